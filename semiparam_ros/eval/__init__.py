@@ -1,0 +1,1 @@
+"""semiparam_ros."""
