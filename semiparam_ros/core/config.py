@@ -1,0 +1,424 @@
+"""Estimator configuration: one parameter table shared by the ROS node and the offline tools.
+
+Configuration is data: one YAML file per robot in the ROS 2 parameter-file form::
+
+    estimator:
+      ros__parameters:
+        robot:
+          joints: [r_shoulder_pitch, ...]
+        nonparametric:
+          n_features: 500
+
+Nested keys become dotted parameter names (``nonparametric.n_features``), exactly as ``rclpy`` flattens
+them. :data:`PARAMETERS` lists every parameter once, with its type, default, allowed range and
+description: the node declares its ROS parameters from it, and ``evaluate``/``tune`` read the same file
+through :func:`load_config`. Values are validated once, here, with messages that name the parameter and
+the allowed range.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import yaml
+
+__all__ = [
+    "PARAMETERS",
+    "EstimatorConfig",
+    "ParameterSpec",
+    "load_config",
+    "parameter_spec",
+    "validate_value",
+    "write_config",
+]
+
+_TYPES = ("string", "string_array", "double", "double_array", "integer", "bool")
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One configuration parameter.
+
+    Attributes:
+        name: Dotted parameter name (``group.key``).
+        type: One of ``string``, ``string_array``, ``double``, ``double_array``, ``integer``, ``bool``.
+        default: Default value.
+        description: What the parameter means, with its unit.
+        min: Inclusive lower bound for numbers (for arrays: of each element), or ``None``.
+        max: Inclusive upper bound for numbers, or ``None``.
+        choices: Allowed values of a string parameter, or ``None``.
+        min_exclusive: Whether ``min`` itself is excluded (e.g. a regularization λ > 0).
+        length: Required length of an array parameter, or ``None``.
+        read_only: Whether the value can only be set at start-up (structure of the model).
+    """
+
+    name: str
+    type: str
+    default: Any
+    description: str
+    min: float | None = None
+    max: float | None = None
+    choices: tuple[str, ...] | None = None
+    min_exclusive: bool = False
+    length: int | None = None
+    read_only: bool = True
+
+    def range_text(self) -> str:
+        """Return the allowed range as text for error messages and parameter descriptors."""
+        if self.choices is not None:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        parts = []
+        if self.min is not None:
+            parts.append(f"{'>' if self.min_exclusive else '>='} {self.min:g}")
+        if self.max is not None:
+            parts.append(f"<= {self.max:g}")
+        text = " and ".join(parts) if parts else "any value"
+        if self.length is not None:
+            text = f"{self.length} values, each {text}"
+        return text
+
+
+_ICUB_JOINTS = ("r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow")
+
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    # robot
+    ParameterSpec("robot.urdf", "string", "", "URDF file path; empty = the iCub URDF of example-robot-data"),
+    ParameterSpec("robot.joints", "string_array", list(_ICUB_JOINTS),
+                  "moving joints used for learning, in this order (q [rad], dq [rad/s], ddq [rad/s^2])"),
+    ParameterSpec("robot.locked_joints", "string_array", [],
+                  "names of other joints given a fixed position (all others are locked at 0 rad)"),
+    ParameterSpec("robot.locked_positions", "double_array", [],
+                  "positions of robot.locked_joints [rad], same length"),
+    ParameterSpec("robot.ft_sensor", "string", "r_arm_ft_sensor",
+                  "fixed URDF joint of the six-axis F/T sensor (output = wrench)"),
+    ParameterSpec("robot.output", "string", "wrench",
+                  "learned quantity: the F/T sensor wrench, or the joint torques from JointState.effort",
+                  choices=("wrench", "joint_torques")),
+    ParameterSpec("robot.frame_id", "string", "r_arm_ft_sensor",
+                  "expected frame_id of the WrenchStamped input; empty accepts any"),
+    ParameterSpec("robot.gravity", "double_array", [0.0, 0.0, -9.81],
+                  "gravity in the robot base frame [m/s^2]", min=-100.0, max=100.0, length=3),
+    # topics
+    ParameterSpec("topics.joint_states", "string", "joint_states", "sensor_msgs/JointState input topic"),
+    ParameterSpec("topics.wrench", "string", "wrench", "geometry_msgs/WrenchStamped input topic"),
+    # pairing and acceleration
+    ParameterSpec("sync.tolerance", "double", 0.005,
+                  "largest stamp difference when pairing a wrench with a joint state [s]", min=0.0, max=1.0),
+    ParameterSpec("acceleration.method", "string", "savgol",
+                  "joint acceleration estimator from velocities: centred local polynomial (delayed by half "
+                  "a window, no phase lag) or causal filtered finite difference",
+                  choices=("savgol", "finite_difference")),
+    ParameterSpec("acceleration.window", "integer", 9,
+                  "samples in the acceleration estimator window (odd for savgol)", min=3, max=201),
+    ParameterSpec("acceleration.cutoff_hz", "double", 20.0,
+                  "low-pass cut-off of the finite-difference estimator [Hz]", min=0.0, max=10000.0,
+                  min_exclusive=True),
+    # parametric stage
+    ParameterSpec("parametric.lam", "double", 1e-2,
+                  "ridge regularization of the rigid-body (base inertial parameter) stage", min=0.0,
+                  min_exclusive=True, max=1e12),
+    ParameterSpec("parametric.forgetting", "double", 1.0,
+                  "forgetting factor of the rigid-body stage (1 = no forgetting; the regularizer is kept)",
+                  min=0.9, max=1.0, min_exclusive=False),
+    ParameterSpec("parametric.sensor_offset", "bool", False,
+                  "add the six constant F/T sensor offsets as extra parameters"),
+    # nonparametric stage
+    ParameterSpec("nonparametric.lam", "double", 1.0,
+                  "ridge regularization of the random-feature residual stage", min=0.0, min_exclusive=True,
+                  max=1e12),
+    ParameterSpec("nonparametric.n_features", "integer", 500,
+                  "number D of random Fourier features", min=1, max=20000),
+    ParameterSpec("nonparametric.sigma", "double", 2.0,
+                  "Gaussian kernel width on standardized inputs", min=0.0, min_exclusive=True, max=1e6),
+    ParameterSpec("nonparametric.forgetting", "double", 1.0,
+                  "forgetting factor of the residual stage (1 = no forgetting; the regularizer is kept)",
+                  min=0.9, max=1.0),
+    ParameterSpec("nonparametric.seed", "integer", 0, "seed of the random features", min=0, max=2**31 - 1),
+    ParameterSpec("nonparametric.standardizer_warmup", "integer", 200,
+                  "samples used to estimate the input standardization before the residual stage learns",
+                  min=1, max=10**7),
+    # run time
+    ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)", read_only=False),
+    ParameterSpec("queue_size", "integer", 1000,
+                  "bounded input queue of the node; the oldest message is dropped and counted beyond it",
+                  min=1, max=10**6),
+    ParameterSpec("checkpoint.path", "string", "",
+                  "checkpoint file (.npz); empty disables checkpoints; ~ is expanded"),
+    ParameterSpec("checkpoint.period", "double", 60.0,
+                  "period of automatic checkpoints [s]; 0 disables them", min=0.0, max=1e7, read_only=False),
+    ParameterSpec("checkpoint.load_on_start", "bool", True, "warm start from an existing checkpoint"),
+    ParameterSpec("diagnostics.period", "double", 1.0, "period of /diagnostics [s]", min=0.01, max=3600.0),
+    ParameterSpec("diagnostics.rmse_window", "integer", 300,
+                  "samples in the running RMSE window reported in diagnostics", min=1, max=10**6),
+)
+
+_SPECS: Mapping[str, ParameterSpec] = MappingProxyType({p.name: p for p in PARAMETERS})
+
+
+def parameter_spec(name: str) -> ParameterSpec:
+    """Return the specification of a parameter.
+
+    Args:
+        name: Dotted parameter name.
+
+    Returns:
+        Its :class:`ParameterSpec`.
+
+    Raises:
+        ValueError: If no such parameter exists.
+    """
+    try:
+        return _SPECS[name]
+    except KeyError:
+        raise ValueError(f"unknown parameter {name!r}; known: {', '.join(sorted(_SPECS))}") from None
+
+
+def _number(name: str, value: Any, integer: bool) -> float | int:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        kind = "an integer" if integer else "a number"
+        raise ValueError(f"parameter {name!r} must be {kind}, got {value!r}")
+    if integer and isinstance(value, float):
+        if not value.is_integer():
+            raise ValueError(f"parameter {name!r} must be an integer, got {value!r}")
+        value = int(value)
+    if not math.isfinite(value):
+        raise ValueError(f"parameter {name!r} must be finite, got {value!r}")
+    return int(value) if integer else float(value)
+
+
+def _check_range(spec: ParameterSpec, value: float) -> None:
+    low_bad = spec.min is not None and (value <= spec.min if spec.min_exclusive else value < spec.min)
+    high_bad = spec.max is not None and value > spec.max
+    if low_bad or high_bad:
+        raise ValueError(f"parameter {spec.name!r} = {value!r} is out of range: must be {spec.range_text()}")
+
+
+def validate_value(name: str, value: Any) -> Any:
+    """Check one parameter value and return it normalized (ints for integers, lists for arrays).
+
+    Args:
+        name: Dotted parameter name.
+        value: Candidate value.
+
+    Returns:
+        The normalized value.
+
+    Raises:
+        ValueError: Naming the parameter and the allowed range or type when the value is invalid.
+    """
+    spec = parameter_spec(name)
+    if spec.type == "string":
+        if not isinstance(value, str):
+            raise ValueError(f"parameter {name!r} must be a string, got {value!r}")
+        if spec.choices is not None and value not in spec.choices:
+            raise ValueError(f"parameter {name!r} = {value!r} is invalid: must be {spec.range_text()}")
+        return value
+    if spec.type == "bool":
+        if not isinstance(value, bool):
+            raise ValueError(f"parameter {name!r} must be true or false, got {value!r}")
+        return value
+    if spec.type in ("double", "integer"):
+        number = _number(name, value, spec.type == "integer")
+        _check_range(spec, number)
+        return number
+    if isinstance(value, str | bytes) or not isinstance(value, Iterable):
+        raise ValueError(f"parameter {name!r} must be a list, got {value!r}")
+    items = list(value)
+    if spec.length is not None and len(items) != spec.length:
+        raise ValueError(f"parameter {name!r} must have {spec.length} values, got {len(items)}")
+    if spec.type == "string_array":
+        if not all(isinstance(v, str) for v in items):
+            raise ValueError(f"parameter {name!r} must be a list of strings, got {value!r}")
+        return items
+    numbers = [_number(name, v, False) for v in items]
+    for v in numbers:
+        _check_range(spec, v)
+    return numbers
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """A complete, validated set of estimator parameters.
+
+    Read values with ``config["nonparametric.lam"]`` or ``config.get(...)``. Instances are immutable; use
+    :meth:`with_overrides` to derive a changed copy.
+    """
+
+    values: Mapping[str, Any]
+
+    def __post_init__(self) -> None:
+        checked = {name: validate_value(name, value) for name, value in self.values.items()}
+        missing = [p.name for p in PARAMETERS if p.name not in checked]
+        if missing:
+            raise ValueError(f"missing parameters: {', '.join(missing)}")
+        joints = checked["robot.joints"]
+        if not joints:
+            raise ValueError("parameter 'robot.joints' must name at least one joint")
+        if len(set(joints)) != len(joints):
+            raise ValueError(f"parameter 'robot.joints' has duplicate names: {joints}")
+        if len(checked["robot.locked_joints"]) != len(checked["robot.locked_positions"]):
+            raise ValueError("parameters 'robot.locked_joints' and 'robot.locked_positions' must have the "
+                             "same length")
+        overlap = set(joints) & set(checked["robot.locked_joints"])
+        if overlap:
+            raise ValueError(f"joints both learned and locked: {sorted(overlap)}")
+        if checked["robot.output"] == "wrench" and not checked["robot.ft_sensor"]:
+            raise ValueError("parameter 'robot.ft_sensor' must name the F/T sensor joint when "
+                             "robot.output is 'wrench'")
+        if checked["acceleration.method"] == "savgol" and checked["acceleration.window"] % 2 == 0:
+            raise ValueError("parameter 'acceleration.window' must be odd for the savgol method, got "
+                             f"{checked['acceleration.window']}")
+        object.__setattr__(self, "values", MappingProxyType(checked))
+
+    @classmethod
+    def defaults(cls) -> EstimatorConfig:
+        """Return the configuration made of every parameter's default."""
+        return cls({p.name: p.default for p in PARAMETERS})
+
+    @classmethod
+    def from_flat(cls, flat: Mapping[str, Any]) -> EstimatorConfig:
+        """Build a configuration from dotted names; missing parameters take their defaults.
+
+        Args:
+            flat: Mapping of dotted parameter names to values.
+
+        Returns:
+            The validated configuration.
+
+        Raises:
+            ValueError: On an unknown name or an invalid value (the message names the parameter).
+        """
+        values = {p.name: p.default for p in PARAMETERS}
+        for name, value in flat.items():
+            parameter_spec(name)
+            values[name] = value
+        return cls(values)
+
+    def to_flat(self) -> dict[str, Any]:
+        """Return the values as a plain dict of dotted names."""
+        return {name: (list(v) if isinstance(v, list) else v) for name, v in self.values.items()}
+
+    def with_overrides(self, overrides: Mapping[str, Any]) -> EstimatorConfig:
+        """Return a copy with some values replaced.
+
+        Args:
+            overrides: Dotted names to new values.
+
+        Returns:
+            The new validated configuration.
+
+        Raises:
+            ValueError: On an unknown name or an invalid value.
+        """
+        values = self.to_flat()
+        for name, value in overrides.items():
+            parameter_spec(name)
+            values[name] = value
+        return EstimatorConfig(values)
+
+    def __getitem__(self, name: str) -> Any:
+        if name not in self.values:
+            parameter_spec(name)
+        return self.values[name]
+
+    def get(self, name: str) -> Any:
+        """Return the value of a parameter (same as ``config[name]``)."""
+        return self[name]
+
+    @property
+    def locked(self) -> dict[str, float]:
+        """Return the positions of the locked joints [rad] by name."""
+        return dict(zip(self["robot.locked_joints"], self["robot.locked_positions"], strict=True))
+
+    def urdf_path(self) -> Path:
+        """Return the URDF path: ``robot.urdf`` expanded, or the iCub URDF of example-robot-data."""
+        if self["robot.urdf"]:
+            return Path(self["robot.urdf"]).expanduser()
+        from semiparam_ros.core.dynamics import icub_urdf_path  # lazy: pinocchio is heavy
+
+        return icub_urdf_path()
+
+
+def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            flat.update(_flatten(value, name + "."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def _parameters_block(document: Any, node_name: str, path: Path) -> Mapping[str, Any]:
+    if not isinstance(document, Mapping):
+        raise ValueError(f"{path}: expected a ROS 2 parameter file (a mapping at the top)")
+    for key in (node_name, f"/{node_name}", "/**"):
+        block = document.get(key)
+        if isinstance(block, Mapping) and isinstance(block.get("ros__parameters"), Mapping):
+            return block["ros__parameters"]
+    raise ValueError(f"{path}: no '{node_name}: ros__parameters:' (or '/**') block found")
+
+
+_ROS_ONLY = frozenset({"use_sim_time"})
+
+
+def load_config(path: str | Path, node_name: str = "estimator") -> EstimatorConfig:
+    """Read a ROS 2 parameter file into a validated configuration.
+
+    Args:
+        path: YAML file in the ROS 2 parameter-file form.
+        node_name: Node whose ``ros__parameters`` block is read (``/**`` is accepted too).
+
+    Returns:
+        The validated configuration (missing parameters take their defaults).
+
+    Raises:
+        ValueError: If the file is missing, is not valid YAML, has no parameter block, or holds an unknown
+            parameter or an invalid value (the message names the file and the parameter).
+    """
+    path = Path(path)
+    try:
+        document = yaml.safe_load(path.read_text())
+    except OSError as err:
+        raise ValueError(f"cannot read config file {path}: {err}") from err
+    except yaml.YAMLError as err:
+        raise ValueError(f"config file {path} is not valid YAML: {err}") from err
+    flat = {k: v for k, v in _flatten(_parameters_block(document, node_name, path)).items()
+            if k not in _ROS_ONLY}
+    try:
+        return EstimatorConfig.from_flat(flat)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from err
+
+
+def write_config(config: EstimatorConfig, path: str | Path, node_name: str = "estimator",
+                 header: str = "") -> None:
+    """Write a configuration as a ROS 2 parameter file that the node and the tools accept.
+
+    Args:
+        config: Configuration to write.
+        path: Destination YAML file (parent directories are created).
+        node_name: Node name of the parameter block.
+        header: Optional comment lines put at the top of the file.
+    """
+    tree: dict[str, Any] = {}
+    for name, value in config.to_flat().items():
+        node = tree
+        *groups, key = name.split(".")
+        for group in groups:
+            node = node.setdefault(group, {})
+        node[key] = value
+    text = yaml.safe_dump({node_name: {"ros__parameters": tree}}, sort_keys=False)
+    if header:
+        text = "".join(f"# {line}\n" for line in header.splitlines()) + text
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
