@@ -1,0 +1,324 @@
+"""The online estimator: one configuration → regressor, sample pipeline and learners.
+
+This is the single data path shared by the live node and offline replay: messages go through
+:class:`~semiparam_ros.core.pipeline.SamplePipeline` (joint mapping, stamp pairing, acceleration
+estimate, drops counted by reason) and every paired sample goes through :meth:`OnlineEstimator.step`,
+which first predicts (a priori: the prediction never saw its own label) and then learns — the
+rigid-body stage first, then the residual. The same bag therefore gives the same numbers whichever way it
+is fed.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from semiparam_ros.core.acceleration import AccelerationConfig
+from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.dynamics import RigidBodyRegressor
+from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
+from semiparam_ros.core.pipeline import SamplePipeline
+from semiparam_ros.core.semiparametric import (
+    NonparametricModel,
+    ParametricModel,
+    Prediction,
+    SemiparametricModel,
+)
+
+__all__ = [
+    "ModelKind",
+    "OnlineEstimator",
+    "StepResult",
+    "build_model",
+    "build_pipeline",
+    "build_regressor",
+    "regressor_function",
+]
+
+ModelKind = Literal["P", "NP", "SP"]
+Model = ParametricModel | NonparametricModel | SemiparametricModel
+
+_CHECKPOINT_VERSION = 1
+# Parameters that fix the shape or meaning of the learned state: a checkpoint is only loaded when these
+# match. Regularization, forgetting and run-time switches may change between runs.
+_STRUCTURAL = (
+    "robot.joints",
+    "robot.output",
+    "robot.ft_sensor",
+    "robot.locked_joints",
+    "robot.locked_positions",
+    "parametric.sensor_offset",
+    "nonparametric.n_features",
+    "nonparametric.sigma",
+    "nonparametric.seed",
+)
+
+
+def build_regressor(config: EstimatorConfig) -> RigidBodyRegressor:
+    """Build the rigid-body regressor described by a configuration.
+
+    Args:
+        config: Estimator configuration (``robot.*`` and ``parametric.sensor_offset``).
+
+    Returns:
+        The regressor of the F/T sensor wrench or of the joint torques.
+
+    Raises:
+        ValueError: If the URDF, joints or sensor are invalid.
+    """
+    output = config["robot.output"]
+    return RigidBodyRegressor.from_urdf(
+        config.urdf_path(),
+        config["robot.joints"],
+        ft_sensor=config["robot.ft_sensor"] if output == "wrench" else None,
+        locked=config.locked,
+        gravity=tuple(config["robot.gravity"]),
+        output=output,
+        sensor_offset=bool(config["parametric.sensor_offset"]) and output == "wrench",
+    )
+
+
+def regressor_function(regressor: RigidBodyRegressor) -> Callable[[np.ndarray], np.ndarray]:
+    """Adapt a regressor to the learners' flat input ``x = [q, dq, ddq]``.
+
+    Args:
+        regressor: Rigid-body regressor of n joints.
+
+    Returns:
+        A function mapping x (3n,) to the base regressor (t × n_base).
+    """
+    n = regressor.n_joints
+
+    def base_regressor(x: np.ndarray) -> np.ndarray:
+        return regressor.base_regressor(x[:n], x[n : 2 * n], x[2 * n : 3 * n])
+
+    return base_regressor
+
+
+def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
+    """Build the message-to-sample pipeline described by a configuration.
+
+    Args:
+        config: Estimator configuration (``robot.*``, ``sync.*``, ``acceleration.*``).
+
+    Returns:
+        A fresh pipeline.
+    """
+    return SamplePipeline(
+        config["robot.joints"],
+        output=config["robot.output"],
+        frame_id=config["robot.frame_id"] or None,
+        sync_tolerance=config["sync.tolerance"],
+        acceleration=AccelerationConfig(
+            method=config["acceleration.method"],
+            window=config["acceleration.window"],
+            cutoff_hz=config["acceleration.cutoff_hz"],
+        ),
+    )
+
+
+def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
+                regressor: RigidBodyRegressor | None = None) -> Model:
+    """Build one of the paper's three learners, with zero initial parameters.
+
+    Args:
+        config: Estimator configuration (``parametric.*``, ``nonparametric.*``).
+        kind: ``"P"`` (rigid-body RRLS), ``"NP"`` (random features RRLS) or ``"SP"`` (both).
+        regressor: Rigid-body regressor to use; built from the configuration when omitted.
+
+    Returns:
+        The learner.
+
+    Raises:
+        ValueError: On an unknown kind.
+    """
+    if kind not in ("P", "NP", "SP"):
+        raise ValueError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
+    n_joints = len(config["robot.joints"])
+    n_inputs = 3 * n_joints
+    if kind == "NP":
+        n_outputs = 6 if config["robot.output"] == "wrench" else n_joints
+        return NonparametricModel(
+            n_inputs,
+            n_outputs,
+            n_features=config["nonparametric.n_features"],
+            sigma=config["nonparametric.sigma"],
+            lam=config["nonparametric.lam"],
+            forgetting=config["nonparametric.forgetting"],
+            seed=config["nonparametric.seed"],
+            standardizer_warmup=config["nonparametric.standardizer_warmup"],
+        )
+    regressor = regressor if regressor is not None else build_regressor(config)
+    phi = regressor_function(regressor)
+    if kind == "P":
+        return ParametricModel(
+            phi,
+            regressor.n_base,
+            regressor.n_outputs,
+            lam=config["parametric.lam"],
+            forgetting=config["parametric.forgetting"],
+        )
+    return SemiparametricModel(
+        phi,
+        regressor.n_base,
+        n_inputs,
+        regressor.n_outputs,
+        lam_parametric=config["parametric.lam"],
+        lam_nonparametric=config["nonparametric.lam"],
+        n_features=config["nonparametric.n_features"],
+        sigma=config["nonparametric.sigma"],
+        forgetting_parametric=config["parametric.forgetting"],
+        forgetting_nonparametric=config["nonparametric.forgetting"],
+        seed=config["nonparametric.seed"],
+        standardizer_warmup=config["nonparametric.standardizer_warmup"],
+    )
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one paired sample produced.
+
+    Attributes:
+        sample: The sample (stamp [ns], q [rad], dq [rad/s], ddq [rad/s²], measured y).
+        prediction: The a-priori prediction of y (parametric, residual and total parts; N, N·m for a
+            wrench, N·m for joint torques), made before the sample was learned.
+        latency_s: Wall time of predict + learn for this sample [s].
+        learned: Whether the sample was learned (false when learning is disabled).
+    """
+
+    sample: Sample
+    prediction: Prediction
+    latency_s: float
+    learned: bool
+
+
+class OnlineEstimator:
+    """Pipeline + semiparametric learner, driven one message at a time.
+
+    Args:
+        config: Validated configuration.
+        regressor: Prebuilt regressor (to share one between estimators); built when omitted.
+        kind: Learner to run; the node runs ``"SP"``, whose prediction carries all three parts.
+    """
+
+    def __init__(self, config: EstimatorConfig, *, regressor: RigidBodyRegressor | None = None,
+                 kind: ModelKind = "SP") -> None:
+        self.config = config
+        self.kind: ModelKind = kind
+        self.regressor = regressor if regressor is not None else build_regressor(config)
+        self.pipeline = build_pipeline(config)
+        self.model = build_model(config, kind, self.regressor)
+        self.learning_enabled = bool(config["learning_enabled"])
+        self.n_samples_learned = 0
+
+    # ------------------------------------------------------------------ streaming
+    def process_joint_state(self, msg: JointStateData) -> list[StepResult]:
+        """Feed a joint state; return the results of the samples it completed (often none or one)."""
+        return [self.step(sample) for sample in self.pipeline.add_joint_state(msg)]
+
+    def process_wrench(self, msg: WrenchData) -> list[StepResult]:
+        """Feed an F/T reading; return the results of the samples it completed."""
+        return [self.step(sample) for sample in self.pipeline.add_wrench(msg)]
+
+    def step(self, sample: Sample) -> StepResult:
+        """Predict y for a sample, then learn it (unless learning is disabled).
+
+        Args:
+            sample: A clean sample from the pipeline.
+
+        Returns:
+            The a-priori prediction and the time it took.
+        """
+        start = time.perf_counter()
+        if self.learning_enabled:
+            prediction = self.model.predict_learn_one(sample.x, sample.y)
+            self.n_samples_learned += 1
+        else:
+            prediction = self.model.predict_one(sample.x)
+        return StepResult(sample, prediction, time.perf_counter() - start, self.learning_enabled)
+
+    # ------------------------------------------------------------------ inspection
+    @property
+    def drops(self) -> dict[str, int]:
+        """Input messages dropped so far, by reason."""
+        return dict(self.pipeline.drops)
+
+    @property
+    def parameters(self) -> np.ndarray | None:
+        """Current estimate of the base inertial parameters (None for the NP learner)."""
+        return self.model.parameters
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of the base parameters, as combinations of the URDF parameters."""
+        return tuple(self.regressor.base_parameter_names)
+
+    @property
+    def model_size(self) -> int:
+        """Number of learned coefficients (parametric + residual weights)."""
+        n_out = self.regressor.n_outputs
+        size = 0
+        if self.kind in ("P", "SP"):
+            size += self.regressor.n_base * n_out
+        if self.kind in ("NP", "SP"):
+            size += int(self.config["nonparametric.n_features"]) * n_out
+        return size
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget everything learned and restart the pipeline (configuration kept)."""
+        self.model.reset()
+        self.pipeline.reset()
+        self.n_samples_learned = 0
+
+    def _fingerprint(self) -> str:
+        structure = {name: self.config[name] for name in _STRUCTURAL}
+        structure["kind"] = self.kind
+        structure["base_parameters"] = list(self.parameter_names)
+        return json.dumps(structure, sort_keys=True)
+
+    def save(self, path: str | Path) -> None:
+        """Write the learned state to one ``.npz`` file atomically (temp file + rename).
+
+        Args:
+            path: Destination file.
+        """
+        state = dict(self.model.state_dict("model."))
+        state["meta.version"] = np.array(_CHECKPOINT_VERSION)
+        state["meta.fingerprint"] = np.array(self._fingerprint())
+        state["meta.n_samples_learned"] = np.array(self.n_samples_learned)
+        atomic_save_npz(Path(path).expanduser(), state)
+
+    def load(self, path: str | Path) -> None:
+        """Restore the learned state written by :meth:`save`.
+
+        Args:
+            path: Checkpoint file.
+
+        Raises:
+            ValueError: If the file is missing or corrupt, or was written for another model structure
+                (joints, output, features…); the current state is then left untouched.
+        """
+        state = load_npz(Path(path).expanduser())
+        try:
+            version = int(state["meta.version"])
+            fingerprint = str(state["meta.fingerprint"])
+            n_learned = int(state["meta.n_samples_learned"])
+        except KeyError as err:
+            raise ValueError(f"{path}: not a semiparam_ros checkpoint (missing {err})") from err
+        if version != _CHECKPOINT_VERSION:
+            raise ValueError(f"{path}: checkpoint version {version}, expected {_CHECKPOINT_VERSION}")
+        if fingerprint != self._fingerprint():
+            raise ValueError(f"{path}: checkpoint was written for another model structure:\n"
+                             f"  checkpoint: {fingerprint}\n  current:    {self._fingerprint()}")
+        model = self.model.copy()
+        model.load_state_dict(state, "model.")
+        self.model = model
+        self.n_samples_learned = n_learned
