@@ -1,0 +1,210 @@
+"""Compiled Givens-rotation kernels of the QR-RLS update (numba, ``cache=True``).
+
+The learner state is the augmented upper-trapezoidal matrix ``M = [R | d]`` (``b × (b+t)``, C-contiguous
+float64) with ``RᵀR = A`` and ``d = R⁻ᵀB``, so the weights are ``W = R⁻¹d``. One *time step* appends
+rows to ``M`` and re-triangularises it::
+
+    Q · [ s·R   s·d ]   =   [ R'  d' ]
+        [  Z     U  ]       [  0   E ]
+
+where ``s = √β`` is the forgetting scale (folded into the first rotation of each row, so forgetting costs
+no extra pass over memory), ``Z`` are the k data rows plus (optionally) one regularizer row ``√c·e_j`` with
+zero target. Rotations are applied column by column: row i of ``R`` is loaded once and rotated against all
+k rows while it is in cache, so a block of k rows costs one sweep of ``R`` (memory-bound at large b).
+
+A-priori prediction as a by-product: from ``Q21·s·R + Q22·Z = 0`` and ``E = Q21·s·d + Q22·U`` follows
+``E = Q22 (U − Z W_old)``. The kernel tracks ``Q22`` by appending an identity block to the new rows (and
+a k-long scratch for the ``R`` row being rotated, which is discarded once that row is finished). With the
+column ordering ``Q22`` is lower triangular with the products of the cosines on its diagonal, so the
+a-priori errors ``U − Z W_old`` follow by a k×k forward substitution. Data rows come first, so the
+regularizer row never enters the data rows' errors.
+
+Loops run over row slices with ranges starting at 0 so LLVM vectorises them (2–4× faster than indexing
+``M[i, j]`` with ``j`` from ``i+1``). Only float64 C-contiguous arrays are used (one compiled signature).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["qr_rls_steps"]
+
+
+@njit(cache=True, nogil=True)
+def _rotate_in(
+    M: np.ndarray,
+    W: np.ndarray,
+    scale: float,
+    scratch: np.ndarray,
+    ext: int,
+    coef: np.ndarray,
+    act: np.ndarray,
+) -> None:
+    """Rotate the rows of ``W`` into ``M = [R | d]`` (in place), scaling ``M`` by ``scale``.
+
+    ``W`` is ``(kk, b+t+ext)``: the new rows ``[z | u]`` followed, if ``ext > 0``, by the ``ext`` columns
+    of the ``Q22`` tracker. On return ``W[:, :b]`` is zero, ``W[:, b:b+t]`` holds ``E`` and
+    ``W[:, b+t:]`` holds ``Q22``. ``coef`` (kk, 4) and ``act`` (kk,) are work arrays.
+
+    At column i the rotation of row r only touches ``M[i, i:]`` and ``W[r, i:]``, so all rotation angles
+    of the column follow from the diagonal recurrence first; two active rows (the hot path: one data row
+    plus the regularizer row) are then applied in one fused sweep over the row of ``M``.
+    """
+    b = M.shape[0]
+    bt = M.shape[1]
+    kk = W.shape[0]
+    for i in range(b):
+        sc = scale
+        n_act = 0
+        diag = M[i, i]
+        for r in range(kk):
+            w0 = W[r, i]
+            if w0 == 0.0:
+                continue  # exact: c = 1, s = 0 (regularizer rows are zero left of their coordinate)
+            a = sc * diag
+            rr = math.hypot(a, w0)
+            c = a / rr
+            s = w0 / rr
+            coef[n_act, 0] = c
+            coef[n_act, 1] = s
+            coef[n_act, 2] = c * sc
+            coef[n_act, 3] = s * sc
+            act[n_act] = r
+            n_act += 1
+            diag = rr
+            W[r, i] = 0.0
+            sc = 1.0
+        M[i, i] = diag * sc
+        Mi = M[i, i + 1 :]
+        n = Mi.shape[0]
+        if n_act == 0:
+            if sc != 1.0:
+                for j in range(n):
+                    Mi[j] *= sc
+            continue
+        if n_act == 2:
+            c1 = coef[0, 0]
+            s1 = coef[0, 1]
+            cs1 = coef[0, 2]
+            ss1 = coef[0, 3]
+            c2 = coef[1, 0]
+            s2 = coef[1, 1]
+            W1 = W[act[0], i + 1 : bt]
+            W2 = W[act[1], i + 1 : bt]
+            for j in range(n):
+                x = Mi[j]
+                y1 = W1[j]
+                y2 = W2[j]
+                x1 = cs1 * x + s1 * y1
+                W1[j] = c1 * y1 - ss1 * x
+                Mi[j] = c2 * x1 + s2 * y2
+                W2[j] = c2 * y2 - s2 * x1
+        else:
+            for p in range(n_act):
+                c = coef[p, 0]
+                s = coef[p, 1]
+                cs = coef[p, 2]
+                ss = coef[p, 3]
+                Wr = W[act[p], i + 1 : bt]
+                for j in range(n):
+                    x = Mi[j]
+                    y = Wr[j]
+                    Mi[j] = cs * x + s * y
+                    Wr[j] = c * y - ss * x
+        if ext > 0:
+            for q in range(ext):
+                scratch[q] = 0.0
+            for p in range(n_act):
+                c = coef[p, 0]
+                s = coef[p, 1]
+                r = act[p]
+                for q in range(ext):
+                    x = scratch[q]
+                    y = W[r, bt + q]
+                    scratch[q] = c * x + s * y
+                    W[r, bt + q] = c * y - s * x
+
+
+@njit(cache=True, nogil=True)
+def qr_rls_steps(
+    M: np.ndarray,
+    Z: np.ndarray,
+    U: np.ndarray,
+    rows_per_step: int,
+    scale: float,
+    reg: float,
+    j0: int,
+    P: np.ndarray,
+) -> int:
+    """Apply ``len(Z) // rows_per_step`` consecutive time steps to ``M = [R | d]`` in place.
+
+    Step m uses rows ``Z[m·k:(m+1)·k]``, targets ``U[m·k:(m+1)·k]``: ``A ← β·A + ZᵀZ + c·e_j e_jᵀ``,
+    ``B ← β·B + ZᵀU`` with ``scale = √β``, ``reg = c`` (no regularizer row if ``reg == 0``) and the
+    coordinate ``j`` cycling from ``j0`` through ``0 … b−1``.
+
+    Args:
+        M: ``(b, b+t)`` float64 C-contiguous, updated in place.
+        Z: ``(n, b)`` float64 C-contiguous data rows.
+        U: ``(n, t)`` float64 C-contiguous targets.
+        rows_per_step: k ≥ 1; ``n`` must be a multiple of it.
+        scale: √β ∈ (0, 1].
+        reg: c ≥ 0, weight of the regularizer row of each step.
+        j0: coordinate of the first step's regularizer row.
+        P: ``(n, t)`` output for the a-priori predictions ``Z W_old`` of every row (W before its step),
+            or a ``(0, t)`` array to skip them.
+
+    Returns:
+        The coordinate of the regularizer row of the next step.
+    """
+    b = M.shape[0]
+    bt = M.shape[1]
+    k = rows_per_step
+    n_steps = Z.shape[0] // k
+    track = P.shape[0] > 0
+    kk = k + 1 if reg > 0.0 else k
+    ext = kk if track else 0
+    W = np.empty((kk, bt + ext))
+    scratch = np.zeros(max(ext, 1))
+    coef = np.empty((kk, 4))
+    act = np.empty(kk, dtype=np.int64)
+    sqrt_reg = math.sqrt(reg)
+    e = np.empty(bt - b)
+    j = j0
+    for step in range(n_steps):
+        base = step * k
+        for r in range(k):
+            Wr = W[r]
+            Zr = Z[base + r]
+            Ur = U[base + r]
+            for q in range(b):
+                Wr[q] = Zr[q]
+            for q in range(bt - b):
+                Wr[b + q] = Ur[q]
+        if kk > k:
+            Wr = W[k]
+            for q in range(bt):
+                Wr[q] = 0.0
+            Wr[j] = sqrt_reg
+        if track:
+            for r in range(kk):
+                for q in range(ext):
+                    W[r, bt + q] = 0.0
+                W[r, bt + r] = 1.0
+        _rotate_in(M, W, scale, scratch, ext, coef, act)
+        if track:
+            # E = Q22 (U − Z W_old), Q22 lower triangular: forward substitution for the data rows.
+            for r in range(k):
+                for q in range(bt - b):
+                    acc = W[r, b + q]
+                    for p in range(r):
+                        acc -= W[r, bt + p] * (U[base + p, q] - P[base + p, q])
+                    e[q] = acc / W[r, bt + r]
+                for q in range(bt - b):
+                    P[base + r, q] = U[base + r, q] - e[q]
+        j += 1
+        if j == b:
+            j = 0
+    return j
