@@ -1,0 +1,139 @@
+"""Conversions between ROS 2 messages and the plain-array types of :mod:`semiparam_ros.core.messages`.
+
+Inputs are converted with the same duck-typed functions the bag reader uses
+(:func:`~semiparam_ros.core.messages.joint_state_from_msg`,
+:func:`~semiparam_ros.core.messages.wrench_from_msg`), so a message gives identical data live or from a
+bag. Outputs are built here: a wrench prediction as ``geometry_msgs/WrenchStamped`` (force first, N; then
+torque, N·m; in the sensor frame of the input), joint torques as ``sensor_msgs/JointState`` with only
+``effort`` (N·m) filled, and the base inertial parameters as ``std_msgs/Float64MultiArray``.
+
+Layout of ``~/inertial_parameters``: one dimension, ``layout.dim[0].label`` holds the base-parameter names
+joined by commas (``size`` = number of parameters, ``stride`` = size); each name is a linear combination of
+URDF parameters as given by :attr:`RigidBodyRegressor.base_parameter_names`. A name never contains a comma
+(commas inside a name are replaced by ``;``), so ``label.split(",")`` recovers them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import WrenchStamped
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from semiparam_ros.core.messages import joint_state_from_msg, ns_to_stamp, wrench_from_msg
+
+__all__ = [
+    "joint_state_from_msg",
+    "joint_torques_msg",
+    "parameters_msg",
+    "parameters_names_from_msg",
+    "stamp_msg",
+    "wrench_from_msg",
+    "wrench_stamped_msg",
+]
+
+
+def stamp_msg(stamp_ns: int) -> Time:
+    """Build a ``builtin_interfaces/Time`` from integer nanoseconds.
+
+    Args:
+        stamp_ns: Time in nanoseconds (must be ≥ 0 for ROS; negative values are clamped to 0).
+
+    Returns:
+        The stamp message.
+    """
+    sec, nanosec = ns_to_stamp(max(int(stamp_ns), 0))
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def wrench_stamped_msg(stamp_ns: int, frame_id: str, wrench: np.ndarray) -> WrenchStamped:
+    """Build a ``geometry_msgs/WrenchStamped``.
+
+    Args:
+        stamp_ns: Header stamp in nanoseconds (the input sample's stamp).
+        frame_id: Header frame (the sensor frame of the input).
+        wrench: ``[fx, fy, fz, tx, ty, tz]`` in N and N·m, shape ``(6,)``.
+
+    Returns:
+        The message.
+
+    Raises:
+        ValueError: If ``wrench`` does not have 6 entries.
+    """
+    w = np.asarray(wrench, dtype=np.float64).reshape(-1)
+    if w.shape != (6,):
+        raise ValueError(f"a wrench has 6 entries [fx, fy, fz, tx, ty, tz], got shape {w.shape}")
+    msg = WrenchStamped()
+    msg.header.stamp = stamp_msg(stamp_ns)
+    msg.header.frame_id = frame_id
+    f, t = msg.wrench.force, msg.wrench.torque
+    f.x, f.y, f.z, t.x, t.y, t.z = (float(v) for v in w)
+    return msg
+
+
+def joint_torques_msg(stamp_ns: int, joints: Sequence[str], torques: np.ndarray) -> JointState:
+    """Build a ``sensor_msgs/JointState`` carrying predicted joint torques in ``effort``.
+
+    Args:
+        stamp_ns: Header stamp in nanoseconds (the input sample's stamp).
+        joints: Joint names, in the order of ``torques``.
+        torques: Joint torques in N·m, shape ``(len(joints),)``.
+
+    Returns:
+        The message (``position`` and ``velocity`` left empty).
+
+    Raises:
+        ValueError: If the lengths differ.
+    """
+    tau = np.asarray(torques, dtype=np.float64).reshape(-1)
+    if tau.shape != (len(joints),):
+        raise ValueError(f"{len(joints)} joints but {tau.size} torques")
+    msg = JointState()
+    msg.header.stamp = stamp_msg(stamp_ns)
+    msg.name = list(joints)
+    msg.effort = tau.tolist()
+    return msg
+
+
+def parameters_msg(names: Sequence[str], values: np.ndarray) -> Float64MultiArray:
+    """Build the ``~/inertial_parameters`` message (names comma-joined in ``layout.dim[0].label``).
+
+    Args:
+        names: Base-parameter names.
+        values: Their current estimates (kg, kg·m, kg·m² combinations as the names say).
+
+    Returns:
+        The message.
+
+    Raises:
+        ValueError: If the lengths differ.
+    """
+    vals = np.asarray(values, dtype=np.float64).reshape(-1)
+    if vals.size != len(names):
+        raise ValueError(f"{len(names)} parameter names but {vals.size} values")
+    msg = Float64MultiArray()
+    dim = MultiArrayDimension()
+    dim.label = ",".join(str(n).replace(",", ";") for n in names)
+    dim.size = int(vals.size)
+    dim.stride = int(vals.size)
+    msg.layout.dim = [dim]
+    msg.layout.data_offset = 0
+    msg.data = vals.tolist()
+    return msg
+
+
+def parameters_names_from_msg(msg: Float64MultiArray) -> list[str]:
+    """Recover the parameter names from an ``~/inertial_parameters`` message.
+
+    Args:
+        msg: A message built by :func:`parameters_msg`.
+
+    Returns:
+        The names, in the order of ``msg.data``.
+    """
+    if not msg.layout.dim or not msg.layout.dim[0].label:
+        return []
+    return msg.layout.dim[0].label.split(",")

@@ -1,0 +1,254 @@
+"""Run-time statistics of the estimator node and their ``diagnostic_msgs/DiagnosticArray`` form.
+
+:class:`NodeStatistics` is updated by the worker thread (one call per processed sample) and by the
+subscription callbacks (one counter increment per message), and read by the diagnostics timer; a lock
+makes each read a consistent snapshot. Memory is bounded: the RMSE window is a fixed-size ring of squared
+errors and the latency statistics are reset every diagnostics period.
+
+Published values (``DiagnosticStatus.values``, all strings as the message requires):
+
+==============================  =================================================================
+key                             meaning
+==============================  =================================================================
+samples_learned                 samples the learner has been updated with (survives warm starts)
+samples_predicted               samples predicted since start
+learning_enabled                ``true`` / ``false``
+input_rate_hz                   paired samples per second over the last period
+joint_states_rate_hz            JointState messages received per second
+wrench_rate_hz                  WrenchStamped messages received per second
+update_latency_mean_ms / _max   core step (predict + learn) wall time over the last period
+pipeline_latency_mean_ms / _max message received → prediction published, over the last period
+acceleration_delay_ms           inherent lag of the acceleration estimate (centred window)
+queue_length / queue_size       input queue occupancy and bound
+queue_drops                     messages dropped because the queue was full (oldest first)
+drops.<reason>                  input messages dropped by the pipeline or the node, by reason
+drops_total                     sum of all drops, queue drops included
+rmse_window                     samples in the RMSE window (≤ diagnostics.rmse_window)
+rmse_force_N, rmse_torque_Nm    a-priori RMSE of the semiparametric prediction (wrench output)
+rmse_parametric_force_N, ...    same for the rigid-body part alone
+rmse_Nm, rmse_parametric_Nm     joint-torque output
+model_size                      learned coefficients (parametric + residual weights)
+checkpoint_path                 configured path ('' = disabled)
+checkpoint_age_s                seconds since the last successful checkpoint write (-1 = never)
+checkpoint_errors               failed checkpoint writes
+==============================  =================================================================
+
+Level: ERROR if the worker thread died, WARN if messages were dropped in the last period (bad input or a
+full queue) or no input arrived, OK otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Mapping
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+__all__ = ["NodeStatistics", "diagnostic_array"]
+
+
+class _RingRMSE:
+    """Root mean square of the last ``window`` error vectors, split into groups of columns."""
+
+    def __init__(self, window: int, width: int) -> None:
+        self._sq = np.zeros((max(int(window), 1), width))
+        self._next = 0
+        self._count = 0
+
+    def add(self, error: np.ndarray) -> None:
+        self._sq[self._next] = np.square(error)
+        self._next = (self._next + 1) % self._sq.shape[0]
+        self._count = min(self._count + 1, self._sq.shape[0])
+
+    def rmse(self, columns: slice) -> float:
+        if self._count == 0:
+            return math.nan
+        return float(np.sqrt(self._sq[: self._count, columns].mean()))
+
+    @property
+    def count(self) -> int:
+        return self._count
+
+    def clear(self) -> None:
+        self._next = 0
+        self._count = 0
+
+
+class NodeStatistics:
+    """Thread-safe counters and windows of the estimator node.
+
+    Args:
+        output: ``"wrench"`` (6 outputs: force N, torque N·m) or ``"joint_torques"`` (n outputs, N·m).
+        n_outputs: Number of outputs.
+        rmse_window: Samples in the running RMSE window.
+    """
+
+    def __init__(self, output: str, n_outputs: int, rmse_window: int) -> None:
+        self._lock = threading.Lock()
+        self.output = output
+        self._rmse_total = _RingRMSE(rmse_window, n_outputs)
+        self._rmse_param = _RingRMSE(rmse_window, n_outputs)
+        self._period_start = time.monotonic()
+        self._reset_period()
+        self.samples_predicted = 0
+        self.queue_drops = 0
+        self.node_drops: dict[str, int] = {}
+        self.last_checkpoint_time: float | None = None
+        self.checkpoint_errors = 0
+
+    def _reset_period(self) -> None:
+        self._n_js = 0
+        self._n_wrench = 0
+        self._n_samples = 0
+        self._step_sum = 0.0
+        self._step_max = 0.0
+        self._e2e_sum = 0.0
+        self._e2e_max = 0.0
+        self._drops_in_period = 0
+
+    # ---------------------------------------------------------------- updates (hot path, cheap)
+    def count_input(self, kind: str) -> None:
+        """Count one received input message (``"joint_states"`` or ``"wrench"``)."""
+        with self._lock:
+            if kind == "joint_states":
+                self._n_js += 1
+            else:
+                self._n_wrench += 1
+
+    def count_drop(self, reason: str, n: int = 1) -> None:
+        """Count input dropped by the node itself (queue overflow is ``"queue_full"``)."""
+        with self._lock:
+            if reason == "queue_full":
+                self.queue_drops += n
+            else:
+                self.node_drops[reason] = self.node_drops.get(reason, 0) + n
+            self._drops_in_period += n
+
+    def count_pipeline_drops(self, n: int) -> None:
+        """Note that the core pipeline dropped ``n`` more messages (totals are read from the core)."""
+        if n:
+            with self._lock:
+                self._drops_in_period += n
+
+    def add_sample(self, step_s: float, e2e_s: float, y: np.ndarray, total: np.ndarray,
+                   parametric: np.ndarray) -> None:
+        """Record one processed sample.
+
+        Args:
+            step_s: Core step (predict + learn) wall time [s].
+            e2e_s: Message receipt → prediction published [s].
+            y: Measured output.
+            total: Semiparametric a-priori prediction.
+            parametric: Rigid-body part of the prediction.
+        """
+        with self._lock:
+            self.samples_predicted += 1
+            self._n_samples += 1
+            self._step_sum += step_s
+            self._step_max = max(self._step_max, step_s)
+            self._e2e_sum += e2e_s
+            self._e2e_max = max(self._e2e_max, e2e_s)
+            self._rmse_total.add(y - total)
+            self._rmse_param.add(y - parametric)
+
+    def clear_errors(self) -> None:
+        """Forget the RMSE windows (after a model reset)."""
+        with self._lock:
+            self._rmse_total.clear()
+            self._rmse_param.clear()
+
+    # ---------------------------------------------------------------- read-out
+    def snapshot(self) -> dict[str, object]:
+        """Return this period's statistics and start a new period."""
+        with self._lock:
+            now = time.monotonic()
+            dt = max(now - self._period_start, 1e-9)
+            n = self._n_samples
+            snap: dict[str, object] = dict(
+                input_rate_hz=n / dt,
+                joint_states_rate_hz=self._n_js / dt,
+                wrench_rate_hz=self._n_wrench / dt,
+                update_latency_mean_ms=1e3 * self._step_sum / n if n else math.nan,
+                update_latency_max_ms=1e3 * self._step_max if n else math.nan,
+                pipeline_latency_mean_ms=1e3 * self._e2e_sum / n if n else math.nan,
+                pipeline_latency_max_ms=1e3 * self._e2e_max if n else math.nan,
+                samples_predicted=self.samples_predicted,
+                queue_drops=self.queue_drops,
+                drops_in_period=self._drops_in_period,
+                inputs_in_period=self._n_js + self._n_wrench,
+                rmse_window=self._rmse_total.count,
+                checkpoint_age_s=(now - self.last_checkpoint_time
+                                  if self.last_checkpoint_time is not None else -1.0),
+                checkpoint_errors=self.checkpoint_errors,
+            )
+            if self.output == "wrench":
+                snap["rmse_force_N"] = self._rmse_total.rmse(slice(0, 3))
+                snap["rmse_torque_Nm"] = self._rmse_total.rmse(slice(3, 6))
+                snap["rmse_parametric_force_N"] = self._rmse_param.rmse(slice(0, 3))
+                snap["rmse_parametric_torque_Nm"] = self._rmse_param.rmse(slice(3, 6))
+            else:
+                snap["rmse_Nm"] = self._rmse_total.rmse(slice(None))
+                snap["rmse_parametric_Nm"] = self._rmse_param.rmse(slice(None))
+            for reason, count in self.node_drops.items():
+                snap[f"drops.{reason}"] = count
+            self._period_start = now
+            self._reset_period()
+            return snap
+
+    def mark_checkpoint(self, ok: bool) -> None:
+        """Record the outcome of a checkpoint write."""
+        with self._lock:
+            if ok:
+                self.last_checkpoint_time = time.monotonic()
+            else:
+                self.checkpoint_errors += 1
+
+
+def _fmt(value: object) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def diagnostic_array(
+    stamp: object,
+    name: str,
+    hardware_id: str,
+    stats: Mapping[str, object],
+    *,
+    worker_alive: bool = True,
+) -> DiagnosticArray:
+    """Build the ``/diagnostics`` message of the estimator.
+
+    Args:
+        stamp: ``builtin_interfaces/Time`` of the header (node clock, sim time when enabled).
+        name: Status name (``"<node name>: online learning"``).
+        hardware_id: Robot / sensor identifier.
+        stats: Values to publish (see the module docstring), including ``drops.<reason>`` entries.
+        worker_alive: Whether the learning thread is running.
+
+    Returns:
+        The message with one :class:`DiagnosticStatus`.
+    """
+    status = DiagnosticStatus()
+    status.name = name
+    status.hardware_id = hardware_id
+    if not worker_alive:
+        status.level, status.message = DiagnosticStatus.ERROR, "learning thread stopped"
+    elif int(stats.get("drops_in_period", 0)) > 0:  # type: ignore[call-overload]
+        status.level, status.message = DiagnosticStatus.WARN, "input dropped (see drops.*)"
+    elif int(stats.get("inputs_in_period", 0)) == 0:  # type: ignore[call-overload]
+        status.level, status.message = DiagnosticStatus.WARN, "no input"
+    else:
+        status.level, status.message = DiagnosticStatus.OK, "learning" if stats.get(
+            "learning_enabled", True) else "predicting (learning disabled)"
+    status.values = [KeyValue(key=str(k), value=_fmt(v)) for k, v in stats.items()]
+    msg = DiagnosticArray()
+    msg.header.stamp = stamp
+    msg.status = [status]
+    return msg

@@ -1,0 +1,536 @@
+"""The ``estimator`` node: online semiparametric inverse-dynamics learning on live ROS 2 topics.
+
+Run it with::
+
+    ros2 run semiparam_ros estimator --ros-args --params-file config/icub_right_arm.yaml
+    python -m semiparam_ros.ros.estimator_node --ros-args --params-file config/icub_right_arm.yaml
+
+The node is a thin adapter over the pure core: messages are converted to
+:mod:`semiparam_ros.core.messages` types and fed to :class:`~semiparam_ros.core.estimator.OnlineEstimator`,
+the same object offline replay uses, so a bag gives the same numbers either way.
+
+Topics (relative names, remap with ``-r``):
+
+* in ``joint_states`` (``sensor_msgs/JointState``) and ``wrench`` (``geometry_msgs/WrenchStamped``), names
+  from ``topics.*``; sensor-data QoS (best effort, volatile) with a history of 100 so a scheduling hiccup
+  at 1 kHz loses nothing; reliability/depth can be overridden with
+  ``-p qos_overrides./joint_states.subscription.reliability:=reliable`` (standard QoS overrides);
+* out ``~/predicted_wrench`` (semiparametric prediction, the input's stamp and frame),
+  ``~/predicted_wrench/parametric`` (rigid-body part), ``~/predicted_wrench/nonparametric`` (residual);
+  with ``robot.output: joint_torques`` instead ``predicted_joint_torques`` (``sensor_msgs/JointState``,
+  ``effort`` in N·m); every prediction is a priori: it was made before its own sample was learned;
+* out ``~/inertial_parameters`` (``std_msgs/Float64MultiArray``, base parameters, names comma-joined in
+  ``layout.dim[0].label``; reliable + transient local, depth 1): published once per diagnostics period
+  when learning changed them, and after start, reset and load;
+* out ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) every ``diagnostics.period`` (wall time),
+  keys listed in :mod:`semiparam_ros.ros.diagnostics`.
+
+Services (``std_srvs/Trigger``): ``~/save`` writes a checkpoint to ``checkpoint.path`` (atomic; the reply
+comes once the file is on disk), ``~/reset`` forgets everything learned.
+
+Threads. The executor (single-threaded) runs the subscription callbacks, which only convert the message and
+append it to a bounded deque (``queue_size``; when full the oldest entry is dropped and counted), plus the
+timers and services. One worker thread owns the estimator: it pops messages, runs the pipeline and the
+learner (predict, publish, then learn) and publishes. A worker thread rather than a timer in a
+``MultiThreadedExecutor``: the worker wakes as soon as a message is queued (no timer period added to the
+latency, no thread-pool hand-off per callback), and the executor never waits for learning, so input is
+taken off DDS at full rate even while a sample is being learned. A third thread writes checkpoints
+(periodically every ``checkpoint.period`` seconds of wall time, on ``~/save``, on clean shutdown): it copies
+the model under the lock (a memory copy, ~1 ms at D = 500) and writes outside it, so neither callbacks nor
+the learner ever wait for the disk. A node killed with SIGKILL loses at most the samples learned since the
+last periodic checkpoint.
+
+Bad input (NaN/inf, unknown or missing joints, wrong frame, out-of-order or zero stamps, unconvertible
+messages) is dropped, counted by reason in ``/diagnostics`` and logged at most every 5 s; it never stops
+the node or reaches the model.
+"""
+
+from __future__ import annotations
+
+import collections
+import copy
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+from threadpoolctl import threadpool_limits
+
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.estimator import OnlineEstimator, StepResult
+from semiparam_ros.core.messages import JointStateData, WrenchData
+from semiparam_ros.ros.conversions import (
+    joint_state_from_msg,
+    joint_torques_msg,
+    parameters_msg,
+    wrench_from_msg,
+    wrench_stamped_msg,
+)
+from semiparam_ros.ros.diagnostics import NodeStatistics, diagnostic_array
+from semiparam_ros.ros.parameters import (
+    ParameterError,
+    declare_parameters,
+    make_parameter_validator,
+)
+
+__all__ = ["INPUT_QOS", "PARAMETERS_QOS", "EstimatorNode", "StartupError", "main"]
+
+#: Sensor-data QoS of the inputs (best effort, volatile), with a deeper history than the default 5.
+INPUT_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)
+#: Latched output of the inertial parameters: a late subscriber gets the latest estimate.
+PARAMETERS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+_OUTPUT_QOS = 100
+_LOG_THROTTLE_S = 5.0
+
+
+class StartupError(RuntimeError):
+    """The node cannot start (invalid parameters, incompatible checkpoint); the message says why."""
+
+
+class EstimatorNode(Node):
+    """ROS 2 node running :class:`OnlineEstimator` on live topics.
+
+    Args:
+        node_name: Node name (parameters are read from this name's block of the parameter file).
+        **kwargs: Passed to :class:`rclpy.node.Node` (e.g. ``context``, ``parameter_overrides``).
+
+    Raises:
+        StartupError: If a parameter is invalid or the checkpoint to warm start from is incompatible; the
+            node is destroyed before raising.
+    """
+
+    def __init__(self, node_name: str = "estimator", **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        try:
+            self._setup()
+        except BaseException:
+            self._stop_threads(save=False)
+            self.destroy_node()
+            raise
+
+    # ================================================================== set-up
+    def _setup(self) -> None:
+        self._stopping = threading.Event()
+        self._worker: threading.Thread | None = None
+        self._ckpt_thread: threading.Thread | None = None
+        try:
+            self.config: EstimatorConfig = declare_parameters(self)
+        except ParameterError as err:
+            raise StartupError(f"invalid parameter: {err}") from err
+        cfg = self.config
+        self._output = cfg["robot.output"]
+        self._joints = tuple(cfg["robot.joints"])
+        self._frame_id = cfg["robot.frame_id"]
+        self._ckpt_path = Path(cfg["checkpoint.path"]).expanduser() if cfg["checkpoint.path"] else None
+        self._ckpt_period = float(cfg["checkpoint.period"])
+
+        try:
+            self._estimator = OnlineEstimator(cfg)
+        except ValueError as err:
+            raise StartupError(f"cannot build the estimator: {err}") from err
+        self._warm_up_kernels()
+        if self._ckpt_path is not None and cfg["checkpoint.load_on_start"] and self._ckpt_path.exists():
+            try:
+                self._estimator.load(self._ckpt_path)
+            except ValueError as err:
+                raise StartupError(
+                    f"cannot warm start from checkpoint {self._ckpt_path}: {err}\n"
+                    "Delete or move it, point checkpoint.path elsewhere, or set "
+                    "checkpoint.load_on_start:=false to overwrite it.") from err
+            self.get_logger().info(
+                f"warm start from {self._ckpt_path} ({self._estimator.n_samples_learned} samples learned)")
+        self._estimator.learning_enabled = bool(cfg["learning_enabled"])
+
+        # Shared state between the executor, the worker and the checkpoint thread.
+        self._model_lock = threading.Lock()
+        self._queue: collections.deque[tuple[str, JointStateData | WrenchData, float]] = collections.deque()
+        self._queue_size = int(cfg["queue_size"])
+        self._queue_cond = threading.Condition()
+        self._version = 0  # bumped whenever the learned state changes (learning, reset)
+        self._published_version = -1
+        self._ckpt_event = threading.Event()
+        self._ckpt_requests: list[Future] = []
+        self._ckpt_lock = threading.Lock()
+        self._ckpt_reset_pending = False
+        self._saved_version = 0
+        self._last_wrench_frame = self._frame_id
+        self._last_drop_total = 0
+        n_out = 6 if self._output == "wrench" else len(self._joints)
+        self._stats = NodeStatistics(self._output, n_out, int(cfg["diagnostics.rmse_window"]))
+
+        # Outputs.
+        if self._output == "wrench":
+            self._pub_total = self.create_publisher(WrenchStamped, "~/predicted_wrench", _OUTPUT_QOS)
+            self._pub_param = self.create_publisher(
+                WrenchStamped, "~/predicted_wrench/parametric", _OUTPUT_QOS)
+            self._pub_resid = self.create_publisher(
+                WrenchStamped, "~/predicted_wrench/nonparametric", _OUTPUT_QOS)
+        else:
+            self._pub_total = self.create_publisher(JointState, "predicted_joint_torques", _OUTPUT_QOS)
+            self._pub_param = self._pub_resid = None
+        self._pub_params = self.create_publisher(Float64MultiArray, "~/inertial_parameters", PARAMETERS_QOS)
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+
+        # Inputs: callbacks only convert and enqueue.
+        overrides = QoSOverridingOptions.with_default_policies()
+        self.create_subscription(JointState, cfg["topics.joint_states"], self._on_joint_state, INPUT_QOS,
+                                 qos_overriding_options=overrides)
+        self.create_subscription(WrenchStamped, cfg["topics.wrench"], self._on_wrench, INPUT_QOS,
+                                 qos_overriding_options=overrides)
+
+        # Services, parameters and timers (wall time, so diagnostics go on when /clock stops).
+        services = MutuallyExclusiveCallbackGroup()
+        self.create_service(Trigger, "~/save", self._on_save, callback_group=services)
+        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
+        self.add_on_set_parameters_callback(make_parameter_validator(lambda: self.config))
+        self.add_post_set_parameters_callback(self._on_parameters_set)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(float(cfg["diagnostics.period"]), self._on_diagnostics_timer, clock=steady)
+
+        self._worker = threading.Thread(target=self._worker_loop, name="estimator-worker", daemon=True)
+        self._worker.start()
+        self._ckpt_thread = threading.Thread(target=self._checkpoint_loop, name="estimator-checkpoint",
+                                             daemon=True)
+        self._ckpt_thread.start()
+        self._publish_parameters(force=True)
+        est = self._estimator
+        inputs = [self.resolve_topic_name(cfg[k]) for k in ("topics.joint_states", "topics.wrench")]
+        self.get_logger().info(
+            f"estimating {self._output} of joints {list(self._joints)}: {est.regressor.n_base} base "
+            f"parameters, D = {cfg['nonparametric.n_features']} random features; learning "
+            f"{'enabled' if est.learning_enabled else 'disabled'}; inputs {', '.join(inputs)}")
+
+    def _warm_up_kernels(self) -> None:
+        """Run one predict+learn on a throw-away copy so compiled kernels are loaded before input arrives."""
+        est = self._estimator
+        model = est.model.copy()
+        n = len(self._joints)
+        y_dim = 6 if self._output == "wrench" else n
+        model.predict_learn_one(np.zeros(3 * n), np.zeros(y_dim))
+
+    # ================================================================== executor side
+    def _enqueue(self, kind: str, item: JointStateData | WrenchData) -> None:
+        with self._queue_cond:
+            dropped = len(self._queue) >= self._queue_size
+            if dropped:
+                self._queue.popleft()
+            self._queue.append((kind, item, time.perf_counter()))
+            self._queue_cond.notify()
+        if dropped:
+            self._stats.count_drop("queue_full")
+            self.get_logger().warning(
+                "input queue full: dropping the oldest message (learning cannot keep up)",
+                throttle_duration_sec=_LOG_THROTTLE_S)
+
+    def _on_joint_state(self, msg: JointState) -> None:
+        self._stats.count_input("joint_states")
+        try:
+            data = joint_state_from_msg(msg)
+        except Exception as err:  # a malformed message must never stop the node
+            self._conversion_failed("joint_states", err)
+            return
+        self._enqueue("joint_states", data)
+
+    def _on_wrench(self, msg: WrenchStamped) -> None:
+        self._stats.count_input("wrench")
+        try:
+            data = wrench_from_msg(msg)
+        except Exception as err:  # a malformed message must never stop the node
+            self._conversion_failed("wrench", err)
+            return
+        self._enqueue("wrench", data)
+
+    def _conversion_failed(self, topic: str, err: Exception) -> None:
+        self._stats.count_drop("conversion_error")
+        self.get_logger().warning(f"cannot convert a {topic} message: {err}",
+                                  throttle_duration_sec=_LOG_THROTTLE_S)
+
+    async def _on_save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        if self._ckpt_path is None:
+            response.success, response.message = False, "checkpoint.path is empty: checkpoints are disabled"
+            return response
+        future = Future(executor=self.executor)
+        future.add_done_callback(lambda _f: None)  # makes set_result() wake the executor
+        with self._ckpt_lock:
+            self._ckpt_requests.append(future)
+        self._ckpt_event.set()
+        ok, message = await future
+        response.success, response.message = ok, message
+        return response
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        with self._model_lock:
+            self._estimator.reset()
+            self._version += 1
+        self._stats.clear_errors()
+        self._publish_parameters(force=True)
+        if self._ckpt_path is not None:
+            with self._ckpt_lock:
+                self._ckpt_reset_pending = True
+            self._ckpt_event.set()  # persist the reset, so a warm start does not bring the old model back
+        self.get_logger().info("model reset: everything learned was forgotten")
+        response.success, response.message = True, "model reset"
+        return response
+
+    def _on_parameters_set(self, params: list[Parameter]) -> None:
+        changes = {p.name: p.value for p in params}
+        known = {k: v for k, v in changes.items() if k in self.config.values}
+        if not known:
+            return
+        self.config = self.config.with_overrides(known)
+        if "learning_enabled" in known:
+            with self._model_lock:
+                self._estimator.learning_enabled = bool(known["learning_enabled"])
+            self.get_logger().info(f"learning {'enabled' if known['learning_enabled'] else 'disabled'}")
+        if "checkpoint.period" in known:
+            self._ckpt_period = float(known["checkpoint.period"])
+            self._ckpt_event.set()
+
+    def _on_diagnostics_timer(self) -> None:
+        stats = self._stats.snapshot()
+        with self._model_lock:
+            est = self._estimator
+            drops = est.drops
+            stats["samples_learned"] = est.n_samples_learned
+            stats["learning_enabled"] = est.learning_enabled
+            stats["model_size"] = est.model_size
+        with self._queue_cond:
+            stats["queue_length"] = len(self._queue)
+        stats["queue_size"] = self._queue_size
+        stats["acceleration_delay_ms"] = 1e3 * float(getattr(est.pipeline, "acceleration_delay_s", 0.0))
+        for reason, count in drops.items():
+            key = f"drops.{reason}"
+            stats[key] = int(stats.get(key, 0)) + count  # type: ignore[call-overload]
+        stats["drops_total"] = int(stats["queue_drops"]) + sum(  # type: ignore[call-overload]
+            v for k, v in stats.items() if k.startswith("drops.") and isinstance(v, int))
+        stats["checkpoint_path"] = str(self._ckpt_path or "")
+        msg = diagnostic_array(self.get_clock().now().to_msg(), f"{self.get_name()}: online learning",
+                               ",".join(self._joints), stats,
+                               worker_alive=self._worker is not None and self._worker.is_alive())
+        self._pub_diag.publish(msg)
+        self._publish_parameters(force=False)
+
+    def _publish_parameters(self, *, force: bool) -> None:
+        with self._model_lock:
+            version = self._version
+            if not force and version == self._published_version:
+                return
+            params = self._estimator.parameters
+            names = self._estimator.parameter_names
+        if params is None:
+            return
+        self._pub_params.publish(parameters_msg(names, params))
+        self._published_version = version
+
+    # ================================================================== worker thread
+    def _worker_loop(self) -> None:
+        while not self._stopping.is_set():
+            with self._queue_cond:
+                if not self._queue:
+                    self._queue_cond.wait(0.1)
+                    continue
+                kind, data, t_recv = self._queue.popleft()
+            self._process(kind, data, t_recv)
+
+    def _process(self, kind: str, data: JointStateData | WrenchData, t_recv: float) -> None:
+        est = self._estimator
+        try:
+            with self._model_lock:
+                if kind == "wrench":
+                    results = est.process_wrench(data)  # type: ignore[arg-type]
+                    if not self._frame_id:
+                        self._last_wrench_frame = data.frame_id  # type: ignore[union-attr]
+                else:
+                    results = est.process_joint_state(data)  # type: ignore[arg-type]
+                if any(r.learned for r in results):
+                    self._version += 1
+                drop_total = sum(est.pipeline.drops.values())
+        except Exception as err:  # the core rejected something unexpected: count it, keep running
+            self._stats.count_drop("estimator_error")
+            self.get_logger().error(f"estimator failed on a {kind} message: {err!r}",
+                                    throttle_duration_sec=_LOG_THROTTLE_S)
+            return
+        if drop_total != self._last_drop_total:
+            self._stats.count_pipeline_drops(drop_total - self._last_drop_total)
+            self._last_drop_total = drop_total
+            self.get_logger().warning(f"dropped input messages: {est.drops}",
+                                      throttle_duration_sec=_LOG_THROTTLE_S)
+        for result in results:
+            try:
+                self._publish_result(result)
+            except Exception as err:  # e.g. non-finite output; never stop the worker
+                self._stats.count_drop("publish_error")
+                self.get_logger().error(f"cannot publish a prediction: {err!r}",
+                                        throttle_duration_sec=_LOG_THROTTLE_S)
+                continue
+            pred = result.prediction
+            self._stats.add_sample(result.latency_s, time.perf_counter() - t_recv, result.sample.y,
+                                   pred.total, pred.parametric)
+
+    def _publish_result(self, result: StepResult) -> None:
+        stamp = result.sample.stamp_ns
+        pred = result.prediction
+        if self._output == "wrench":
+            frame = self._last_wrench_frame
+            self._pub_total.publish(wrench_stamped_msg(stamp, frame, pred.total))
+            for pub, value in ((self._pub_param, pred.parametric), (self._pub_resid, pred.residual)):
+                if pub is not None and pub.get_subscription_count() > 0:
+                    pub.publish(wrench_stamped_msg(stamp, frame, value))
+        else:
+            self._pub_total.publish(joint_torques_msg(stamp, self._joints, pred.total))
+
+    # ================================================================== checkpoint thread
+    def _checkpoint_loop(self) -> None:
+        last_periodic = time.monotonic()
+        while True:
+            period = self._ckpt_period
+            timeout = max(last_periodic + period - time.monotonic(), 0.0) if period > 0 else 1.0
+            self._ckpt_event.wait(timeout)
+            self._ckpt_event.clear()
+            stopping = self._stopping.is_set()
+            with self._ckpt_lock:
+                requests, self._ckpt_requests = self._ckpt_requests, []
+                reset_pending, self._ckpt_reset_pending = self._ckpt_reset_pending, False
+            now = time.monotonic()
+            periodic = period > 0 and now - last_periodic >= period
+            if periodic or period <= 0:
+                last_periodic = now
+            if self._ckpt_path is None:
+                result = (False, "checkpoint.path is empty: checkpoints are disabled")
+            elif requests or ((stopping or periodic or reset_pending) and self._version_changed()):
+                result = self._write_checkpoint()
+            else:
+                result = (True, f"checkpoint {self._ckpt_path} is up to date")
+            for future in requests:
+                future.set_result(result)
+            if stopping:
+                return
+
+    def _version_changed(self) -> bool:
+        return self._version != self._saved_version
+
+    def _write_checkpoint(self) -> tuple[bool, str]:
+        assert self._ckpt_path is not None
+        with self._model_lock:  # copy under the lock, write outside it: the learner never waits for disk
+            shadow = copy.copy(self._estimator)
+            shadow.model = self._estimator.model.copy()
+            version = self._version
+            n_learned = self._estimator.n_samples_learned
+        try:
+            shadow.save(self._ckpt_path)
+        except (OSError, ValueError) as err:
+            self._stats.mark_checkpoint(False)
+            self.get_logger().error(f"checkpoint to {self._ckpt_path} failed: {err}",
+                                    throttle_duration_sec=_LOG_THROTTLE_S)
+            return False, f"checkpoint failed: {err}"
+        self._saved_version = version
+        self._stats.mark_checkpoint(True)
+        return True, f"saved {n_learned} learned samples to {self._ckpt_path}"
+
+    # ================================================================== shutdown
+    def _stop_threads(self, *, save: bool) -> None:
+        stopping = getattr(self, "_stopping", None)
+        if stopping is None:
+            return
+        stopping.set()
+        if getattr(self, "_worker", None) is not None:
+            with self._queue_cond:
+                self._queue_cond.notify_all()
+            self._worker.join(timeout=5.0)
+        if getattr(self, "_ckpt_thread", None) is not None:
+            if not save:
+                self._ckpt_path = None
+            self._ckpt_event.set()
+            self._ckpt_thread.join(timeout=30.0)
+
+    def shutdown(self) -> None:
+        """Stop learning and write the final checkpoint (if configured); call before ``destroy_node``."""
+        self._stop_threads(save=True)
+
+    # Expose a few read-only views for tests and tools running the node in-process.
+    @property
+    def estimator(self) -> OnlineEstimator:
+        """The estimator (owned by the worker thread: hold no reference across samples)."""
+        return self._estimator
+
+    def wait_idle(self, timeout: float = 5.0, poll: Callable[[], None] | None = None) -> bool:
+        """Wait until the input queue is empty (for in-process tests); returns whether it emptied."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with self._queue_cond:
+                if not self._queue:
+                    return True
+            if poll is not None:
+                poll()
+            time.sleep(0.005)
+        return False
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the estimator node until shut down (Ctrl-C, SIGTERM or context shutdown).
+
+    Args:
+        args: Command-line arguments (``--ros-args ...``); ``sys.argv`` when None.
+
+    Returns:
+        Process exit code: 0 on a clean shutdown, 2 if the node could not start.
+    """
+    rclpy.init(args=args)
+    node: EstimatorNode | None = None
+    code = 0
+    try:
+        # One BLAS/OpenMP thread: the learner's small dense operations do not profit from more, and on a
+        # small machine extra threads only compete with the executor.
+        with threadpool_limits(1):
+            node = EstimatorNode()
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            executor.spin()
+    except StartupError as err:
+        print(f"[estimator] FATAL: {err}", file=sys.stderr, flush=True)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.shutdown()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
