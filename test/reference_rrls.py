@@ -50,7 +50,7 @@ class ReferenceQRRLS:
         self.j = 0
 
     @property
-    def R(self) -> np.ndarray:
+    def R(self) -> np.ndarray:  # noqa: N802
         return self.M[:, : self.b]
 
     @property
