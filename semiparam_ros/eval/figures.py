@@ -1,0 +1,147 @@
+"""Figures of the evaluation (matplotlib, Agg backend; no display needed).
+
+:func:`plot_protocol` draws the paper's Fig. 3: force (top) and torque (bottom) windowed RMSE against the
+time from the start of each test split on a log axis, mean over splits as a line and ± one standard
+deviation shaded, P green, NP red, SP blue. :func:`plot_adaptation` draws the payload scenario: windowed
+force and torque RMSE against the time from the pickup, one line per model (with and without adaptation),
+the pre-pickup level and the recovery tolerance band.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # before pyplot: headless, deterministic PNGs
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+__all__ = ["COLORS", "plot_adaptation", "plot_protocol"]
+
+#: The paper's colours: parametric green, nonparametric red, semiparametric blue.
+COLORS: dict[str, str] = {"P": "tab:green", "NP": "tab:red", "SP": "tab:blue"}
+_UNITS = {"force": "N", "torque": "N·m"}
+_EXTRA = ("tab:purple", "tab:orange", "tab:brown", "tab:gray", "tab:olive", "tab:cyan")
+
+
+def _color(kind: str, index: int) -> str:
+    for key in sorted(COLORS, key=len, reverse=True):
+        if kind == key or kind.startswith(key + " "):
+            return COLORS[key]
+    return _EXTRA[index % len(_EXTRA)]
+
+
+def _save(fig: Any, path: str | Path, dpi: int) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.png")
+    try:
+        fig.savefig(tmp, dpi=dpi, format="png")
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def plot_protocol(report: Mapping[str, Any], path: str | Path, *, truth: bool = False,
+                  title: str | None = None, dpi: int = 120) -> Path:
+    """Draw the paper's Fig. 3 from a protocol report and write it as PNG (atomically).
+
+    Args:
+        report: Output of :func:`~semiparam_ros.eval.report.protocol_report` (uses ``curves``).
+        path: Destination ``.png``.
+        truth: Plot the errors against the noise-free outputs (requires them in the report).
+        title: Figure title.
+        dpi: Resolution.
+
+    Returns:
+        The written path.
+
+    Raises:
+        ValueError: If the report has no curves (or no ground-truth curves when ``truth``).
+    """
+    curves = report.get("curves")
+    if not curves:
+        raise ValueError("the report has no curves")
+    time_s = np.asarray(curves["time_s"])
+    source = curves.get("ground_truth") if truth else {k: v for k, v in curves.items() if k not in
+                                                     ("time_s", "ground_truth")}
+    if not source:
+        raise ValueError("the report has no ground-truth curves")
+    groups = [g for g in ("force", "torque") if f"{g}_mean" in next(iter(source.values()))]
+    fig, axes = plt.subplots(len(groups), 1, figsize=(6.4, 2.6 * len(groups) + 0.6), sharex=True,
+                             squeeze=False)
+    for ax, group in zip(axes[:, 0], groups, strict=True):
+        for i, (kind, entry) in enumerate(source.items()):
+            mean = np.asarray(entry[f"{group}_mean"])
+            std = np.asarray(entry[f"{group}_std"])
+            color = _color(kind, i)
+            ax.plot(time_s, mean, color=color, lw=1.4, label=kind)
+            ax.fill_between(time_s, mean - std, mean + std, color=color, alpha=0.2, lw=0)
+        ax.set_xscale("log")
+        ax.set_ylabel(f"{group} RMSE [{_UNITS[group]}]")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.set_ylim(bottom=0)
+    axes[0, 0].legend(loc="upper right")
+    window = report.get("protocol", {}).get("window_s")
+    axes[-1, 0].set_xlabel("time from split start [s] (log scale)")
+    splits = report.get("splits")
+    fig.suptitle(title or (f"windowed RMSE ({window:.3g} s window), mean ± std over {splits} splits"
+                           + (" — vs noise-free wrench" if truth else "")), fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path, dpi)
+
+
+def plot_adaptation(report: Mapping[str, Any], path: str | Path, *, title: str | None = None,
+                    dpi: int = 120, xlim: tuple[float, float] | None = None) -> Path:
+    """Draw the payload scenario (error vs time around the change) and write it as PNG (atomically).
+
+    Args:
+        report: Output of :func:`~semiparam_ros.eval.report.adaptation_report`.
+        path: Destination ``.png``.
+        title: Figure title.
+        dpi: Resolution.
+        xlim: Time range relative to the change [s]; default all.
+
+    Returns:
+        The written path.
+
+    Raises:
+        ValueError: If the report has no curves.
+    """
+    curves = report.get("curves")
+    if not curves:
+        raise ValueError("the report has no curves")
+    time_s = np.asarray(curves["time_s"])
+    models = {k: v for k, v in curves.items() if k != "time_s"}
+    groups = [g for g in ("force", "torque") if g in next(iter(models.values()))]
+    fig, axes = plt.subplots(len(groups), 1, figsize=(6.4, 2.6 * len(groups) + 0.6), sharex=True,
+                             squeeze=False)
+    tol = report.get("tolerance", 1.5)
+    deadline = report.get("deadline_s", 10.0)
+    styles = ("-", "--", ":", "-.")
+    for ax, group in zip(axes[:, 0], groups, strict=True):
+        for i, (kind, entry) in enumerate(models.items()):
+            color = _color(kind, i)
+            ax.plot(time_s, entry[group], color=color, ls=styles[i % len(styles)], lw=1.3, label=kind)
+            pre = report["summary"][kind][group]["pre_rmse"]
+            ax.axhline(tol * pre, color=color, ls=styles[i % len(styles)], lw=0.7, alpha=0.6)
+        ax.axvline(0.0, color="k", lw=0.8)
+        ax.axvspan(0.0, deadline, color="0.85", alpha=0.5, lw=0)
+        ax.set_yscale("log")
+        ax.set_ylabel(f"{group} RMSE [{_UNITS[group]}]")
+        ax.grid(True, which="both", alpha=0.3)
+        if xlim is not None:
+            ax.set_xlim(*xlim)
+    axes[0, 0].legend(loc="upper left", fontsize=8)
+    axes[-1, 0].set_xlabel(f"time from the pickup [s] (shaded: {deadline:g} s; "
+                           f"thin lines: {tol:g}× pre-pickup)")
+    fig.suptitle(title or "payload pickup: windowed RMSE with and without adaptation", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path, dpi)

@@ -1,0 +1,520 @@
+"""The paper's evaluation protocol on sample arrays and online models.
+
+Camoriano et al. (ICRA 2016, Sec. IV-C): initialise the parametric (P), nonparametric (NP) and
+semiparametric (SP) models at zero; train each on the whole training log (XY circles); split the test log
+(XZ circles) into sequential parts; on each part, starting from a copy of the trained model, predict and
+then update one sample at a time; report mean and standard deviation over the parts of the
+component-averaged RMSE of forces and torques over a sliding window.
+
+This module works on plain arrays (:class:`SampleArrays`) and on any object with the online-model
+interface of :mod:`semiparam_ros.core.semiparametric` (``predict_learn_one(x, y)`` returning a prediction
+with a ``total`` attribute or an array, and ``copy()``), so it is tested against hand-written loops on toy
+models and used unchanged on bags by :mod:`semiparam_ros.eval.evaluate`.
+
+A second protocol, :func:`run_adaptation`, follows one stream through an abrupt change (a payload picked
+up at a known time) and measures how fast each model's error returns to its pre-change level.
+
+Units: time in s (stamps in int ns), errors in N (forces) and N·m (torques), update times in µs.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from semiparam_ros.eval.metrics import group_rmse, groups_for, window_samples, windowed_rmse
+
+__all__ = [
+    "AdaptationResult",
+    "OnlineModel",
+    "ProtocolResult",
+    "SampleArrays",
+    "run_adaptation",
+    "run_protocol",
+    "split_bounds",
+    "test_then_train",
+    "train",
+]
+
+_NS = 1e-9
+
+
+class OnlineModel(Protocol):
+    """What the protocol needs from a learner (P, NP and SP models of ``core.semiparametric``)."""
+
+    def predict_learn_one(self, x: np.ndarray, y: np.ndarray) -> Any:
+        """A-priori prediction at ``x`` (array or object with ``.total``), then learn ``(x, y)``."""
+        ...
+
+    def copy(self) -> OnlineModel:
+        """Independent deep copy."""
+        ...
+
+
+Progress = Callable[[int], None]
+
+
+def _total(prediction: Any) -> np.ndarray:
+    return np.asarray(getattr(prediction, "total", prediction), dtype=np.float64).reshape(-1)
+
+
+@dataclass(frozen=True)
+class SampleArrays:
+    """A stream of learning samples as arrays.
+
+    Attributes:
+        stamps_ns: Sample stamps [ns], shape ``(n,)``, strictly increasing.
+        X: Inputs ``[q, dq, ddq]`` (rad, rad/s, rad/s²), shape ``(n, d)``.
+        Y: Measured outputs (wrench ``[fx, fy, fz, tx, ty, tz]`` in N, N·m, or joint torques), ``(n, t)``.
+        Y_true: Noise-free outputs at the same stamps when known (simulated bags), else ``None``.
+    """
+
+    stamps_ns: np.ndarray
+    X: np.ndarray
+    Y: np.ndarray
+    Y_true: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        stamps = np.asarray(self.stamps_ns, dtype=np.int64).reshape(-1)
+        X = np.asarray(self.X, dtype=np.float64)
+        Y = np.asarray(self.Y, dtype=np.float64)
+        if X.ndim != 2 or Y.ndim != 2:
+            raise ValueError(f"X and Y must be 2-D, got shapes {X.shape} and {Y.shape}")
+        if not (len(stamps) == X.shape[0] == Y.shape[0]):
+            raise ValueError(f"stamps, X and Y disagree in length: {len(stamps)}, {X.shape[0]}, {Y.shape[0]}")
+        if len(stamps) > 1 and np.any(np.diff(stamps) <= 0):
+            raise ValueError("sample stamps must be strictly increasing")
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Y))):
+            raise ValueError("X or Y contain NaN or inf")
+        Y_true = None
+        if self.Y_true is not None:
+            Y_true = np.asarray(self.Y_true, dtype=np.float64)
+            if Y_true.shape != Y.shape or not np.all(np.isfinite(Y_true)):
+                raise ValueError(f"Y_true must be finite with the shape of Y {Y.shape}, got {Y_true.shape}")
+        object.__setattr__(self, "stamps_ns", stamps)
+        object.__setattr__(self, "X", X)
+        object.__setattr__(self, "Y", Y)
+        object.__setattr__(self, "Y_true", Y_true)
+
+    @classmethod
+    def from_samples(cls, samples: Iterable[Any], ground_truth: Mapping[int, np.ndarray] | None = None,
+                     limit: int | None = None) -> SampleArrays:
+        """Collect :class:`~semiparam_ros.core.messages.Sample` objects into arrays.
+
+        Args:
+            samples: Objects with ``stamp_ns``, ``x`` and ``y``.
+            ground_truth: Noise-free outputs by stamp [ns]; used only if every sample has one.
+            limit: Keep at most this many samples (the first ones).
+
+        Returns:
+            The arrays.
+
+        Raises:
+            ValueError: If no sample is given or samples are malformed.
+        """
+        stamps, xs, ys = [], [], []
+        for sample in samples:
+            if limit is not None and len(stamps) >= limit:
+                break
+            stamps.append(int(sample.stamp_ns))
+            xs.append(np.asarray(sample.x, dtype=np.float64))
+            ys.append(np.asarray(sample.y, dtype=np.float64))
+        if not stamps:
+            raise ValueError("no samples")
+        y_true = None
+        if ground_truth and all(s in ground_truth for s in stamps):
+            y_true = np.stack([np.asarray(ground_truth[s], dtype=np.float64) for s in stamps])
+        return cls(np.array(stamps, dtype=np.int64), np.stack(xs), np.stack(ys), y_true)
+
+    def __len__(self) -> int:
+        return len(self.stamps_ns)
+
+    @property
+    def n_outputs(self) -> int:
+        """Number of output components t."""
+        return self.Y.shape[1]
+
+    @property
+    def sample_period_s(self) -> float:
+        """Median stamp difference [s] (the actual sample period; ``nan`` for a single sample)."""
+        if len(self) < 2:
+            return float("nan")
+        return float(np.median(np.diff(self.stamps_ns))) * _NS
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last stamp [s]."""
+        return float(self.stamps_ns[-1] - self.stamps_ns[0]) * _NS
+
+    def slice(self, start: int, stop: int) -> SampleArrays:
+        """Return samples ``start:stop``."""
+        return SampleArrays(self.stamps_ns[start:stop], self.X[start:stop], self.Y[start:stop],
+                            None if self.Y_true is None else self.Y_true[start:stop])
+
+    def head(self, n: int | None) -> SampleArrays:
+        """Return the first ``n`` samples (all when ``n`` is ``None``)."""
+        return self if n is None else self.slice(0, n)
+
+
+def split_bounds(n_samples: int, splits: int, split_size: int | None = None) -> list[tuple[int, int]]:
+    """Sequential, non-overlapping parts of a test stream.
+
+    Args:
+        n_samples: Length of the test stream.
+        splits: Number of parts (>= 1).
+        split_size: Samples per part; ``None`` divides the stream into ``splits`` equal parts
+            (``n_samples // splits`` each, the remainder at the end unused).
+
+    Returns:
+        ``[(start, stop), ...]`` index ranges of the parts, in order.
+
+    Raises:
+        ValueError: If the stream is too short for the request or an argument is invalid.
+    """
+    if splits < 1:
+        raise ValueError(f"splits must be >= 1, got {splits}")
+    if split_size is None:
+        split_size = n_samples // splits
+        if split_size < 2:
+            raise ValueError(f"{n_samples} test samples cannot be divided into {splits} parts of >= 2 "
+                             "samples")
+    elif split_size < 2:
+        raise ValueError(f"split_size must be >= 2, got {split_size}")
+    if splits * split_size > n_samples:
+        raise ValueError(f"the test stream has {n_samples} samples, fewer than splits x split_size = "
+                         f"{splits} x {split_size}; lower --splits/--split-size or omit --split-size")
+    return [(k * split_size, (k + 1) * split_size) for k in range(splits)]
+
+
+def train(model: OnlineModel, data: SampleArrays, progress: Progress | None = None) -> np.ndarray:
+    """Train a model on a whole stream, one sample at a time (predict, then learn — as online).
+
+    Args:
+        model: The model, updated in place.
+        data: Training samples.
+        progress: Called with the number of samples processed since the last call.
+
+    Returns:
+        The a-priori predictions during training, shape ``(n, t)``.
+    """
+    return test_then_train(model, data.X, data.Y, progress)[0]
+
+
+def test_then_train(model: OnlineModel, X: np.ndarray, Y: np.ndarray,
+                    progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Predict each sample before learning it (the paper's test-and-update), one at a time.
+
+    Args:
+        model: The model, updated in place.
+        X: Inputs, shape ``(n, d)``.
+        Y: Targets, shape ``(n, t)``.
+        progress: Called with the number of samples processed since the last call (every 100).
+
+    Returns:
+        ``(predictions (n, t), update_ns (n,))``: the a-priori predictions and the wall time of each
+        ``predict_learn_one`` call [ns].
+    """
+    n = X.shape[0]
+    predictions = np.empty_like(Y, dtype=np.float64)
+    update_ns = np.empty(n, dtype=np.int64)
+    clock = time.perf_counter_ns
+    for i in range(n):
+        t0 = clock()
+        prediction = model.predict_learn_one(X[i], Y[i])
+        update_ns[i] = clock() - t0
+        predictions[i] = _total(prediction)
+        if progress is not None and (i + 1) % 100 == 0:
+            progress(100)
+    if progress is not None and n % 100:
+        progress(n % 100)
+    return predictions, update_ns
+
+
+@dataclass
+class ProtocolResult:
+    """Everything the paper's protocol produces (see :func:`run_protocol`).
+
+    Attributes:
+        kinds: Model names in order (e.g. ``("P", "NP", "SP")``).
+        bounds: ``(start, stop)`` of each test split.
+        predictions: Per model, a-priori test predictions, shape ``(splits, split_size, t)``.
+        targets: Measured test outputs, shape ``(splits, split_size, t)``.
+        targets_true: Noise-free test outputs (same shape) or ``None``.
+        time_s: Elapsed time of each split sample from the split's start, plus one period [s], shape
+            ``(split_size,)`` (median over splits; > 0 so that it fits a log axis).
+        sample_period_s: Median sample period of the test stream [s].
+        window: Sliding-window length [samples].
+        first: Samples making up the "first seconds" segment.
+        first_s: Length of that segment [s].
+        update_ns: Per model, wall time of each test ``predict_learn_one`` [ns], ``(splits, split_size)``.
+        train_ns: Per model, total training wall time [ns].
+        samples_train: Number of training samples.
+        groups: Component groups (``{"force": 0:3, "torque": 3:6}`` for a wrench).
+    """
+
+    kinds: tuple[str, ...]
+    bounds: list[tuple[int, int]]
+    predictions: dict[str, np.ndarray]
+    targets: np.ndarray
+    targets_true: np.ndarray | None
+    time_s: np.ndarray
+    sample_period_s: float
+    window: int
+    first: int
+    update_ns: dict[str, np.ndarray]
+    train_ns: dict[str, int]
+    samples_train: int
+    first_s: float = 3.0
+    groups: dict[str, slice] = field(default_factory=dict)
+
+    @property
+    def samples_test(self) -> int:
+        """Number of test samples used (splits × split size)."""
+        return int(self.targets.shape[0] * self.targets.shape[1])
+
+    def errors(self, kind: str, truth: bool = False) -> np.ndarray:
+        """Prediction errors ``ŷ - y`` of a model, shape ``(splits, split_size, t)``.
+
+        Args:
+            kind: Model name.
+            truth: Against the noise-free outputs instead of the measured ones.
+
+        Raises:
+            ValueError: If ``truth`` is requested but the stream has no noise-free outputs.
+        """
+        if truth:
+            if self.targets_true is None:
+                raise ValueError("the test stream has no noise-free outputs")
+            return self.predictions[kind] - self.targets_true
+        return self.predictions[kind] - self.targets
+
+    def curves(self, kind: str, group: str, truth: bool = False) -> np.ndarray:
+        """Windowed component-averaged RMSE of each split, shape ``(splits, split_size)``."""
+        err = self.errors(kind, truth)[:, :, self.groups[group]]
+        return np.stack([windowed_rmse(e, self.window) for e in err])
+
+    def segment_rmse(self, kind: str, group: str, segment: str, truth: bool = False) -> np.ndarray:
+        """Component-averaged RMSE of each split over a segment, shape ``(splits,)``.
+
+        Args:
+            kind: Model name.
+            group: ``"force"`` or ``"torque"``.
+            segment: ``"regime"`` (second half of each split) or ``"first"`` (first seconds).
+            truth: Against the noise-free outputs.
+        """
+        err = self.errors(kind, truth)[:, :, self.groups[group]]
+        length = err.shape[1]
+        part = slice(length // 2, length) if segment == "regime" else slice(0, self.first)
+        return np.array([group_rmse(e[part]) for e in err])
+
+
+def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, test_data: SampleArrays, *,
+                 splits: int = 10, split_size: int | None = None, window_s: float = 3.0,
+                 first_s: float = 3.0, progress: bool | Progress = False) -> ProtocolResult:
+    """Run the paper's protocol: train every model on the whole train stream, then test-and-update.
+
+    Each model is trained in place on all of ``train_data`` (one sample at a time); then for every split of
+    ``test_data`` an independent ``copy()`` of the trained model predicts and learns each sample in turn.
+
+    Args:
+        models: Fresh models by name (the paper: P, NP, SP with zero parameters). Trained in place.
+        train_data: Training stream (the XY log).
+        test_data: Test stream (the XZ log).
+        splits: Number of sequential test parts.
+        split_size: Samples per part; ``None`` = equal parts.
+        window_s: Sliding-window length [s], converted to samples at the test stream's sample rate.
+        first_s: Length of the initial segment reported as ``*_first_3s`` [s].
+        progress: ``True`` for a tqdm bar on stderr, or a callable receiving processed-sample counts.
+
+    Returns:
+        The :class:`ProtocolResult`.
+
+    Raises:
+        ValueError: If no model is given, the streams disagree in output size, or the test stream is too
+            short for the split request.
+    """
+    if not models:
+        raise ValueError("no models to evaluate")
+    if train_data.n_outputs != test_data.n_outputs or train_data.X.shape[1] != test_data.X.shape[1]:
+        raise ValueError("train and test streams differ in input or output size")
+    bounds = split_bounds(len(test_data), splits, split_size)
+    length = bounds[0][1] - bounds[0][0]
+    period = test_data.sample_period_s
+    window = window_samples(window_s, period)
+    first = min(length, window_samples(first_s, period))
+    kinds = tuple(models)
+    total = len(kinds) * (len(train_data) + len(bounds) * length)
+    bar, tick = _progress(progress, total)
+    try:
+        train_ns: dict[str, int] = {}
+        predictions: dict[str, np.ndarray] = {}
+        update_ns: dict[str, np.ndarray] = {}
+        for kind, model in models.items():
+            t0 = time.perf_counter_ns()
+            train(model, train_data, tick)
+            train_ns[kind] = time.perf_counter_ns() - t0
+            preds, times = [], []
+            for start, stop in bounds:
+                pred, ns = test_then_train(model.copy(), test_data.X[start:stop], test_data.Y[start:stop],
+                                           tick)
+                preds.append(pred)
+                times.append(ns)
+            predictions[kind] = np.stack(preds)
+            update_ns[kind] = np.stack(times)
+    finally:
+        if bar is not None:
+            bar.close()
+    targets = np.stack([test_data.Y[a:b] for a, b in bounds])
+    targets_true = None if test_data.Y_true is None else np.stack([test_data.Y_true[a:b] for a, b in bounds])
+    elapsed = np.stack([test_data.stamps_ns[a:b] - test_data.stamps_ns[a] for a, b in bounds]) * _NS
+    time_s = np.median(elapsed, axis=0) + period
+    return ProtocolResult(kinds=kinds, bounds=bounds, predictions=predictions, targets=targets,
+                          targets_true=targets_true, time_s=time_s, sample_period_s=period, window=window,
+                          first=first, first_s=first_s, update_ns=update_ns, train_ns=train_ns,
+                          samples_train=len(train_data),
+                          groups=groups_for(test_data.n_outputs))
+
+
+def _progress(progress: bool | Progress, total: int) -> tuple[Any, Progress | None]:
+    if progress is True:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, unit="sample", dynamic_ncols=True, smoothing=0.05)
+        return bar, bar.update
+    if callable(progress):
+        return None, progress
+    return None, None
+
+
+@dataclass
+class AdaptationResult:
+    """One stream through an abrupt change, per model (see :func:`run_adaptation`).
+
+    Attributes:
+        kinds: Model names.
+        time_s: Sample times relative to the change [s], shape ``(n,)`` (negative before it).
+        errors: Per model, a-priori errors ``ŷ - y``, shape ``(n, t)``.
+        errors_true: Per model, errors against the noise-free outputs, or ``None``.
+        window: Sliding-window length [samples].
+        curves: Per model and group, windowed component-averaged RMSE, shape ``(n,)``.
+        summary: Per model and group: ``pre_rmse`` (RMSE over ``pre_s`` before the change),
+            ``peak`` (largest windowed RMSE after it), ``recovery_time_s`` (first time after the change from
+            which the windowed RMSE stays within ``tolerance × pre_rmse`` to the end of the stream, ``None``
+            if never), ``level_at_deadline`` (windowed RMSE at ``deadline_s``, ratio to ``pre_rmse`` in
+            ``ratio_at_deadline``), ``post_rmse`` (RMSE from ``deadline_s`` to the end), ``recovered``
+            (``recovery_time_s <= deadline_s``).
+        change_s: Time of the change from the stream's first stamp [s].
+        tolerance: Recovery tolerance (ratio to the pre-change level).
+        deadline_s: Recovery deadline after the change [s].
+        pre_s: Length of the pre-change reference segment [s].
+    """
+
+    kinds: tuple[str, ...]
+    time_s: np.ndarray
+    errors: dict[str, np.ndarray]
+    errors_true: dict[str, np.ndarray] | None
+    window: int
+    curves: dict[str, dict[str, np.ndarray]]
+    summary: dict[str, dict[str, dict[str, Any]]]
+    change_s: float
+    tolerance: float
+    deadline_s: float
+    pre_s: float
+
+
+def run_adaptation(models: Mapping[str, OnlineModel], stream: SampleArrays, change_s: float, *,
+                   pretrain: SampleArrays | None = None, window_s: float = 3.0, pre_s: float = 10.0,
+                   deadline_s: float = 10.0, tolerance: float = 1.5,
+                   progress: bool | Progress = False) -> AdaptationResult:
+    """Follow a stream through an abrupt change (e.g. a payload picked up) with test-then-train.
+
+    Each model is optionally trained on ``pretrain`` first, then predicts and learns every sample of
+    ``stream``. The pre-change level of a group is its component-averaged RMSE over ``[change - pre_s,
+    change)``; the model has recovered if its windowed RMSE is within ``tolerance ×`` that level from some
+    time ``<= change + deadline_s`` to the end of the stream.
+
+    Args:
+        models: Models by name (e.g. ``{"SP adaptive": ..., "SP": ...}``), updated in place.
+        stream: The stream containing the change.
+        change_s: Time of the change from the stream's first stamp [s].
+        pretrain: Optional stream each model learns first.
+        window_s: Sliding-window length [s].
+        pre_s: Length of the pre-change reference segment [s].
+        deadline_s: Recovery deadline after the change [s].
+        tolerance: Allowed ratio to the pre-change level.
+        progress: As in :func:`run_protocol`.
+
+    Returns:
+        The :class:`AdaptationResult`.
+
+    Raises:
+        ValueError: If the change is not inside the stream with ``pre_s`` of data before it.
+    """
+    if not models:
+        raise ValueError("no models to evaluate")
+    t = (stream.stamps_ns - stream.stamps_ns[0]) * _NS - change_s
+    if not (t[0] <= -pre_s + 1e-9 and t[-1] > 0):
+        raise ValueError(f"the change at {change_s:g} s needs {pre_s:g} s of data before it and some after "
+                         "it "
+                         f"in a stream of {stream.duration_s:.3g} s")
+    window = window_samples(window_s, stream.sample_period_s)
+    total = len(models) * (len(stream) + (0 if pretrain is None else len(pretrain)))
+    bar, tick = _progress(progress, total)
+    errors: dict[str, np.ndarray] = {}
+    try:
+        for kind, model in models.items():
+            if pretrain is not None:
+                train(model, pretrain, tick)
+            pred, _ = test_then_train(model, stream.X, stream.Y, tick)
+            errors[kind] = pred - stream.Y
+    finally:
+        if bar is not None:
+            bar.close()
+    errors_true = None
+    if stream.Y_true is not None:
+        errors_true = {k: e + stream.Y - stream.Y_true for k, e in errors.items()}
+    groups = groups_for(stream.n_outputs)
+    pre = (t >= -pre_s) & (t < 0)
+    after = t >= 0
+    curves: dict[str, dict[str, np.ndarray]] = {}
+    summary: dict[str, dict[str, dict[str, Any]]] = {}
+    for kind, err in errors.items():
+        curves[kind], summary[kind] = {}, {}
+        for group, cols in groups.items():
+            curve = windowed_rmse(err[:, cols], window)
+            curves[kind][group] = curve
+            pre_rmse = group_rmse(err[pre, cols])
+            summary[kind][group] = _recovery(t, curve, err[:, cols], pre_rmse, after, tolerance, deadline_s)
+    return AdaptationResult(kinds=tuple(models), time_s=t, errors=errors, errors_true=errors_true,
+                            window=window, curves=curves, summary=summary, change_s=change_s,
+                            tolerance=tolerance, deadline_s=deadline_s, pre_s=pre_s)
+
+
+def _recovery(t: np.ndarray, curve: np.ndarray, err: np.ndarray, pre_rmse: float, after: np.ndarray,
+              tolerance: float, deadline_s: float) -> dict[str, Any]:
+    limit = tolerance * pre_rmse
+    idx_after = np.flatnonzero(after)
+    bad_after = idx_after[curve[idx_after] > limit]
+    if bad_after.size == 0:
+        recovery = 0.0
+    elif bad_after[-1] == len(t) - 1:
+        recovery = None
+    else:
+        recovery = float(t[bad_after[-1] + 1])
+    at_deadline = int(np.searchsorted(t, deadline_s, side="right")) - 1
+    post = t >= deadline_s
+    level = float(curve[at_deadline]) if at_deadline >= 0 else float("nan")
+    return {
+        "pre_rmse": pre_rmse,
+        "peak": float(np.max(curve[idx_after])),
+        "recovery_time_s": recovery,
+        "level_at_deadline": level,
+        "ratio_at_deadline": level / pre_rmse if pre_rmse > 0 else float("inf"),
+        "post_rmse": group_rmse(err[post]) if np.any(post) else float("nan"),
+        "recovered": recovery is not None and recovery <= deadline_s,
+    }
+

@@ -1,0 +1,280 @@
+"""Bag replay: read bags through the node's own pipeline and run the evaluation protocols on them.
+
+Samples come from exactly the objects the live node uses: :func:`~semiparam_ros.core.estimator.build_pipeline`
+(joint mapping, stamp pairing, acceleration estimate, drops counted) fed by
+:func:`~semiparam_ros.io.bags.iter_samples`, and the learners of
+:func:`~semiparam_ros.core.estimator.build_model`. When the bag also holds the noise-free wrench of a
+simulation (``/ground_truth/wrench``), a second pass of a fresh pipeline over that topic gives the
+noise-free outputs at the same stamps, so errors can be split into model error and sensor noise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.estimator import build_model, build_pipeline, build_regressor
+from semiparam_ros.eval.protocol import (
+    AdaptationResult,
+    ProtocolResult,
+    SampleArrays,
+    run_adaptation,
+    run_protocol,
+)
+from semiparam_ros.io.bags import iter_samples, topic_info
+
+__all__ = [
+    "GROUND_TRUTH_WRENCH_TOPIC",
+    "KINDS",
+    "Topics",
+    "adaptation_configs",
+    "build_models",
+    "evaluate_adaptation",
+    "evaluate_bags",
+    "load_samples",
+    "read_change_time",
+]
+
+#: Topic of the noise-free wrench written by the simulator (absent in real logs).
+GROUND_TRUTH_WRENCH_TOPIC = "/ground_truth/wrench"
+#: The paper's three learners.
+KINDS: tuple[str, ...] = ("P", "NP", "SP")
+
+
+def _absolute(topic: str) -> str:
+    return topic if topic.startswith("/") else "/" + topic
+
+
+@dataclass(frozen=True)
+class Topics:
+    """Bag topics to read.
+
+    Attributes:
+        joint_states: ``sensor_msgs/msg/JointState`` topic.
+        wrench: ``geometry_msgs/msg/WrenchStamped`` topic (measured).
+        ground_truth: Noise-free wrench topic; used when present in the bag, ``None`` to ignore.
+    """
+
+    joint_states: str = "/joint_states"
+    wrench: str = "/wrench"
+    ground_truth: str | None = GROUND_TRUTH_WRENCH_TOPIC
+
+    @classmethod
+    def from_config(cls, config: EstimatorConfig, joint_states: str | None = None,
+                    wrench: str | None = None) -> Topics:
+        """Topics from the configuration (``topics.*``, made absolute), optionally overridden."""
+        return cls(joint_states=_absolute(joint_states or config["topics.joint_states"]),
+                   wrench=_absolute(wrench or config["topics.wrench"]))
+
+
+def load_samples(path: str | Path, config: EstimatorConfig, topics: Topics | None = None, *,
+                 limit: int | None = None) -> tuple[SampleArrays, dict[str, int]]:
+    """Read a bag through the node's pipeline into arrays.
+
+    Args:
+        path: Bag folder or ``.mcap`` file.
+        config: Estimator configuration (joints, output, pairing, acceleration).
+        topics: Topics to read; default from the configuration.
+        limit: Keep only the first ``limit`` samples (a prefix, for quick runs).
+
+    Returns:
+        ``(samples, drops)``: the arrays (with noise-free outputs when the bag has them and the output is a
+        wrench) and the pipeline's drop counts by reason.
+
+    Raises:
+        ValueError: If the bag cannot be read or yields no sample (BagError is a ValueError).
+    """
+    topics = topics or Topics.from_config(config)
+    pipeline = build_pipeline(config)
+    kwargs: dict[str, Any] = {"joint_states_topic": topics.joint_states}
+    if config["robot.output"] == "wrench":
+        kwargs["wrench_topic"] = topics.wrench
+    else:
+        kwargs["wrench_topic"] = None
+    samples = iter_samples(path, pipeline, **kwargs)
+    truth: dict[int, np.ndarray] | None = None
+    if config["robot.output"] == "wrench" and topics.ground_truth and topics.ground_truth in topic_info(path):
+        truth_pipeline = build_pipeline(config)
+        truth = {s.stamp_ns: np.asarray(s.y) for s in iter_samples(
+            path, truth_pipeline, joint_states_topic=topics.joint_states, wrench_topic=topics.ground_truth)}
+    try:
+        arrays = SampleArrays.from_samples(samples, truth, limit=limit)
+    except ValueError as err:
+        raise ValueError(f"{path}: no usable samples on {topics.joint_states} + {topics.wrench} "
+                         f"(drops: {dict(pipeline.drops)}): {err}") from err
+    return arrays, dict(pipeline.drops)
+
+
+def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS) -> dict[str, Any]:
+    """Fresh learners (zero parameters) of the given kinds, sharing one rigid-body regressor.
+
+    Args:
+        config: Estimator configuration.
+        kinds: Any of ``"P"``, ``"NP"``, ``"SP"``.
+
+    Returns:
+        Models by kind, in the given order.
+    """
+    regressor = build_regressor(config) if any(k != "NP" for k in kinds) else None
+    return {k: build_model(config, k, regressor) for k in kinds}
+
+
+def evaluate_bags(train_path: str | Path, test_path: str | Path, config: EstimatorConfig, *,
+                  topics: Topics | None = None, kinds: Sequence[str] = KINDS, splits: int = 10,
+                  split_size: int | None = None, window_s: float = 3.0, first_s: float = 3.0,
+                  train_limit: int | None = None, test_limit: int | None = None,
+                  progress: bool = False) -> tuple[ProtocolResult, dict[str, Any]]:
+    """Run the paper's protocol on two bags.
+
+    Args:
+        train_path: Training bag (the XY circles).
+        test_path: Test bag (the XZ circles).
+        config: Estimator configuration the learners and the pipeline are built from.
+        topics: Topics to read; default from the configuration.
+        kinds: Learners to compare.
+        splits: Number of sequential test parts.
+        split_size: Samples per part; ``None`` = equal parts.
+        window_s: Sliding window [s].
+        first_s: Initial segment reported separately [s].
+        train_limit: Use only the first samples of the training bag.
+        test_limit: Use only the first samples of the test bag.
+        progress: Show a tqdm progress bar.
+
+    Returns:
+        ``(result, info)`` where ``info`` records the bags, topics, limits and pipeline drops.
+
+    Raises:
+        ValueError: On unreadable bags or a test bag too short for the split request.
+    """
+    topics = topics or Topics.from_config(config)
+    train_data, train_drops = load_samples(train_path, config, topics, limit=train_limit)
+    test_data, test_drops = load_samples(test_path, config, topics, limit=test_limit)
+    models = build_models(config, kinds)
+    result = run_protocol(models, train_data, test_data, splits=splits, split_size=split_size,
+                          window_s=window_s, first_s=first_s, progress=progress)
+    info = {
+        "train_bag": str(train_path), "test_bag": str(test_path),
+        "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench,
+        "ground_truth_topic": topics.ground_truth if test_data.Y_true is not None else None,
+        "train_limit": train_limit, "test_limit": test_limit,
+        "drops_train": train_drops, "drops_test": test_drops,
+        "test_samples_available": len(test_data),
+    }
+    return result, info
+
+
+def read_change_time(bag: str | Path) -> float:
+    """Read the payload pickup time [s from the bag start] from the simulator's ``scenario.yaml``.
+
+    Looks for ``scenario.yaml`` in the bag folder (or next to a bare ``.mcap`` file) and accepts the keys
+    ``pickup_time_s``, ``pickup_time``, ``payload.pickup_time_s`` or ``payload.time_s``.
+
+    Args:
+        bag: Bag folder or ``.mcap`` file.
+
+    Returns:
+        The pickup time [s].
+
+    Raises:
+        ValueError: If the file or the key is missing.
+    """
+    bag = Path(bag)
+    folder = bag if bag.is_dir() else bag.parent
+    path = folder / "scenario.yaml"
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise ValueError(f"cannot read the pickup time from {path}: {err}; pass --pickup-time") from err
+
+    def find(node: Any, depth: int = 0) -> float | None:
+        if not isinstance(node, Mapping) or depth > 3:
+            return None
+        for key in ("pickup_time_s", "pickup_time", "pickup_s", "time_s"):
+            value = node.get(key)
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                return float(value)
+        for value in node.values():
+            found = find(value, depth + 1)
+            if found is not None:
+                return found
+        return None
+
+    found = find(doc)
+    if found is None:
+        raise ValueError(f"{path} has no pickup time (pickup_time_s); pass --pickup-time")
+    return found
+
+
+def adaptation_configs(config: EstimatorConfig, forgetting: float) -> dict[str, EstimatorConfig]:
+    """Return the two configurations compared in the payload scenario.
+
+    Args:
+        config: Base configuration.
+        forgetting: Forgetting factor β of both stages with adaptation on (``0.9 <= β < 1``).
+
+    Returns:
+        ``{"on": β in both stages, "off": β = 1 in both stages}``.
+
+    Raises:
+        ValueError: If ``forgetting`` is out of range.
+    """
+    if not 0.9 <= forgetting < 1.0:
+        raise ValueError(f"forgetting for the adaptive model must be in [0.9, 1), got {forgetting}")
+    return {
+        "on": config.with_overrides({"parametric.forgetting": forgetting,
+                                     "nonparametric.forgetting": forgetting}),
+        "off": config.with_overrides({"parametric.forgetting": 1.0, "nonparametric.forgetting": 1.0}),
+    }
+
+
+def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting: float,
+                        change_s: float | None = None, pretrain_path: str | Path | None = None,
+                        topics: Topics | None = None, kinds: Sequence[str] = ("SP",), window_s: float = 3.0,
+                        pre_s: float = 10.0, deadline_s: float = 10.0, tolerance: float = 1.5,
+                        progress: bool = False) -> tuple[AdaptationResult, dict[str, Any]]:
+    """Run the payload scenario: each learner with adaptation on (forgetting β) and off (β = 1).
+
+    Args:
+        bag: Bag with the payload change.
+        config: Base configuration.
+        forgetting: β of both stages for the adaptive learners.
+        change_s: Pickup time [s from the first sample]; read from ``scenario.yaml`` when omitted.
+        pretrain_path: Optional bag every learner is trained on first.
+        topics: Topics to read.
+        kinds: Learners (``"SP"`` by default; ``"P"`` and ``"NP"`` possible).
+        window_s: Sliding window [s].
+        pre_s: Pre-pickup reference segment [s].
+        deadline_s: Recovery deadline after the pickup [s].
+        tolerance: Allowed ratio to the pre-pickup level.
+        progress: Show a tqdm progress bar.
+
+    Returns:
+        ``(result, info)``; model names are ``"<kind> adaptive (β=...)"`` and ``"<kind> no adaptation"``.
+
+    Raises:
+        ValueError: On unreadable bags, a missing pickup time or an invalid β.
+    """
+    topics = topics or Topics.from_config(config)
+    if change_s is None:
+        change_s = read_change_time(bag)
+    stream, drops = load_samples(bag, config, topics)
+    # scenario times are from the bag start; the protocol measures from the first sample
+    change_from_first = change_s
+    pretrain = load_samples(pretrain_path, config, topics)[0] if pretrain_path is not None else None
+    configs = adaptation_configs(config, forgetting)
+    models: dict[str, Any] = {}
+    for kind in kinds:
+        models[f"{kind} adaptive (β={forgetting:g})"] = build_models(configs["on"], [kind])[kind]
+        models[f"{kind} no adaptation"] = build_models(configs["off"], [kind])[kind]
+    result = run_adaptation(models, stream, change_from_first, pretrain=pretrain, window_s=window_s,
+                            pre_s=pre_s, deadline_s=deadline_s, tolerance=tolerance, progress=progress)
+    info = {"bag": str(bag), "pretrain_bag": None if pretrain_path is None else str(pretrain_path),
+            "forgetting": forgetting, "pickup_time_s": change_s, "drops": drops,
+            "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench}
+    return result, info

@@ -1,0 +1,174 @@
+"""Tests of the evaluation: windowed RMSE, the paper's protocol, reports, figures and the evaluate command."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from semiparam_ros.eval.metrics import group_rmse, window_samples, windowed_rmse
+from semiparam_ros.eval.protocol import SampleArrays, run_adaptation, run_protocol, split_bounds
+from semiparam_ros.eval.report import paper_checks, protocol_markdown, protocol_report, write_json
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# ----------------------------------------------------------------------------------------------- toys
+class ToyRidge:
+    """Closed-form ridge regression on [1, x] refitted at every step (an independent toy learner)."""
+
+    def __init__(self, d: int, t: int, lam: float = 1.0, forgetting: float = 1.0) -> None:
+        self.A = lam * np.eye(d + 1)
+        self.B = np.zeros((d + 1, t))
+        self.lam = lam
+        self.beta = forgetting
+
+    def predict_learn_one(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        z = np.concatenate([[1.0], x])
+        pred = np.linalg.solve(self.A, self.B).T @ z
+        self.A = self.beta * self.A + (1 - self.beta) * self.lam * np.eye(len(z)) + np.outer(z, z)
+        self.B = self.beta * self.B + np.outer(z, y)
+        return pred
+
+    def copy(self) -> ToyRidge:
+        return copy.deepcopy(self)
+
+
+def toy_stream(n: int, seed: int, d: int = 3, t: int = 6, period_ns: int = 10_000_000,
+               shift_at: int | None = None) -> SampleArrays:
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(n, d))
+    W = np.arange(1, d * t + 1, dtype=float).reshape(d, t) / 10
+    Y_true = X @ W + np.sin(X[:, :1])
+    if shift_at is not None:
+        Y_true[shift_at:] += 5.0
+    Y = Y_true + 0.1 * rng.normal(size=(n, t))
+    stamps = 1_000_000_000 + period_ns * np.arange(n)
+    return SampleArrays(stamps, X, Y, Y_true)
+
+
+# ------------------------------------------------------------------------------------------- metrics
+def test_windowed_rmse_matches_direct_numpy() -> None:
+    rng = np.random.default_rng(0)
+    e = rng.normal(size=(57, 3)) * [1.0, 2.0, 0.5]
+    for w in (1, 5, 30, 100):
+        got = windowed_rmse(e, w)
+        want = [np.mean(np.sqrt(np.mean(e[max(0, i - w + 1): i + 1] ** 2, axis=0))) for i in range(len(e))]
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14)
+    assert group_rmse(e) == pytest.approx(np.mean(np.sqrt(np.mean(e**2, axis=0))))
+    assert window_samples(3.0, 0.1) == 30 and window_samples(3.0, 0.01) == 300
+
+
+@pytest.mark.parametrize("bad", [np.array([[np.nan, 1.0]]), np.zeros((0, 3)), np.zeros((2, 2, 2))])
+def test_metrics_reject_bad_input(bad: np.ndarray) -> None:
+    with pytest.raises(ValueError):
+        windowed_rmse(bad, 3)
+    with pytest.raises(ValueError):
+        windowed_rmse(np.ones((4, 3)), 0)
+
+
+def test_split_bounds() -> None:
+    assert split_bounds(10_000, 10, 1000) == [(k * 1000, (k + 1) * 1000) for k in range(10)]
+    assert split_bounds(1005, 10) == [(k * 100, (k + 1) * 100) for k in range(10)]
+    with pytest.raises(ValueError, match="fewer than"):
+        split_bounds(999, 10, 100)
+    with pytest.raises(ValueError):
+        split_bounds(10, 0)
+
+
+# ------------------------------------------------------------------------------------------ protocol
+def test_protocol_matches_hand_written_loop() -> None:
+    train, test = toy_stream(300, 1), toy_stream(250, 2)
+    models = {"P": ToyRidge(3, 6, lam=1.0), "SP": ToyRidge(3, 6, lam=10.0)}
+    reference = {k: m.copy() for k, m in models.items()}
+    result = run_protocol(models, train, test, splits=4, split_size=60, window_s=0.05, first_s=0.1)
+    report = protocol_report(result)
+
+    # the paper's protocol written out directly
+    for kind, model in reference.items():
+        for i in range(len(train)):
+            model.predict_learn_one(train.X[i], train.Y[i])
+        force, torque, force0, wins = [], [], [], []
+        for s in range(4):
+            m = model.copy()
+            sl = slice(60 * s, 60 * s + 60)
+            pred = np.array([m.predict_learn_one(x, y) for x, y in zip(test.X[sl], test.Y[sl], strict=True)])
+            np.testing.assert_allclose(result.predictions[kind][s], pred, rtol=1e-10, atol=1e-12)
+            err = pred - test.Y[sl]
+            force.append(np.mean(np.sqrt(np.mean(err[30:, :3] ** 2, axis=0))))
+            torque.append(np.mean(np.sqrt(np.mean(err[30:, 3:] ** 2, axis=0))))
+            force0.append(np.mean(np.sqrt(np.mean(err[:10, :3] ** 2, axis=0))))  # 0.1 s at 100 Hz
+            wins.append([np.mean(np.sqrt(np.mean(err[max(0, i - 4): i + 1, :3] ** 2, axis=0)))
+                         for i in range(60)])
+        stats = report["models"][kind]
+        assert stats["force_rmse"] == pytest.approx(np.mean(force), rel=1e-10)
+        assert stats["force_rmse_std"] == pytest.approx(np.std(force), rel=1e-10)
+        assert stats["torque_rmse"] == pytest.approx(np.mean(torque), rel=1e-10)
+        assert stats["force_rmse_first_0.1s"] == pytest.approx(np.mean(force0), rel=1e-10)
+        np.testing.assert_allclose(report["curves"][kind]["force_mean"], np.mean(wins, axis=0), rtol=1e-10)
+        np.testing.assert_allclose(report["curves"][kind]["force_std"], np.std(wins, axis=0), rtol=1e-9,
+                                   atol=1e-12)
+    assert report["splits"] == 4 and report["samples_train"] == 300 and report["samples_test"] == 240
+    assert report["protocol"]["window_samples"] == 5
+    np.testing.assert_allclose(report["curves"]["time_s"], 0.01 * np.arange(1, 61))
+    # errors against the noise-free outputs and the noise level are reported too
+    assert "ground_truth" in report["models"]["P"]
+    assert report["noise"]["force_rmse"] == pytest.approx(0.1, rel=0.15)
+
+
+def test_protocol_splits_are_independent_copies() -> None:
+    train, test = toy_stream(50, 3), toy_stream(100, 4)
+    model = ToyRidge(3, 6)
+    result = run_protocol({"P": model}, train, test, splits=2)
+    # split 2 starts from the trained model, not from the one that learnt split 1
+    fresh = ToyRidge(3, 6)
+    for x, y in zip(train.X, train.Y, strict=True):
+        fresh.predict_learn_one(x, y)
+    np.testing.assert_allclose(result.predictions["P"][1][0], fresh.predict_learn_one(test.X[50], test.Y[50]))
+
+
+def test_adaptation_detects_recovery_only_with_forgetting() -> None:
+    stream = toy_stream(4000, 5, shift_at=2000)  # 40 s at 100 Hz, output shift of 5 N at 20 s
+    models = {"P adaptive": ToyRidge(3, 6, forgetting=0.99), "P no adaptation": ToyRidge(3, 6)}
+    result = run_adaptation(models, stream, change_s=20.0, window_s=1.0, pre_s=10.0, deadline_s=10.0)
+    on, off = result.summary["P adaptive"]["force"], result.summary["P no adaptation"]["force"]
+    assert on["recovered"] and on["recovery_time_s"] < 10.0
+    assert not off["recovered"] and off["ratio_at_deadline"] > 1.5
+    # the summary agrees with a direct computation
+    t = (stream.stamps_ns - stream.stamps_ns[0]) * 1e-9 - 20.0
+    err = result.errors["P adaptive"][:, :3]
+    assert on["pre_rmse"] == pytest.approx(group_rmse(err[(t >= -10) & (t < 0)]))
+    curve = windowed_rmse(err, 100)
+    bad = np.flatnonzero((t >= 0) & (curve > 1.5 * on["pre_rmse"]))
+    assert on["recovery_time_s"] == pytest.approx(t[bad[-1] + 1])
+    with pytest.raises(ValueError, match="needs"):
+        run_adaptation({"P": ToyRidge(3, 6)}, stream, change_s=5.0)
+
+
+def test_sample_arrays_reject_bad_input() -> None:
+    with pytest.raises(ValueError, match="increasing"):
+        SampleArrays(np.array([2, 1]), np.zeros((2, 3)), np.zeros((2, 6)))
+    with pytest.raises(ValueError, match="NaN"):
+        SampleArrays(np.array([1, 2]), np.array([[np.nan] * 3, [0.0] * 3]), np.zeros((2, 6)))
+    with pytest.raises(ValueError, match="disagree"):
+        SampleArrays(np.array([1, 2, 3]), np.zeros((2, 3)), np.zeros((2, 6)))
+
+
+def test_report_json_and_checks(tmp_path: Path) -> None:
+    train, test = toy_stream(100, 6), toy_stream(200, 7)
+    models = {"P": ToyRidge(3, 6, lam=1e6), "NP": ToyRidge(3, 6), "SP": ToyRidge(3, 6, lam=0.5)}
+    report = protocol_report(run_protocol(models, train, test, splits=2))
+    checks = paper_checks(report)
+    assert len(checks) == 8
+    sp_np = next(c for c in checks if c["check"] == "SP force RMSE at regime / NP's")
+    models = report["models"]
+    assert sp_np["value"] == pytest.approx(models["SP"]["force_rmse"] / models["NP"]["force_rmse"])
+    path = tmp_path / "r.json"
+    write_json(report, path)
+    loaded = json.loads(path.read_text())
+    assert loaded["models"]["P"]["force_rmse"] == pytest.approx(report["models"]["P"]["force_rmse"])
+    assert "| SP |" in protocol_markdown(report)
+    assert not list(tmp_path.glob("*.tmp"))
