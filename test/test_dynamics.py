@@ -14,6 +14,7 @@ from semiparam_ros.core.dynamics import (
     INERTIAL_PARAMETER_NAMES,
     RigidBodyRegressor,
     icub_urdf_path,
+    is_physically_consistent,
     point_mass_parameters,
 )
 
@@ -45,7 +46,11 @@ def reference_model(urdf_text, joints, sensor=None, locked=None, gravity=(0, 0, 
     full = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
     q0 = pin.neutral(full)
     for name, val in (locked or {}).items():
-        q0[full.joints[full.getJointId(name)].idx_q] = val
+        jm = full.joints[full.getJointId(name)]
+        if jm.nq == 2:
+            q0[jm.idx_q : jm.idx_q + 2] = np.cos(val), np.sin(val)
+        else:
+            q0[jm.idx_q] = val
     keep = set(joints) | ({sensor} if sensor else set())
     lock = [j for j in range(1, full.njoints) if full.names[j] not in keep]
     model = pin.buildReducedModel(full, lock, q0)
@@ -57,7 +62,11 @@ def reference_state(model, joints, q, dq, ddq):
     qf, vf, af = pin.neutral(model), np.zeros(model.nv), np.zeros(model.nv)
     for i, name in enumerate(joints):
         jm = model.joints[model.getJointId(name)]
-        qf[jm.idx_q], vf[jm.idx_v], af[jm.idx_v] = q[i], dq[i], ddq[i]
+        if jm.nq == 2:  # continuous joint: (cos, sin)
+            qf[jm.idx_q : jm.idx_q + 2] = np.cos(q[i]), np.sin(q[i])
+        else:
+            qf[jm.idx_q] = q[i]
+        vf[jm.idx_v], af[jm.idx_v] = dq[i], ddq[i]
     return qf, vf, af
 
 
@@ -379,6 +388,43 @@ def test_ur5_joint_torques_match_rnea(ur5_path):
         reg.base_regressor(qs, dqs, ddqs).reshape(-1, reg.n_base) @ reg.to_base(pi), full @ pi, atol=1e-9
     )
     assert {reg.compute_base_parameters(seed=s).n_base for s in (1, 2)} == {reg.n_base}
+
+
+def test_continuous_joints_moving_and_locked(ur5_path, tmp_path):
+    """Continuous joints use (cos, sin) in Pinocchio; q stays an angle in rad for the caller."""
+    root = ET.parse(ur5_path).getroot()
+    for j in root.findall("joint"):
+        if j.get("name") in ("shoulder_pan_joint", "wrist_3_joint"):
+            j.set("type", "continuous")
+    path = tmp_path / "ur5_continuous.urdf"
+    path.write_text(ET.tostring(root, encoding="unicode"))
+    joints = UR5_JOINTS[:5]
+    locked = {"wrist_3_joint": 2.5}
+    reg = RigidBodyRegressor.from_urdf(path, joints, ft_sensor=UR5_SENSOR, locked=locked)
+    lo, hi = reg.position_limits()
+    assert lo[0] == -np.inf and hi[0] == np.inf and np.isfinite(lo[1:]).all()
+    ref = reference_model(path.read_text(), joints, UR5_SENSOR, locked)
+    rng = np.random.default_rng(10)
+    for _ in range(10):
+        q = rng.uniform(-3, 3, 5)
+        dq, ddq = rng.normal(size=5), rng.normal(size=5)
+        np.testing.assert_allclose(
+            reg.wrench(q, dq, ddq), reference_wrench(ref, joints, UR5_SENSOR, q, dq, ddq), atol=1e-10
+        )
+
+
+def test_physical_consistency():
+    reg = RigidBodyRegressor.from_urdf(icub_urdf_path(), ICUB_JOINTS, output="joint_torques")
+    pi = reg.urdf_parameters().reshape(-1, 10)
+    assert all(is_physically_consistent(p) for p in pi if p[0] > 0)
+    assert is_physically_consistent(point_mass_parameters(0.5, [0.1, 0.2, -0.3]))  # degenerate but physical
+    body = pin.Inertia(2.0, np.array([0.1, 0.0, 0.0]), np.diag([0.01, 0.02, 0.025])).toDynamicParameters()
+    assert is_physically_consistent(body)
+    assert not is_physically_consistent(np.r_[-1.0, body[1:]])  # negative mass
+    bad = pin.Inertia(2.0, np.zeros(3), np.diag([0.01, 0.01, 0.03])).toDynamicParameters()
+    assert not is_physically_consistent(bad)  # violates Ixx + Iyy >= Izz
+    with pytest.raises(ValueError, match="10 finite"):
+        is_physically_consistent(np.zeros(9))
 
 
 # ---------------------------------------------------------------- copies

@@ -49,6 +49,7 @@ __all__ = [
     "BaseParameterMap",
     "RigidBodyRegressor",
     "icub_urdf_path",
+    "is_physically_consistent",
     "point_mass_parameters",
 ]
 
@@ -163,6 +164,40 @@ def point_mass_parameters(mass: float, position: Sequence[float] | np.ndarray) -
             m * (cx * cx + cy * cy),
         ]
     )
+
+
+def is_physically_consistent(params: Sequence[float] | np.ndarray, *, tol: float = 1e-12) -> bool:
+    """Tell whether 10 inertial parameters describe a physical rigid body.
+
+    Checks m > 0 and that the rotational inertia about the centre of mass, ``I_c = I_o − m(‖c‖² 1 − c cᵀ)``
+    with ``c = mc/m``, has non-negative principal moments obeying the triangle inequalities
+    (``Iᵢ + Iⱼ ≥ Iₖ``, i.e. a non-negative second moment of the mass distribution). Useful to vet a URDF,
+    a simulated payload, or an identified full-parameter vector.
+
+    Args:
+        params: ``[m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` (kg, kg·m, kg·m²) about the body origin.
+        tol: Absolute tolerance (kg·m²) on the moment inequalities.
+
+    Returns:
+        True if the parameters are physically consistent.
+
+    Raises:
+        ValueError: If ``params`` is not 10 finite numbers.
+    """
+    p = np.asarray(params, dtype=float)
+    if p.shape != (10,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"params must be 10 finite inertial parameters, got shape {p.shape}")
+    m = p[0]
+    if m <= 0.0:
+        return False
+    c = p[1:4] / m
+    I_o = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]])
+    I_c = I_o - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+    moments = np.linalg.eigvalsh(I_c)
+    if moments[0] < -tol:
+        return False
+    # Second moments of the mass distribution along the principal axes: (tr/2 − I_k) ≥ 0.
+    return bool(np.all(0.5 * moments.sum() - moments >= -tol))
 
 
 @dataclass(frozen=True)
