@@ -270,12 +270,10 @@ class RigidBodyRegressor:
         Args and Raises: see :meth:`from_urdf`; ``source`` is only used in messages.
         """
         self._init_args: dict[str, Any] = {
-            "joints": tuple(joints) if not isinstance(joints, str) else joints,
+            "joints": joints,
             "ft_sensor": ft_sensor,
-            "locked": dict(locked) if locked is not None else None,
-            "gravity": tuple(np.asarray(gravity, dtype=float).ravel().tolist())
-            if not isinstance(gravity, str)
-            else gravity,
+            "locked": locked,
+            "gravity": gravity,
             "output": output,
             "sensor_offset": sensor_offset,
             "source": source,
@@ -292,6 +290,7 @@ class RigidBodyRegressor:
         if isinstance(joints, str) or not isinstance(joints, Sequence):
             raise ValueError(f"joints must be a sequence of joint names, got {joints!r}")
         joint_names = tuple(joints)
+        self._init_args["joints"] = joint_names
         if not joint_names:
             raise ValueError("joints is empty: give at least one moving joint")
         for name in joint_names:
@@ -309,7 +308,10 @@ class RigidBodyRegressor:
             raise ValueError(f"URDF{where} has root element <{root.tag}>, expected <robot>")
         # Only direct children: <transmission> blocks also contain <joint> elements.
         urdf_joints = {j.get("name"): j for j in root.findall("joint")}
-        child_link = {name: j.find("child").get("link") for name, j in urdf_joints.items()}
+        child_link = {
+            name: (j.find("child").get("link") if j.find("child") is not None else name)
+            for name, j in urdf_joints.items()
+        }
 
         for name in joint_names:
             if name not in urdf_joints:
@@ -366,11 +368,16 @@ class RigidBodyRegressor:
                     raise ValueError(f"locked position of {name!r} is not finite: {value!r}")
                 locked_values[name] = val
         self.locked = dict(locked_values)
+        self._init_args["locked"] = dict(locked_values)
 
-        g = np.asarray(gravity, dtype=float) if not isinstance(gravity, str) else np.array([np.nan])
+        try:
+            g = np.asarray(gravity, dtype=float) if not isinstance(gravity, str) else np.array([np.nan])
+        except (TypeError, ValueError):
+            g = np.array([np.nan])
         if g.shape != (3,) or not np.all(np.isfinite(g)):
             raise ValueError(f"gravity must be 3 finite numbers (m/s²), got {gravity!r}")
         self.gravity = g.copy()
+        self._init_args["gravity"] = tuple(g.tolist())
 
         try:
             full = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
@@ -448,6 +455,10 @@ class RigidBodyRegressor:
         # Distal body: deepest in the tree (ties: the last); it carries the end effector / hand.
         depth = [len(model.supports[j]) for j in body_jids]
         self._distal = max(range(len(body_jids)), key=lambda i: (depth[i], i))
+
+        self._urdf_params = np.zeros(self.n_params)
+        for i, jid in enumerate(body_jids):
+            self._urdf_params[10 * i : 10 * i + 10] = model.inertias[int(jid)].toDynamicParameters()
 
         self._base = self.compute_base_parameters(seed=base_seed, n_samples=base_samples)
 
@@ -651,10 +662,7 @@ class RigidBodyRegressor:
             (n_params,): per body ``[m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` (kg, kg·m, kg·m²)
             about the body frame origin, in the order of ``body_names``.
         """
-        pi = np.zeros(self.n_params)
-        for i, jid in enumerate(self._body_jids):
-            pi[10 * i : 10 * i + 10] = self._model.inertias[int(jid)].toDynamicParameters()
-        return pi
+        return self._urdf_params.copy()
 
     def _params(self, name: str, value: Any, n: int) -> np.ndarray:
         arr = np.asarray(value, dtype=float)
