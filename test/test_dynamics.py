@@ -500,6 +500,8 @@ def test_bad_state_vectors_raise_value_error_naming_vector_and_joint(icub):
     batch[1, 3] = np.nan
     with pytest.raises(ValueError, match=r"ddq has non-finite values at joint\(s\) \['r_elbow'\]"):
         icub.regressor(np.zeros((3, 4)), np.zeros((3, 4)), batch)
+    with pytest.raises(ValueError, match=r"^dq must be numeric"):
+        icub.regressor(ok, ["a", "b", "c", "d"], ok)
     with pytest.raises(ValueError, match="params"):
         icub.wrench(ok, ok, ok, np.zeros(19))
     with pytest.raises(ValueError, match="pi_full"):
