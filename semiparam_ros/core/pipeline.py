@@ -13,8 +13,9 @@ and returns the :class:`~semiparam_ros.core.messages.Sample` objects they comple
    :mod:`semiparam_ros.core.acceleration`, which decides each joint-state stamp once: q̈ (rad/s²) or
    none (warm-up). With the default Savitzky–Golay estimator the decision comes ``window // 2`` joint
    states later and refers to the older stamp, so joint states are buffered until decided.
-3. **Pairing** (``output="wrench"``). A wrench waits (bounded) until every joint state within
-   ``sync_tolerance`` of its stamp has been decided, then pairs with the nearest one that has q̈. The
+3. **Pairing** (``output="wrench"``). A wrench waits (bounded) until its pairing is final — every
+   joint state within ``sync_tolerance`` of its stamp decided, or a decided one so close that no later
+   joint state can be closer — then pairs with the nearest one that has q̈ (the earlier on a tie). The
    sample carries the **wrench** stamp, q and q̇ of that joint state as received, and its q̈. The
    learning rate is thus the wrench rate (e.g. joint states at 100 Hz, wrench at 10 Hz → 10 samples/s).
    With ``output="joint_torques"`` every decided joint state gives a sample whose output is
@@ -399,21 +400,41 @@ class SamplePipeline:
         return self._resolve_wrenches()
 
     def _resolve_wrenches(self) -> list[Sample]:
-        """Pair every pending wrench whose joint-state neighbourhood is fully decided."""
+        """Pair the pending wrenches, oldest first, as soon as their pairing can no longer change.
+
+        Joint states arriving later have stamps after ``decided_until`` (the newest decided stamp), so a
+        wrench is final when ``decided_until ≥ t_w + tolerance`` (all candidates decided), or earlier
+        when a decided candidate with q̈ is at most ``decided_until − t_w`` away (none can be closer).
+        """
         samples: list[Sample] = []
         decided_until = self._decided_until
         if decided_until is None:
             return samples
         tol = self._tol_ns
-        while self._wrenches and self._wrenches[0].stamp_ns + tol <= decided_until:
-            wrench = self._wrenches.popleft()
-            sample = self._pair(wrench)
-            if sample is not None:
-                samples.append(sample)
+        while self._wrenches:
+            wrench = self._wrenches[0]
+            tw = wrench.stamp_ns
+            if decided_until < tw:
+                break
+            best, best_dist, any_candidate = self._nearest(tw)
+            if tw + tol > decided_until and (best is None or best_dist > decided_until - tw):
+                break  # a closer joint state may still be decided
+            self._wrenches.popleft()
+            if best is None:
+                self.drops[DROP_ACCELERATION_WARMUP if any_candidate else DROP_UNPAIRED_WRENCH] += 1
+                continue
+            assert best.ddq is not None
+            self.n_samples += 1
+            samples.append(Sample(tw, best.q, best.dq, best.ddq, wrench.wrench))
         return samples
 
-    def _pair(self, wrench: WrenchData) -> Sample | None:
-        tw, tol = wrench.stamp_ns, self._tol_ns
+    def _nearest(self, tw: int) -> tuple[_JointEntry | None, int, bool]:
+        """Find the nearest decided joint state with q̈ within tolerance of ``tw``.
+
+        Returns:
+            The entry (or None), its distance in ns, and whether any decided joint state is in tolerance.
+        """
+        tol = self._tol_ns
         best: _JointEntry | None = None
         best_dist = 0
         any_candidate = False
@@ -423,18 +444,15 @@ class SamplePipeline:
                 continue
             if dist < -tol:
                 break
+            if not entry.decided:
+                continue
             any_candidate = True
             if entry.ddq is None:
                 continue
             dist = abs(dist)
-            if best is None or dist < best_dist:
+            if best is None or dist <= best_dist:  # scanning backwards: ties go to the earlier one
                 best, best_dist = entry, dist
-        if best is None:
-            self.drops[DROP_ACCELERATION_WARMUP if any_candidate else DROP_UNPAIRED_WRENCH] += 1
-            return None
-        assert best.ddq is not None
-        self.n_samples += 1
-        return Sample(tw, best.q, best.dq, best.ddq, wrench.wrench)
+        return best, best_dist, any_candidate
 
     def _restart(self) -> None:
         """Clock restart on one stream: clear the streaming state, keep the counts."""
