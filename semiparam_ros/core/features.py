@@ -1,0 +1,305 @@
+"""Random Fourier features for the Gaussian kernel, and input standardization.
+
+:class:`RandomFourierFeatures` maps an input x to ``φ(x) = √(2/D)·cos(x Ω + b)`` with the entries of
+``Ω`` (n_inputs × D) drawn from ``N(0, 1/σ²)`` and ``b`` from ``U[0, 2π)`` (Rahimi & Recht 2007; the
+same formulation as scikit-learn's ``RBFSampler`` with ``gamma = 1/(2σ²)``), so that
+``φ(x)·φ(x′) ≈ exp(−‖x − x′‖² / 2σ²)`` with an error of order ``1/√D``.
+
+:class:`Standardizer` rescales inputs to zero mean and unit variance per coordinate, either from a batch
+(:meth:`Standardizer.fit`) or online from the first N samples of a stream (Welford's algorithm), after
+which its statistics are frozen so the feature map stays fixed while the learner runs. Inputs whose
+variance is (numerically) zero get scale 1 so they pass through centred instead of blowing up.
+
+Units: the inputs are whatever the caller feeds (for the learners ``x = [q, q̇, q̈]`` in rad, rad/s,
+rad/s², optionally followed by a predicted wrench in N and N·m); σ is in the units of the standardized
+input (dimensionless when a standardizer is used).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+__all__ = ["RandomFourierFeatures", "Standardizer"]
+
+_RFF_VERSION = 1
+_STD_VERSION = 1
+
+
+def _check_positive_int(name: str, value: Any, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _as_inputs(X: Any, n_inputs: int, what: str = "X") -> tuple[np.ndarray, bool]:
+    """Return X as a finite (n, n_inputs) float64 array and whether it was a single 1-D sample."""
+    X2 = np.asarray(X, dtype=np.float64)
+    single = X2.ndim == 1
+    if single:
+        X2 = X2[None, :]
+    if X2.ndim != 2 or X2.shape[1] != n_inputs:
+        raise ValueError(f"{what} must have shape (n, {n_inputs}) or ({n_inputs},), got {np.shape(X)}")
+    if X2.size and not np.isfinite(X2).all():
+        raise ValueError(f"{what} contains NaN or inf")
+    return X2, single
+
+
+class RandomFourierFeatures:
+    """Random Fourier feature map of the Gaussian kernel ``exp(−‖x − x′‖² / 2σ²)``.
+
+    Args:
+        n_inputs: Input dimension.
+        n_features: D, the number of features.
+        sigma: Kernel width σ > 0 (input units).
+        seed: Seed of the random draw of Ω and b (the same seed gives the same map).
+
+    Raises:
+        ValueError: For non-positive sizes or σ ≤ 0 / non-finite.
+    """
+
+    def __init__(self, n_inputs: int, n_features: int, sigma: float, seed: int = 0) -> None:
+        self.n_inputs = _check_positive_int("n_inputs", n_inputs)
+        self.n_features = _check_positive_int("n_features", n_features)
+        sigma = float(sigma)
+        if not (math.isfinite(sigma) and sigma > 0.0):
+            raise ValueError(f"sigma must be a finite number > 0, got {sigma!r}")
+        self.sigma = sigma
+        self.seed = int(seed)
+        rng = np.random.default_rng(self.seed)
+        self.omega_ = rng.normal(0.0, 1.0 / sigma, size=(self.n_inputs, self.n_features))
+        self.offset_ = rng.uniform(0.0, 2.0 * np.pi, size=self.n_features)
+        self._scale = math.sqrt(2.0 / self.n_features)
+
+    def transform(self, X: Any) -> np.ndarray:
+        """Map inputs to features.
+
+        Args:
+            X: One sample (n_inputs,) or a batch (n, n_inputs).
+
+        Returns:
+            (D,) for one sample, (n, D) for a batch.
+
+        Raises:
+            ValueError: Wrong shape, NaN or inf.
+        """
+        X2, single = _as_inputs(X, self.n_inputs)
+        F = X2 @ self.omega_
+        F += self.offset_
+        np.cos(F, out=F)
+        F *= self._scale
+        return F[0] if single else F
+
+    __call__ = transform
+
+    def kernel(self, X: Any, Y: Any) -> np.ndarray:
+        """Exact Gaussian kernel matrix ``exp(−‖x − y‖² / 2σ²)`` that the features approximate (n, m)."""
+        X2, _ = _as_inputs(X, self.n_inputs)
+        Y2, _ = _as_inputs(Y, self.n_inputs, "Y")
+        sq = np.sum(X2**2, 1)[:, None] + np.sum(Y2**2, 1)[None, :] - 2.0 * X2 @ Y2.T
+        return np.exp(-np.maximum(sq, 0.0) / (2.0 * self.sigma**2))
+
+    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Return the map as arrays (Ω and b are stored, so reloading needs no RNG)."""
+        return {
+            f"{prefix}version": np.array(_RFF_VERSION),
+            f"{prefix}sigma": np.array(self.sigma),
+            f"{prefix}seed": np.array(self.seed),
+            f"{prefix}omega": self.omega_.copy(),
+            f"{prefix}offset": self.offset_.copy(),
+        }
+
+    @classmethod
+    def from_state_dict(cls, state: dict[str, np.ndarray], prefix: str = "") -> RandomFourierFeatures:
+        """Rebuild the map from :meth:`state_dict` output.
+
+        Raises:
+            ValueError: Missing keys, wrong version, inconsistent shapes or non-finite arrays.
+        """
+        try:
+            if int(state[f"{prefix}version"]) != _RFF_VERSION:
+                raise ValueError("unsupported RandomFourierFeatures state version")
+            omega = np.asarray(state[f"{prefix}omega"], dtype=np.float64)
+            offset = np.asarray(state[f"{prefix}offset"], dtype=np.float64)
+            sigma = float(state[f"{prefix}sigma"])
+            seed = int(state[f"{prefix}seed"])
+        except KeyError as err:
+            raise ValueError(f"RandomFourierFeatures state is missing key {err}") from err
+        if omega.ndim != 2 or offset.shape != (omega.shape[1],):
+            raise ValueError(f"inconsistent RandomFourierFeatures state: omega {omega.shape}, "
+                             f"offset {offset.shape}")
+        if not (np.isfinite(omega).all() and np.isfinite(offset).all()):
+            raise ValueError("RandomFourierFeatures state is not finite")
+        obj = cls.__new__(cls)
+        obj.n_inputs, obj.n_features = int(omega.shape[0]), int(omega.shape[1])
+        if not (math.isfinite(sigma) and sigma > 0.0):
+            raise ValueError(f"invalid sigma {sigma!r} in RandomFourierFeatures state")
+        obj.sigma, obj.seed = sigma, seed
+        obj.omega_, obj.offset_ = np.ascontiguousarray(omega), offset.copy()
+        obj._scale = math.sqrt(2.0 / obj.n_features)
+        return obj
+
+    def __repr__(self) -> str:
+        return (f"RandomFourierFeatures(n_inputs={self.n_inputs}, n_features={self.n_features}, "
+                f"sigma={self.sigma}, seed={self.seed})")
+
+
+class Standardizer:
+    """Per-coordinate standardization ``(x − mean) / scale``.
+
+    Either fit on a batch with :meth:`fit`, given explicitly (``mean``, ``scale``), or estimated online:
+    with ``warmup = N > 0`` the first N samples passed to :meth:`partial_fit` update Welford running
+    statistics, then the statistics freeze and :attr:`ready` becomes true.
+
+    Args:
+        n_inputs: Input dimension.
+        warmup: Number of samples of the online warm-up (0 = no online warm-up).
+        mean: Optional fixed mean (n_inputs,); requires ``scale`` too.
+        scale: Optional fixed scale (n_inputs,), entries > 0.
+
+    Raises:
+        ValueError: Bad sizes, or inconsistent / non-finite / non-positive mean and scale.
+    """
+
+    #: Relative standard deviation below which an input counts as constant (scale 1).
+    ZERO_VARIANCE_RTOL = 1e-12
+
+    def __init__(self, n_inputs: int, warmup: int = 0, *, mean: Any = None, scale: Any = None) -> None:
+        self.n_inputs = _check_positive_int("n_inputs", n_inputs)
+        self.warmup = _check_positive_int("warmup", warmup, minimum=0)
+        self.count_ = 0
+        self._m2 = np.zeros(self.n_inputs)
+        self.mean_ = np.zeros(self.n_inputs)
+        self.scale_ = np.ones(self.n_inputs)
+        self._ready = False
+        if (mean is None) != (scale is None):
+            raise ValueError("give both mean and scale, or neither")
+        if mean is not None:
+            m = np.asarray(mean, dtype=np.float64)
+            s = np.asarray(scale, dtype=np.float64)
+            if m.shape != (self.n_inputs,) or s.shape != (self.n_inputs,):
+                raise ValueError(f"mean and scale must have shape ({self.n_inputs},)")
+            if not (np.isfinite(m).all() and np.isfinite(s).all() and (s > 0).all()):
+                raise ValueError("mean must be finite and scale finite and > 0")
+            self.mean_, self.scale_, self._ready = m.copy(), s.copy(), True
+
+    @classmethod
+    def identity(cls, n_inputs: int) -> Standardizer:
+        """Return a ready standardizer that leaves inputs unchanged (mean 0, scale 1)."""
+        return cls(n_inputs, mean=np.zeros(n_inputs), scale=np.ones(n_inputs))
+
+    @property
+    def ready(self) -> bool:
+        """Whether the statistics are final (fitted, given, or the warm-up is complete)."""
+        return self._ready
+
+    def _finish(self, mean: np.ndarray, var: np.ndarray) -> None:
+        std = np.sqrt(np.maximum(var, 0.0))
+        constant = std <= self.ZERO_VARIANCE_RTOL * (1.0 + np.abs(mean))
+        self.mean_ = mean.copy()
+        self.scale_ = np.where(constant, 1.0, std)
+        self._ready = True
+
+    def fit(self, X: Any) -> Standardizer:
+        """Set the statistics from a batch (n ≥ 1, population variance) and freeze them.
+
+        Returns:
+            self.
+
+        Raises:
+            ValueError: Wrong shape, NaN/inf, or no rows.
+        """
+        X2, _ = _as_inputs(X, self.n_inputs)
+        if X2.shape[0] == 0:
+            raise ValueError("cannot fit a Standardizer on zero samples")
+        mean = X2.mean(axis=0)
+        self._finish(mean, X2.var(axis=0))
+        self.count_ = X2.shape[0]
+        self._m2 = X2.var(axis=0) * X2.shape[0]
+        return self
+
+    def partial_fit(self, X: Any) -> bool:
+        """Feed samples to the online warm-up; samples after the warm-up (or once ready) are ignored.
+
+        Args:
+            X: One sample (n_inputs,) or a batch (n, n_inputs).
+
+        Returns:
+            :attr:`ready` after the call.
+
+        Raises:
+            ValueError: Wrong shape or NaN/inf (statistics unchanged).
+        """
+        X2, _ = _as_inputs(X, self.n_inputs)
+        for x in X2:
+            if self._ready or self.count_ >= self.warmup:
+                break
+            self.count_ += 1
+            delta = x - self.mean_
+            self.mean_ = self.mean_ + delta / self.count_
+            self._m2 = self._m2 + delta * (x - self.mean_)
+            if self.count_ == self.warmup:
+                self._finish(self.mean_, self._m2 / self.count_)
+        return self._ready
+
+    def transform(self, X: Any) -> np.ndarray:
+        """Standardize one sample (n_inputs,) or a batch (n, n_inputs).
+
+        Raises:
+            ValueError: If not :attr:`ready`, wrong shape, NaN/inf.
+        """
+        if not self._ready:
+            raise ValueError(f"Standardizer is not ready (warm-up {self.count_}/{self.warmup} samples); "
+                             "fit it or feed the warm-up first")
+        X2, single = _as_inputs(X, self.n_inputs)
+        Y = (X2 - self.mean_) / self.scale_
+        return Y[0] if single else Y
+
+    def copy(self) -> Standardizer:
+        """Return an independent copy."""
+        return Standardizer.from_state_dict(self.state_dict())
+
+    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Return the statistics (including an unfinished warm-up) as arrays."""
+        return {
+            f"{prefix}version": np.array(_STD_VERSION),
+            f"{prefix}warmup": np.array(self.warmup),
+            f"{prefix}count": np.array(self.count_),
+            f"{prefix}mean": self.mean_.copy(),
+            f"{prefix}m2": self._m2.copy(),
+            f"{prefix}scale": self.scale_.copy(),
+            f"{prefix}ready": np.array(self._ready),
+        }
+
+    @classmethod
+    def from_state_dict(cls, state: dict[str, np.ndarray], prefix: str = "") -> Standardizer:
+        """Rebuild a standardizer from :meth:`state_dict` output.
+
+        Raises:
+            ValueError: Missing keys, wrong version, inconsistent shapes or invalid values.
+        """
+        try:
+            if int(state[f"{prefix}version"]) != _STD_VERSION:
+                raise ValueError("unsupported Standardizer state version")
+            mean = np.asarray(state[f"{prefix}mean"], dtype=np.float64)
+            m2 = np.asarray(state[f"{prefix}m2"], dtype=np.float64)
+            scale = np.asarray(state[f"{prefix}scale"], dtype=np.float64)
+            warmup = int(state[f"{prefix}warmup"])
+            count = int(state[f"{prefix}count"])
+            ready = bool(state[f"{prefix}ready"])
+        except KeyError as err:
+            raise ValueError(f"Standardizer state is missing key {err}") from err
+        if mean.ndim != 1 or m2.shape != mean.shape or scale.shape != mean.shape or mean.size == 0:
+            raise ValueError("inconsistent Standardizer state shapes")
+        if not (np.isfinite(mean).all() and np.isfinite(m2).all() and np.isfinite(scale).all()
+                and (scale > 0).all() and count >= 0 and warmup >= 0):
+            raise ValueError("invalid Standardizer state values")
+        obj = cls(mean.size, warmup)
+        obj.mean_, obj._m2, obj.scale_ = mean.copy(), m2.copy(), scale.copy()
+        obj.count_, obj._ready = count, ready
+        return obj
+
+    def __repr__(self) -> str:
+        return f"Standardizer(n_inputs={self.n_inputs}, warmup={self.warmup}, ready={self._ready})"
