@@ -87,10 +87,23 @@ class TopicInfo:
     count: int
 
 
+def _resolve(path: Path) -> Path:
+    """Return what AnyReader should open: the folder, or a folder's only ``.mcap`` if it has no metadata."""
+    if path.is_dir() and not (path / "metadata.yaml").exists():
+        mcaps = sorted(path.glob("*.mcap"))
+        if len(mcaps) == 1:
+            return mcaps[0]  # e.g. a recording copied without its metadata.yaml
+        raise BagError(
+            f"bag folder {str(path)!r} has no metadata.yaml and {len(mcaps)} .mcap files (expected exactly 1)"
+        )
+    return path
+
+
 def _open_reader(path: Path) -> AnyReader:
     """Open ``path`` with AnyReader, translating every failure into :class:`BagError`."""
     if not path.exists():
         raise BagError(f"bag {str(path)!r} does not exist")
+    path = _resolve(path)
     if path.is_file() and path.suffix not in {".mcap", ".db3", ".bag"}:
         raise BagError(f"bag {str(path)!r} is a file but not an .mcap (or .db3/.bag) file")
     try:

@@ -1,0 +1,420 @@
+"""Bag I/O: BagWriter → read_messages round trip, cross-checked with the independent mcap_ros2 decoder;
+streaming memory; broken bags raise BagError."""
+
+from __future__ import annotations
+
+import shutil
+import tracemalloc
+
+import mcap_ros2.decoder
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from semiparam_ros.core.messages import JointStateData, WrenchData, stamp_to_ns
+from semiparam_ros.core.pipeline import SamplePipeline
+from semiparam_ros.io.bags import (
+    JOINT_STATE_TYPE,
+    JOINT_TRAJECTORY_TYPE,
+    WRENCH_STAMPED_TYPE,
+    BagError,
+    BagWriter,
+    iter_raw,
+    iter_samples,
+    read_messages,
+    read_topic_arrays,
+    topic_info,
+)
+
+T0 = 1_700_000_000 * 10**9
+JOINTS = ("r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow")
+ALL = (*JOINTS, "torso_pitch", "r_wrist_prosup", "neck_yaw")
+FRAME = "r_arm_ft_sensor"
+
+
+def make_messages(n_js=200, js_dt_ms=10, wrench_every=10, seed=0):
+    """Joint states (shuffled names, NaN in an unused joint now and then) and wrenches, with log times."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n_js):
+        stamp = T0 + k * js_dt_ms * 1_000_000 + int(rng.integers(0, 1000))  # sub-µs jitter in the stamps
+        names = list(ALL)
+        rng.shuffle(names)
+        pos = rng.normal(size=len(names))
+        if k % 17 == 0:
+            pos[names.index("neck_yaw")] = np.nan
+        js = JointStateData(
+            stamp, tuple(names), pos, rng.normal(size=len(names)), rng.normal(size=len(names))
+        )
+        out.append(("/joint_states", js, stamp + 200_000))
+        if k % wrench_every == 3:
+            w = WrenchData(stamp + 2_000_000, FRAME, rng.normal(size=3) * 10, rng.normal(size=3))
+            out.append(("/wrench", w, w.stamp_ns + 500_000))
+    out.sort(key=lambda e: e[2])
+    return out
+
+
+def write_bag(path, messages, *, compress=False, ground_truth=True):
+    with BagWriter(path, compress=compress) as bag:
+        for topic, msg, log_time in messages:
+            if isinstance(msg, JointStateData):
+                bag.write_joint_state(topic, msg, log_time_ns=log_time)
+                if ground_truth:
+                    idx = [msg.names.index(j) for j in JOINTS]
+                    bag.write_joint_trajectory_point(
+                        "/ground_truth/joint_accelerations",
+                        msg.stamp_ns,
+                        JOINTS,
+                        msg.position[idx],
+                        msg.velocity[idx],
+                        -msg.position[idx],
+                        log_time_ns=log_time + 1,
+                    )
+            else:
+                bag.write_wrench(topic, msg, log_time_ns=log_time)
+    return bag
+
+
+def decode_with_mcap_ros2(mcap_file, topics=None):
+    """The independent decoder: mcap + mcap_ros2 (schemas from the file, not from rosbags)."""
+    with open(mcap_file, "rb") as f:
+        reader = make_reader(f, decoder_factories=[mcap_ros2.decoder.DecoderFactory()])
+        return [
+            (channel.topic, schema.name, message.log_time, decoded)
+            for schema, channel, message, decoded in reader.iter_decoded_messages(
+                topics=topics, log_time_order=True
+            )
+        ]
+
+
+def assert_js_equal(a: JointStateData, b: JointStateData):
+    assert a.stamp_ns == b.stamp_ns and a.names == b.names
+    for f in ("position", "velocity", "effort"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))  # NaN == NaN here
+
+
+# ---------------------------------------------------------------------------------------------------
+# round trip and cross-check
+# ---------------------------------------------------------------------------------------------------
+
+
+def test_round_trip_and_independent_decoder(tmp_path):
+    messages = make_messages()
+    bag = tmp_path / "arm"
+    writer = write_bag(bag, messages)
+    assert sorted(p.name for p in bag.iterdir()) == ["arm.mcap", "metadata.yaml"]
+    assert writer.counts == {"/joint_states": 200, "/ground_truth/joint_accelerations": 200, "/wrench": 20}
+
+    # rosbags reader: same objects back, in log-time order
+    got = list(read_messages(bag))
+    want = [m for _, m, _ in messages]
+    assert len(got) == len(want) == 220
+    for a, b in zip(got, want, strict=True):
+        assert type(a) is type(b)
+        if isinstance(a, JointStateData):
+            assert_js_equal(a, b)
+        else:
+            assert (a.stamp_ns, a.frame_id) == (b.stamp_ns, b.frame_id)
+            np.testing.assert_array_equal(a.wrench, b.wrench)
+
+    # independent decoder: types, counts, stamps, values, monotonic log times
+    decoded = decode_with_mcap_ros2(bag / "arm.mcap")
+    by_topic = {}
+    for topic, schema, log_time, msg in decoded:
+        by_topic.setdefault(topic, []).append((schema, log_time, msg))
+    assert {t: len(v) for t, v in by_topic.items()} == writer.counts
+    assert {t: {s for s, _, _ in v} for t, v in by_topic.items()} == {
+        "/joint_states": {JOINT_STATE_TYPE},
+        "/wrench": {WRENCH_STAMPED_TYPE},
+        "/ground_truth/joint_accelerations": {JOINT_TRAJECTORY_TYPE},
+    }
+    log_times = [lt for _, _, lt, _ in decoded]
+    assert log_times == sorted(log_times)
+    js_ref = [m for t, m, _ in messages if t == "/joint_states"]
+    for (_, log_time, msg), ref, (_, _, ref_log) in zip(
+        by_topic["/joint_states"], js_ref, [e for e in messages if e[0] == "/joint_states"], strict=True
+    ):
+        assert stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec) == ref.stamp_ns
+        assert log_time == ref_log
+        assert tuple(msg.name) == ref.names
+        np.testing.assert_array_equal(np.asarray(msg.position), ref.position)
+        np.testing.assert_array_equal(np.asarray(msg.velocity), ref.velocity)
+        np.testing.assert_array_equal(np.asarray(msg.effort), ref.effort)
+    w_ref = [m for t, m, _ in messages if t == "/wrench"]
+    for (_, _, msg), ref in zip(by_topic["/wrench"], w_ref, strict=True):
+        assert msg.header.frame_id == FRAME
+        assert stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec) == ref.stamp_ns
+        f, t = msg.wrench.force, msg.wrench.torque
+        np.testing.assert_array_equal([f.x, f.y, f.z, t.x, t.y, t.z], ref.wrench)
+    # the stored rate: 100 Hz joint states, 10 Hz wrench
+    js_stamps = np.array([m.stamp_ns for m in js_ref])
+    assert np.all(np.diff(js_stamps) > 0)
+    assert np.median(np.diff(js_stamps)) == pytest.approx(1e7, rel=1e-3)
+
+    # the ground-truth topic as arrays, decoded independently too
+    gt = read_topic_arrays(bag, "/ground_truth/joint_accelerations")
+    assert gt.names == JOINTS and len(gt) == 200 and gt.msgtype == JOINT_TRAJECTORY_TYPE
+    np.testing.assert_array_equal(gt.stamp_ns, js_stamps)
+    points = np.array(
+        [np.asarray(m.points[0].accelerations) for _, _, m in by_topic["/ground_truth/joint_accelerations"]]
+    )
+    np.testing.assert_array_equal(gt.fields["accelerations"], points)
+    assert set(gt.fields) == {"positions", "velocities", "accelerations"}  # empty effort left out
+    # reordered columns
+    rev = read_topic_arrays(bag, "/ground_truth/joint_accelerations", joints=JOINTS[::-1])
+    np.testing.assert_array_equal(rev.fields["accelerations"], points[:, ::-1])
+    wr = read_topic_arrays(bag, "/wrench")
+    np.testing.assert_array_equal(wr.fields["wrench"], np.array([m.wrench for m in w_ref]))
+    assert wr.frame_id == FRAME
+    js_arr = read_topic_arrays(bag, "/joint_states", joints=JOINTS)
+    idx = [[m.names.index(j) for j in JOINTS] for m in js_ref]
+    np.testing.assert_array_equal(
+        js_arr.fields["velocity"], np.array([m.velocity[i] for m, i in zip(js_ref, idx, strict=True)])
+    )
+
+    info = topic_info(bag)
+    assert {t: (i.msgtype, i.count) for t, i in info.items()} == {
+        "/joint_states": (JOINT_STATE_TYPE, 200),
+        "/wrench": (WRENCH_STAMPED_TYPE, 20),
+        "/ground_truth/joint_accelerations": (JOINT_TRAJECTORY_TYPE, 200),
+    }
+
+
+def test_bare_mcap_compressed_and_topic_selection(tmp_path):
+    messages = make_messages(n_js=60)
+    bag = tmp_path / "z"
+    write_bag(bag, messages, compress=True)
+    bare = tmp_path / "copy.mcap"
+    shutil.copy(bag / "z.mcap", bare)
+    from_folder = list(read_messages(bag))
+    from_file = list(read_messages(bare))
+    assert len(from_folder) == len(from_file) == 66
+    for a, b in zip(from_folder, from_file, strict=True):
+        assert a.stamp_ns == b.stamp_ns and type(a) is type(b)
+    assert len(decode_with_mcap_ros2(bare)) == 126  # zstd chunks decode independently too
+    only_js = list(read_messages(bag, wrench_topic=None))
+    assert len(only_js) == 60 and all(isinstance(m, JointStateData) for m in only_js)
+    only_w = list(read_messages(bag, joint_states_topic=None))
+    assert len(only_w) == 6 and all(isinstance(m, WrenchData) for m in only_w)
+    # a folder copied without metadata.yaml is read through its single .mcap
+    (bag / "metadata.yaml").unlink()
+    assert len(list(read_messages(bag))) == 66
+
+
+def test_iter_raw_gives_cdr_bytes_for_replay(tmp_path):
+    messages = make_messages(n_js=50)
+    bag = tmp_path / "raw"
+    write_bag(bag, messages)
+    raw = list(iter_raw(bag, ["/wrench", "/joint_states"]))
+    assert len(raw) == 55
+    assert [lt for _, _, lt, _ in raw] == sorted(lt for _, _, lt in messages)
+    # the CDR bytes decode (with the independent decoder's view of the same file) to the same messages
+    decoded = decode_with_mcap_ros2(bag / "raw.mcap", topics=["/wrench", "/joint_states"])
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    for (topic, msgtype, log_time, data), (d_topic, d_schema, d_log, d_msg) in zip(raw, decoded, strict=True):
+        assert isinstance(data, bytes)
+        assert (topic, msgtype, log_time) == (d_topic, d_schema, d_log)
+        msg = store.deserialize_cdr(data, msgtype)
+        assert msg.header.stamp.nanosec == d_msg.header.stamp.nanosec
+
+
+def test_iter_samples_uses_the_pipeline(tmp_path):
+    messages = make_messages(n_js=300)
+    bag = tmp_path / "s"
+    write_bag(bag, messages, ground_truth=False)
+    p = SamplePipeline(JOINTS, frame_id=FRAME)
+    samples = list(iter_samples(bag, p))
+    # same as feeding the messages by hand
+    q = SamplePipeline(JOINTS, frame_id=FRAME)
+    ref = []
+    for _, m, _ in messages:
+        ref += q.add_joint_state(m) if isinstance(m, JointStateData) else q.add_wrench(m)
+    assert len(samples) == len(ref) == 29  # 30 wrenches, the first one in the estimator's warm-up
+    for a, b in zip(samples, ref, strict=True):
+        assert a.stamp_ns == b.stamp_ns
+        np.testing.assert_array_equal(a.x, b.x)
+        np.testing.assert_array_equal(a.y, b.y)
+    assert p.drops == q.drops
+    # joint-torque learning needs no wrench topic
+    tq = list(iter_samples(bag, SamplePipeline(JOINTS, output="joint_torques")))
+    assert len(tq) == 300 - 8
+
+
+# ---------------------------------------------------------------------------------------------------
+# writer behaviour
+# ---------------------------------------------------------------------------------------------------
+
+
+def test_writer_refuses_existing_folder_and_conflicting_types(tmp_path):
+    bag = tmp_path / "b"
+    write_bag(bag, make_messages(n_js=5))
+    with pytest.raises(BagError, match="exists already"):
+        BagWriter(bag).open()
+    write_bag_over = BagWriter(bag, overwrite=True)
+    with write_bag_over as w:
+        w.write_wrench("/wrench", WrenchData(T0, FRAME, [1, 2, 3], [4, 5, 6]))
+    assert len(list(read_messages(bag, joint_states_topic=None))) == 1
+    other = tmp_path / "not_a_bag"
+    other.mkdir()
+    (other / "notes.txt").write_text("keep me")
+    with pytest.raises(BagError, match="not a bag folder"):
+        BagWriter(other, overwrite=True).open()
+    assert (other / "notes.txt").exists()
+    with pytest.raises(BagError, match="already carries"), BagWriter(tmp_path / "c") as w:
+        w.write_wrench("/x", WrenchData(T0, FRAME, [1, 2, 3], [4, 5, 6]))
+        w.write_joint_state("/x", JointStateData(T0, ("a",), [0.0]))
+    with pytest.raises(BagError, match="not open"):
+        BagWriter(tmp_path / "d").write_wrench("/w", WrenchData(T0, FRAME, [1, 2, 3], [4, 5, 6]))
+    with pytest.raises(ValueError, match="3 components"), BagWriter(tmp_path / "e") as w:
+        w.write_wrench("/w", WrenchData(T0, FRAME, [1, 2], [4, 5, 6]))
+
+
+def test_generic_message_and_faulty_content_round_trip(tmp_path):
+    bag = tmp_path / "g"
+    with BagWriter(bag) as w:
+        types = w.typestore.types
+        arr = types["std_msgs/msg/Float64MultiArray"](
+            layout=types["std_msgs/msg/MultiArrayLayout"](
+                dim=[types["std_msgs/msg/MultiArrayDimension"](label="a,b", size=2, stride=2)], data_offset=0
+            ),
+            data=np.array([1.5, -2.0]),
+        )
+        w.write_message("/params", "std_msgs/msg/Float64MultiArray", arr, log_time_ns=T0)
+        # malformed content is stored as given, for fault-injection bags
+        w.write_joint_state("/joint_states", JointStateData(T0, ("a", "b"), [1.0], [np.inf, 2.0, 3.0]))
+    ((topic, schema, _, msg),) = decode_with_mcap_ros2(bag / "g.mcap", topics=["/params"])
+    assert schema == "std_msgs/msg/Float64MultiArray" and list(msg.data) == [1.5, -2.0]
+    (js,) = list(read_messages(bag, wrench_topic=None))
+    assert js.position.shape == (1,) and np.isinf(js.velocity[0])
+
+
+# ---------------------------------------------------------------------------------------------------
+# broken bags
+# ---------------------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def good_bag(tmp_path):
+    bag = tmp_path / "good"
+    write_bag(bag, make_messages(n_js=100), ground_truth=False)
+    return bag
+
+
+def test_missing_path_topic_and_wrong_type(tmp_path, good_bag):
+    with pytest.raises(BagError, match="does not exist"):
+        read_messages(tmp_path / "nope")
+    with pytest.raises(BagError, match="'/joint_states_typo'.*topics: /joint_states"):
+        read_messages(good_bag, joint_states_topic="/joint_states_typo")
+    with pytest.raises(
+        BagError, match="topic '/joint_states' carries 'sensor_msgs/msg/JointState', expected"
+    ):
+        read_messages(good_bag, wrench_topic="/joint_states", joint_states_topic=None)
+    with pytest.raises(BagError, match="no topic"):
+        iter_raw(good_bag, ["/missing"])
+    with pytest.raises(BagError, match="no topic"):
+        read_topic_arrays(good_bag, "/missing")
+    with pytest.raises(BagError, match="lacks joints"):
+        read_topic_arrays(good_bag, "/joint_states", joints=["r_elbow", "l_elbow"])
+    assert issubclass(BagError, ValueError)
+
+
+def test_truncated_and_garbage_files(tmp_path, good_bag):
+    data = (good_bag / "good.mcap").read_bytes()
+    for name, content in [
+        ("half.mcap", data[: len(data) // 2]),
+        ("no_footer.mcap", data[:-30]),
+        ("garbage.mcap", b"not an mcap file" * 100),
+        ("empty.mcap", b""),
+    ]:
+        path = tmp_path / name
+        path.write_bytes(content)
+        with pytest.raises(BagError, match=name) as info:
+            list(read_messages(path))
+        assert info.value.__cause__ is not None
+    folder = tmp_path / "no_mcap"
+    shutil.copytree(good_bag, folder)
+    (folder / "good.mcap").unlink()
+    with pytest.raises(BagError, match="no_mcap") as info:
+        read_messages(folder)
+    assert info.value.__cause__ is not None
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(BagError, match="not an .mcap"):
+        read_messages(tmp_path / "notes.txt")
+
+
+def test_corrupt_chunk_raises_during_iteration(tmp_path, good_bag):
+    src = good_bag / "good.mcap"
+    with open(src, "rb") as f:
+        summary = make_reader(f).get_summary()
+    chunk = summary.chunk_indexes[0]
+    data = bytearray(src.read_bytes())
+    # overwrite the first record inside the chunk (opcode + length) with 0xFF: an impossible length
+    start = chunk.chunk_start_offset + 1 + 8 + 8 + 8 + 8 + 4 + 4 + len(chunk.compression) + 8
+    data[start : start + 16] = b"\xff" * 16
+    bad = tmp_path / "corrupt.mcap"
+    bad.write_bytes(bytes(data))
+    iterator = read_messages(bad)  # the summary is intact: opening works
+    with pytest.raises(BagError, match="corrupt.mcap") as info:
+        list(iterator)
+    assert info.value.__cause__ is not None
+
+
+# ---------------------------------------------------------------------------------------------------
+# streaming
+# ---------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_reading_streams_instead_of_loading_the_file(tmp_path):
+    names = tuple(f"joint_{i:03d}" for i in range(200))
+    bag = tmp_path / "big"
+    rng = np.random.default_rng(0)
+    with BagWriter(bag) as w:
+        for k in range(1600):  # ≈ 7.7 kB per message → ≈ 12 MB
+            w.write_joint_state(
+                "/joint_states",
+                JointStateData(
+                    T0 + k * 10**7, names, rng.normal(size=200), rng.normal(size=200), np.zeros(200)
+                ),
+            )
+            if k % 10 == 0:
+                w.write_wrench("/wrench", WrenchData(T0 + k * 10**7, FRAME, [1, 2, 3], [4, 5, 6]))
+    size = (bag / "big.mcap").stat().st_size
+    assert size > 10e6
+    tracemalloc.start()
+    try:
+        iterator = read_messages(bag)
+        first = next(iterator)
+        _, peak_first = tracemalloc.get_traced_memory()
+        tracemalloc.reset_peak()
+        n = 1
+        for _ in iterator:  # several 1 MB chunks further on
+            n += 1
+            if n == 500:
+                break
+        _, peak_more = tracemalloc.get_traced_memory()
+        iterator.close()
+    finally:
+        tracemalloc.stop()
+    assert first.stamp_ns == T0
+    # one MCAP chunk (≈1 MB) plus its decoded copy is in memory, never the file
+    assert peak_first < 0.3 * size, (peak_first, size)
+    assert peak_more < 0.3 * size, (peak_more, size)
+    assert n == 500
+    assert sum(1 for _ in read_messages(bag)) == 1600 + 160
+
+
+def test_read_messages_is_lazy(good_bag, monkeypatch):
+    # nothing is decoded until iteration: a generator that yields the first message before the rest
+    import semiparam_ros.io.bags as bags
+
+    calls = []
+    real = bags.joint_state_from_msg
+    monkeypatch.setattr(bags, "joint_state_from_msg", lambda m: calls.append(1) or real(m))
+    iterator = read_messages(good_bag)
+    assert calls == []
+    next(iterator)
+    assert len(calls) == 1
+    iterator.close()
