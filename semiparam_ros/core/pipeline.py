@@ -26,7 +26,7 @@ Drops never raise. Memory is bounded: joint states are kept for ``buffer_s`` sec
 
 If one stream's stamps go backwards ``restart_after`` times in a row (a robot restart, ``ros2 bag play
 --loop``), the pipeline treats it as a clock restart: those messages stay counted as dropped, the
-buffers and the estimator are cleared (counts kept) and ``stream_restart`` is incremented, so the
+buffers and the estimator are cleared (counts kept) and ``n_restarts`` is incremented, so the
 pipeline recovers instead of dropping everything until the old stamps are passed.
 """
 
@@ -60,7 +60,6 @@ __all__ = [
     "DROP_WRENCH_ZERO_STAMP",
     "DROP_WRONG_FRAME_ID",
     "OUTPUTS",
-    "STREAM_RESTART",
     "SamplePipeline",
 ]
 
@@ -101,8 +100,6 @@ DROP_BUFFER_OVERFLOW = "buffer_overflow"
 """Pending wrench discarded because ``max_buffer`` wrenches were waiting (joint states stopped)."""
 DROP_WRENCH_IGNORED = "wrench_ignored"
 """Wrench received while learning joint torques (not used)."""
-STREAM_RESTART = "stream_restart"
-"""Not a drop: number of clock restarts detected (``restart_after`` backwards stamps in a row)."""
 
 DROP_REASONS = (
     DROP_JOINT_STATE_ZERO_STAMP,
@@ -121,7 +118,6 @@ DROP_REASONS = (
     DROP_ACCELERATION_WARMUP,
     DROP_BUFFER_OVERFLOW,
     DROP_WRENCH_IGNORED,
-    STREAM_RESTART,
 )
 """Every key of :attr:`SamplePipeline.drops`, in screening order."""
 
@@ -155,6 +151,11 @@ class SamplePipeline:
         buffer_s: How long accepted joint states are kept for pairing with late wrenches (s, > 0).
         max_buffer: Hard cap on buffered joint states and on pending wrenches (≥ 1).
         restart_after: Consecutive backwards stamps on one stream taken as a clock restart (≥ 1).
+
+    Attributes:
+        drops: Reason → count, every reason of :data:`DROP_REASONS` present (zeros included).
+        n_samples: Samples emitted.
+        n_restarts: Clock restarts detected.
 
     Raises:
         ValueError: Invalid settings.
@@ -204,6 +205,7 @@ class SamplePipeline:
         self._name_cache: dict[tuple[str, ...], np.ndarray | str] = {}
         self.drops: dict[str, int] = dict.fromkeys(DROP_REASONS, 0)
         self.n_samples = 0
+        self.n_restarts = 0  # clock restarts detected (restart_after backwards stamps in a row)
         self._estimator: AccelerationEstimator = make_estimator(len(joints), self.acceleration)
         self._clear_stream_state()
 
@@ -229,20 +231,21 @@ class SamplePipeline:
 
     @property
     def n_dropped(self) -> int:
-        """Total dropped messages/samples (all reasons except ``stream_restart``)."""
-        return sum(v for k, v in self.drops.items() if k != STREAM_RESTART)
+        """Total dropped messages/samples, all reasons."""
+        return sum(self.drops.values())
 
     def reset(self, *, keep_counts: bool = False) -> None:
         """Forget all streaming state (stamps, buffers, estimator).
 
         Args:
-            keep_counts: Keep ``drops`` and ``n_samples`` (default: zero them, as a new pipeline).
+            keep_counts: Keep ``drops``, ``n_samples`` and ``n_restarts`` (default: zero them, as a new
+                pipeline).
         """
-        self._estimator.reset()
         self._clear_stream_state()
         if not keep_counts:
             self.drops = dict.fromkeys(DROP_REASONS, 0)
             self.n_samples = 0
+            self.n_restarts = 0
 
     def _clear_stream_state(self) -> None:
         self._estimator.reset()
@@ -456,5 +459,5 @@ class SamplePipeline:
 
     def _restart(self) -> None:
         """Clock restart on one stream: clear the streaming state, keep the counts."""
-        self.drops[STREAM_RESTART] += 1
+        self.n_restarts += 1
         self._clear_stream_state()
