@@ -12,6 +12,7 @@ from semiparam_ros.core.acceleration import (
     AccelerationConfig,
     FiniteDifferenceEstimator,
     SavitzkyGolayEstimator,
+    estimate_accelerations,
     make_estimator,
 )
 
@@ -279,3 +280,20 @@ def test_defaults_and_factory():
     assert est.lag_s == pytest.approx(0.005)  # plain backward difference: half a step
     with pytest.raises(ValueError):
         make_estimator(0)
+
+
+@pytest.mark.parametrize("method", ["savgol", "finite_difference"])
+def test_batch_helper_equals_streaming(method):
+    cfg = AccelerationConfig(method=method, window=7)
+    stamps = jittered_stamps(100, 0.01, 0.2, 4)
+    dq = np.sin(np.outer((stamps - T0) * 1e-9, [1.0, 2.0, 3.0]))
+    s_ref, d_ref = estimates(run(make_estimator(3, cfg), stamps, dq))
+    s_got, d_got = estimate_accelerations(stamps, dq, cfg)
+    np.testing.assert_array_equal((s_got - T0) * 1e-9, s_ref)
+    np.testing.assert_array_equal(d_got, d_ref)
+    _, d1 = estimate_accelerations(stamps, dq[:, 0], cfg)
+    np.testing.assert_allclose(d1[:, 0], d_ref[:, 0], rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError):
+        estimate_accelerations(stamps[:-1], dq, cfg)
+    with pytest.raises(ValueError):
+        estimate_accelerations(stamps[::-1], dq, cfg)

@@ -218,6 +218,7 @@ def test_pairing_at_different_rates(js_rate, wrench_rate, offset_ms, latency_ms)
     bound = savgol_bound(9, 1 / js_rate)
     for s, (tw, tj) in zip(samples, pairs, strict=True):
         assert s.stamp_ns == tw  # the sample carries the wrench stamp …
+        assert s.joint_stamp_ns == tj
         np.testing.assert_array_equal(s.q, q_of(secs(tj)))  # … and the paired joint state, in JOINTS order
         np.testing.assert_array_equal(s.dq, dq_of(secs(tj)))
         np.testing.assert_allclose(s.y, wrench_of(secs(tw)), rtol=0, atol=1e-15)

@@ -40,6 +40,7 @@ __all__ = [
     "Decision",
     "FiniteDifferenceEstimator",
     "SavitzkyGolayEstimator",
+    "estimate_accelerations",
     "make_estimator",
 ]
 
@@ -320,3 +321,40 @@ def make_estimator(n_joints: int, config: AccelerationConfig | None = None) -> A
     if config.method == "savgol":
         return SavitzkyGolayEstimator(n_joints, config)
     return FiniteDifferenceEstimator(n_joints, config)
+
+
+def estimate_accelerations(
+    stamps_ns: np.ndarray, dq: np.ndarray, config: AccelerationConfig | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Run an estimator over a whole recording (offline convenience, e.g. to compare with ground truth).
+
+    Gives exactly what the streaming estimator would produce for the same samples.
+
+    Args:
+        stamps_ns: Stamps in ns, shape ``(N,)``, strictly increasing.
+        dq: Joint velocities (rad/s), shape ``(N, n)`` (or ``(N,)`` for one joint), finite.
+        config: Estimator settings (default ``AccelerationConfig()``).
+
+    Returns:
+        ``(stamps_ns, ddq)``: the stamps that got an estimate, shape ``(m,)`` int64, and the estimates
+        in rad/s², shape ``(m, n)``.
+
+    Raises:
+        ValueError: Mismatched shapes, stamps not increasing, or non-finite velocities.
+    """
+    stamps = np.asarray(stamps_ns)
+    vel = np.asarray(dq, dtype=np.float64)
+    if vel.ndim == 1:
+        vel = vel[:, None]
+    if stamps.ndim != 1 or vel.ndim != 2 or vel.shape[0] != stamps.shape[0]:
+        raise ValueError(f"stamps_ns (N,) and dq (N, n) must match, got {stamps.shape} and {np.shape(dq)}")
+    estimator = make_estimator(vel.shape[1], config)
+    out_stamps: list[int] = []
+    out_ddq: list[np.ndarray] = []
+    for stamp, v in zip(stamps.tolist(), vel, strict=True):
+        for ref, ddq in estimator.update(int(stamp), v):
+            if ddq is not None:
+                out_stamps.append(ref)
+                out_ddq.append(ddq)
+    ddq_arr = np.stack(out_ddq) if out_ddq else np.empty((0, vel.shape[1]))
+    return np.asarray(out_stamps, dtype=np.int64), ddq_arr

@@ -133,6 +133,8 @@ class Sample:
         dq: Joint velocities (rad/s), shape ``(n,)``.
         ddq: Estimated joint accelerations (rad/s²), shape ``(n,)``.
         y: Measured output: a wrench ``[fx, fy, fz, tx, ty, tz]`` (N, N·m) or joint torques (N·m).
+        joint_stamp_ns: Stamp of the joint state that gave q, q̇ and q̈ (ns); differs from ``stamp_ns``
+            by at most the pairing tolerance. Defaults to ``stamp_ns``.
     """
 
     stamp_ns: int
@@ -140,9 +142,12 @@ class Sample:
     dq: np.ndarray
     ddq: np.ndarray
     y: np.ndarray
+    joint_stamp_ns: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "stamp_ns", int(self.stamp_ns))
+        js = self.stamp_ns if self.joint_stamp_ns is None else int(self.joint_stamp_ns)
+        object.__setattr__(self, "joint_stamp_ns", js)
         for name in ("q", "dq", "ddq", "y"):
             object.__setattr__(self, name, _frozen_vector(getattr(self, name)))
 

@@ -428,7 +428,7 @@ class SamplePipeline:
                 continue
             assert best.ddq is not None
             self.n_samples += 1
-            samples.append(Sample(tw, best.q, best.dq, best.ddq, wrench.wrench))
+            samples.append(Sample(tw, best.q, best.dq, best.ddq, wrench.wrench, joint_stamp_ns=best.stamp))
         return samples
 
     def _nearest(self, tw: int) -> tuple[_JointEntry | None, int, bool]:
