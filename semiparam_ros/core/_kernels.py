@@ -65,9 +65,12 @@ def _rotate_in(
             if w0 == 0.0:
                 continue  # exact: c = 1, s = 0 (regularizer rows are zero left of their coordinate)
             a = sc * diag
-            rr = math.hypot(a, w0)
-            c = a / rr
-            s = w0 / rr
+            rr = math.sqrt(a * a + w0 * w0)
+            if not (rr < math.inf and rr > 0.0):
+                rr = math.hypot(a, w0)  # only when a² + w0² over- or underflows
+            inv = 1.0 / rr
+            c = a * inv
+            s = w0 * inv
             coef[n_act, 0] = c
             coef[n_act, 1] = s
             coef[n_act, 2] = c * sc
@@ -85,7 +88,18 @@ def _rotate_in(
                 for j in range(n):
                     Mi[j] *= sc
             continue
-        if n_act == 2:
+        if n_act == 1:
+            c = coef[0, 0]
+            s = coef[0, 1]
+            cs = coef[0, 2]
+            ss = coef[0, 3]
+            Wr = W[act[0], i + 1 : bt]
+            for j in range(n):
+                x = Mi[j]
+                y = Wr[j]
+                Mi[j] = cs * x + s * y
+                Wr[j] = c * y - ss * x
+        elif n_act == 2:
             c1 = coef[0, 0]
             s1 = coef[0, 1]
             cs1 = coef[0, 2]

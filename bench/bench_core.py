@@ -1,0 +1,262 @@
+"""Benchmark: per-sample update + predict of the learning core, next to its peers, in one run.
+
+For D ∈ {100, 250, 500, 1000, 2000} features and 6 outputs, the time of one test-then-train step
+(a-priori prediction of the sample, then the update with its label) for:
+
+* ``ours β=1``      — ``RecursiveRLS.predict_update`` (compiled Givens kernel, prediction from the rotations),
+  including the Python-side validation of every call;
+* ``ours β<1``      — the same with prior-keeping forgetting (β = 0.999: scale + one regularizer row a step);
+* ``ours+RFF``      — ``NonparametricModel.predict_learn_one`` on a 12-d input: standardize, random
+  features, predict_update (the whole NP budget per sample);
+* ``numpy Givens``  — the pure-numpy reference (test/reference_rrls.py): one Python loop over the b rows;
+* ``Sherman–Morrison`` — RLS on the inverse ``P = A⁻¹`` with BLAS ``dsymv`` + ``dsyr`` (in place),
+  6 outputs sharing P;
+* ``padasip``       — ``padasip.filters.FilterRLS`` (1.2.2) ``predict`` + ``adapt``. padasip filters have a
+  single output; the column is the time of ONE filter (one output), i.e. a lower bound of the 6-output
+  cost (6 independent filters would cost 6×). Its update forms ``R (x xᵀ) R`` with two dense products:
+  O(D³);
+* ``sklearn refit`` — ``RBFSampler.transform`` of the sample + ``Ridge(alpha).fit`` on the last n = 1000
+  samples' features (a sliding window: the cheapest honest way to use a batch learner online).
+
+The machine limit: the update reads and writes the upper triangle of ``[R | d]``, ``2·8·(b(b+1)/2 + 6b)``
+bytes; divided by the read+write bandwidth numpy achieves on an array of that footprint
+(``np.multiply(a, c, out=a)``) it gives a lower bound of the time per update. Memory is checked to stay
+constant in the number of samples (RSS and learner bytes after 1k and 10k updates at D = 1000).
+
+All runs use one BLAS thread (``threadpoolctl.threadpool_limits(1)``). Timings are medians over repeats of
+the mean of back-to-back calls. Usage::
+
+    .venv/bin/python bench/bench_core.py [--quick] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import platform
+import statistics
+import sys
+import time
+from collections.abc import Callable
+
+import numba
+import numpy as np
+import psutil
+import scipy
+import sklearn
+from scipy.linalg.blas import dsymv, dsyr
+from sklearn.kernel_approximation import RBFSampler
+from sklearn.linear_model import Ridge
+from threadpoolctl import threadpool_limits
+
+from semiparam_ros.core.features import Standardizer
+from semiparam_ros.core.rrls import RecursiveRLS
+from semiparam_ros.core.semiparametric import NonparametricModel
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "test"))
+from reference_rrls import ReferenceQRRLS
+
+T_OUT = 6
+N_INPUTS = 12
+LAM = 1.0
+BETA = 0.999
+REFIT_WINDOW = 1000
+RESULTS = pathlib.Path(__file__).resolve().parent / "results" / "bench_core.json"
+TARGETS_US = {500: 60.0, 1000: 250.0}
+
+
+def time_per_call(step: Callable[[int], object], calls: int, repeats: int) -> dict[str, float]:
+    """Median/min/max over repeats of the mean µs per call of ``calls`` back-to-back calls."""
+    step(0)  # warm-up (compilation, caches)
+    samples, i = [], 1
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            step(i)
+            i += 1
+        samples.append((time.perf_counter() - t0) / calls * 1e6)
+    return {"median_us": statistics.median(samples), "min_us": min(samples), "max_us": max(samples),
+            "calls": calls, "repeats": repeats}
+
+
+def features_stream(rng: np.random.Generator, n: int, D: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows that look like random Fourier features (√(2/D)·cos) and 6 targets."""
+    Z = np.sqrt(2.0 / D) * np.cos(rng.uniform(0, 2 * np.pi, (n, D)))
+    U = rng.standard_normal((n, T_OUT))
+    return Z, U
+
+
+def bandwidth_limit_us(D: int, repeats: int) -> dict[str, float]:
+    """Lower bound of one update: bytes of [R | d]'s upper triangle read + written over measured bandwidth."""
+    n_elem = D * (D + 1) // 2 + T_OUT * D
+    a = np.ones(n_elem)
+    c = 1.0000001
+    np.multiply(a, c, out=a)
+    ts = []
+    for _ in range(max(repeats, 20)):
+        t0 = time.perf_counter()
+        np.multiply(a, c, out=a)
+        ts.append(time.perf_counter() - t0)
+    t = statistics.median(ts)
+    bw = 2 * a.nbytes / t
+    return {"bytes_per_update": 2 * a.nbytes, "bandwidth_GBps": bw / 1e9, "limit_us": t * 1e6}
+
+
+class ShermanMorrisonRLS:
+    """RLS on P = A⁻¹ (upper triangle, BLAS symv + syr in place), weights W (D, 6) — the classic peer."""
+
+    def __init__(self, D: int, lam: float) -> None:
+        self.P = np.asfortranarray(np.eye(D) / lam)
+        self.W = np.zeros((D, T_OUT))
+
+    def predict_update(self, z: np.ndarray, u: np.ndarray) -> np.ndarray:
+        pred = z @ self.W
+        Pz = dsymv(1.0, self.P, z, lower=0)
+        g = Pz / (1.0 + z @ Pz)
+        self.W += np.outer(g, u - pred)
+        dsyr(-1.0 / (1.0 + z @ Pz), Pz, lower=0, a=self.P, overwrite_a=1)
+        return pred
+
+
+def bench_size(D: int, quick: bool, rng: np.random.Generator) -> dict[str, object]:
+    n_fast = 400 if quick else 4000
+    Z, U = features_stream(rng, n_fast + 1, D)
+    rep = 5 if quick else 15
+    calls = max(10, min(200, int(2e5 / D)))
+    row: dict[str, object] = {"D": D}
+
+    ours = RecursiveRLS(D, T_OUT, LAM)
+    row["ours_beta1"] = time_per_call(lambda i: ours.predict_update(Z[i % n_fast], U[i % n_fast]), calls, rep)
+    ours_f = RecursiveRLS(D, T_OUT, LAM, forgetting=BETA)
+    row["ours_forgetting"] = time_per_call(
+        lambda i: ours_f.predict_update(Z[i % n_fast], U[i % n_fast]), calls, rep)
+
+    X = rng.standard_normal((n_fast + 1, N_INPUTS))
+    npm = NonparametricModel(N_INPUTS, T_OUT, n_features=D, sigma=3.0, lam=LAM,
+                             standardizer=Standardizer(N_INPUTS).fit(X))
+    row["ours_np_model"] = time_per_call(
+        lambda i: npm.predict_learn_one(X[i % n_fast], U[i % n_fast]), calls, rep)
+
+    sm = ShermanMorrisonRLS(D, LAM)
+    row["sherman_morrison"] = time_per_call(
+        lambda i: sm.predict_update(Z[i % n_fast], U[i % n_fast]), calls, rep)
+
+    slow_calls = 3 if quick else (20 if D <= 500 else 5)
+    slow_rep = 2 if quick else 5
+    ref = ReferenceQRRLS(D, T_OUT, LAM)
+    row["numpy_givens"] = time_per_call(lambda i: ref.predict_update(Z[i % n_fast], U[i % n_fast]),
+                                        slow_calls, slow_rep)
+
+    if not (quick and D > 500):
+        import padasip as pa
+
+        filt = pa.filters.FilterRLS(D, mu=1.0, eps=1.0 / LAM, w="zeros")
+
+        def pada(i: int) -> None:
+            z = Z[i % n_fast]
+            filt.predict(z)
+            filt.adapt(U[i % n_fast, 0], z)
+
+        p_calls = 1 if D >= 1000 else slow_calls
+        p_rep = 2 if quick else (3 if D >= 2000 else slow_rep)
+        row["padasip_1out"] = time_per_call(pada, p_calls, p_rep)
+
+    if not (quick and D > 500):
+        Xw = rng.standard_normal((REFIT_WINDOW, N_INPUTS))
+        Yw = rng.standard_normal((REFIT_WINDOW, T_OUT))
+        sampler = RBFSampler(gamma=1.0 / (2 * 3.0**2), n_components=D, random_state=0).fit(Xw)
+        Fw = sampler.transform(Xw)
+
+        def refit(i: int) -> None:
+            x = X[i % n_fast][None, :]
+            f = sampler.transform(x)
+            Fw[i % REFIT_WINDOW] = f[0]  # slide the window
+            Ridge(alpha=LAM).fit(Fw, Yw).predict(f)
+
+        row["sklearn_refit_n1000"] = time_per_call(refit, slow_calls if D <= 500 else 2, slow_rep)
+
+    row["limit"] = bandwidth_limit_us(D, rep)
+    return row
+
+
+def memory_check(D: int = 1000) -> dict[str, object]:
+    rng = np.random.default_rng(1)
+    proc = psutil.Process()
+    model = RecursiveRLS(D, T_OUT, LAM, forgetting=BETA)
+    Z, U = features_stream(rng, 1000, D)
+    out: dict[str, object] = {"D": D}
+    for total in (1000, 10000):
+        while model.n_samples_seen < total:
+            for z, u in zip(Z, U, strict=True):
+                model.predict_update(z, u)
+        state_bytes = sum(v.nbytes for v in model.state_dict().values())
+        out[f"after_{total}"] = {"rss_MB": proc.memory_info().rss / 1e6, "state_bytes": state_bytes}
+    return out
+
+
+def fmt(cell: object) -> str:
+    if isinstance(cell, dict):
+        return f"{cell['median_us']:.1f}"
+    return "–" if cell is None else str(cell)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="fewer sizes/repeats (smoke run, < 60 s)")
+    parser.add_argument("--json", type=pathlib.Path, default=RESULTS, help=f"output JSON (default {RESULTS})")
+    args = parser.parse_args(argv)
+    sizes = [100, 500, 1000] if args.quick else [100, 250, 500, 1000, 2000]
+    rng = np.random.default_rng(0)
+    load_before = os.getloadavg()
+    t_start = time.time()
+    with threadpool_limits(1):
+        rows = [bench_size(D, args.quick, rng) for D in sizes]
+        mem = memory_check(1000 if not args.quick else 500)
+    load_after = os.getloadavg()
+
+    cols = [("ours β=1", "ours_beta1"), (f"ours β={BETA}", "ours_forgetting"),
+            ("ours NP model (RFF+RLS)", "ours_np_model"), ("numpy Givens", "numpy_givens"),
+            ("Sherman–Morrison", "sherman_morrison"), ("padasip RLS (1 output)", "padasip_1out"),
+            (f"RBFSampler+Ridge refit (n={REFIT_WINDOW})", "sklearn_refit_n1000")]
+    print("Per-sample predict + update, µs (median), 6 outputs, 1 BLAS thread\n")
+    header = ["D", *[c for c, _ in cols], "limit (bytes/BW)", "ours β=1 / limit", "target"]
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    for r in rows:
+        lim = r["limit"]["limit_us"]  # type: ignore[index]
+        ours = r["ours_beta1"]["median_us"]  # type: ignore[index]
+        target = TARGETS_US.get(int(r["D"]))  # type: ignore[arg-type]
+        cells = [str(r["D"]), *[fmt(r.get(k)) for _, k in cols], f"{lim:.1f}", f"{ours / lim:.2f}",
+                 f"≤ {target:.0f}" if target else "–"]
+        print("| " + " | ".join(cells) + " |")
+    print(f"\nMemory (D={mem['D']}, β={BETA}): " + ", ".join(
+        f"{k}: RSS {v['rss_MB']:.1f} MB, learner state {v['state_bytes'] / 1e6:.2f} MB"
+        for k, v in mem.items() if k != "D"))
+    print(f"Load average before {load_before[0]:.2f}, after {load_after[0]:.2f} (2 cores, shared); "
+          f"wall {time.time() - t_start:.0f} s")
+
+    result = {
+        "benchmark": "bench_core",
+        "quick": args.quick,
+        "machine": {"platform": platform.platform(), "processor": platform.processor(),
+                    "cpu_count": os.cpu_count(), "python": platform.python_version(),
+                    "numpy": np.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
+                    "sklearn": sklearn.__version__,
+                    "loadavg_before": load_before, "loadavg_after": load_after},
+        "settings": {"outputs": T_OUT, "lam": LAM, "forgetting": BETA, "refit_window": REFIT_WINDOW,
+                     "np_model_inputs": N_INPUTS, "blas_threads": 1,
+                     "padasip_normalisation": "one FilterRLS = one output (lower bound of 6 outputs)"},
+        "targets_us": TARGETS_US,
+        "rows": rows,
+        "memory": mem,
+    }
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(result, indent=2))
+    print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
