@@ -342,3 +342,21 @@ def test_checkpoint_errors(tmp_path):
     state["M"] = np.ones((2, 2))
     with pytest.raises(ValueError, match="shape"):
         RecursiveRLS.from_state_dict(state)
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 6])
+@pytest.mark.parametrize("beta", [1.0, 0.98])
+def test_sparse_rows_exercise_every_kernel_path(k, beta):
+    """Structural zeros (as in rigid-body regressors) select the kernel's skip, pair and fused paths."""
+    rng = np.random.default_rng(30 + k)
+    b, t, lam = 13, 2, 0.6
+    steps = random_steps(rng, 400 // k, k, b, t)
+    steps = [(Z * (rng.random(Z.shape) < 0.5), U) for Z, U in steps]
+    rls = RecursiveRLS(b, t, lam, forgetting=beta)
+    for Z, U in steps:
+        before = rls.predict(Z)
+        np.testing.assert_allclose(rls.predict_update(Z, U), before, rtol=1e-9, atol=1e-11)
+    A, _, W = closed_form(steps, b, t, lam, beta)
+    assert rel(rls.weights, W) < 1e-9
+    assert rel(rls.R.T @ rls.R, A) < 1e-12
+    assert np.all(np.diag(rls.R) > 0)
