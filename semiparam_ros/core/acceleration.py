@@ -109,7 +109,9 @@ class AccelerationEstimator:
         self.n_joints = int(n_joints)
         self.config = config
         self._stamps: deque[int] = deque(maxlen=config.window)
-        self._dq: deque[np.ndarray] = deque(maxlen=config.window)
+        # velocities in a doubled ring buffer: the last m samples are always one contiguous view
+        self._ring = np.zeros((2 * config.window, self.n_joints))
+        self._count = 0
         self._mean_dt_s = math.nan  # running mean of the sample interval, for the stated delay/lag
         self._n_dt = 0
 
@@ -146,7 +148,7 @@ class AccelerationEstimator:
         """
         pending = self._pending_stamps()
         self._stamps.clear()
-        self._dq.clear()
+        self._count = 0
         self._reset_filter()
         return [(s, None) for s in pending]
 
@@ -185,9 +187,19 @@ class AccelerationEstimator:
                 else:
                     self._mean_dt_s += (dt_s - self._mean_dt_s) / min(self._n_dt, 1000)
         self._stamps.append(stamp_ns)
-        self._dq.append(dq.copy())
+        w = self.config.window
+        k = self._count % w
+        self._ring[k] = dq
+        self._ring[k + w] = dq
+        self._count += 1
         decisions.extend(self._estimate())
         return decisions
+
+    def _window(self) -> np.ndarray:
+        """Return the buffered velocities, oldest first, shape ``(len(stamps), n_joints)`` (a view)."""
+        m = len(self._stamps)
+        start = (self._count - m) % self.config.window
+        return self._ring[start : start + m]
 
     # -- subclass hooks --------------------------------------------------------------------------
     def _estimate(self) -> list[Decision]:  # pragma: no cover - abstract
@@ -257,7 +269,7 @@ class SavitzkyGolayEstimator(AccelerationEstimator):
             return []
         stamps = np.fromiter(self._stamps, dtype=np.int64, count=len(self._stamps))
         weights = self._weights(stamps)
-        ddq = weights @ np.stack(self._dq)
+        ddq = weights @ self._window()
         return [(int(stamps[self._half]), ddq)]
 
 
@@ -297,7 +309,8 @@ class FiniteDifferenceEstimator(AccelerationEstimator):
         if len(self._stamps) < self.config.window:
             return [(stamp, None)]
         span_s = (stamp - self._stamps[0]) * 1e-9
-        raw = (self._dq[-1] - self._dq[0]) / span_s
+        window = self._window()
+        raw = (window[-1] - window[0]) / span_s
         if self._state is None or self._tau_s == 0.0:
             self._state = raw
         else:
