@@ -1,0 +1,101 @@
+"""Tests of the hold-out hyperparameter selection (``tune``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from semiparam_ros.cli.tune import main as tune_main
+from semiparam_ros.core.config import load_config
+from semiparam_ros.core.estimator import build_model
+from semiparam_ros.eval.replay import load_samples
+from semiparam_ros.eval.tuning import CachedRegressor, split_holdout, tune
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "config" / "icub_right_arm.yaml"
+XY = ROOT / "bags" / "icub_xy"
+# a prefix of the committed bag and a small D keep the test fast; the full search is `tune` on the bag
+N_SAMPLES = 900
+SMALL = {"nonparametric.n_features": 60, "nonparametric.standardizer_warmup": 100}
+GRID = {"parametric.lam": [1e-4, 1.0], "nonparametric.lam": [0.1, 10.0], "nonparametric.sigma": [1.0, 4.0]}
+
+
+@pytest.fixture(scope="module")
+def data():
+    config = load_config(CONFIG).with_overrides(SMALL)
+    samples, _ = load_samples(XY, config, limit=N_SAMPLES)
+    return config, samples
+
+
+def direct_holdout_nrmse(config, samples, holdout=0.2) -> float:
+    """The hold-out error computed independently: fresh SP learner, learn the head, predict the tail."""
+    n_hold = round(len(samples) * holdout)
+    head, tail = slice(0, len(samples) - n_hold), slice(len(samples) - n_hold, len(samples))
+    model = build_model(config, "SP")
+    for x, y in zip(samples.X[head], samples.Y[head], strict=True):
+        model.learn_one(x, y)
+    pred = np.array([model.predict_one(x).total for x in samples.X[tail]])
+    rmse = np.sqrt(np.mean((pred - samples.Y[tail]) ** 2, axis=0))
+    return float(np.mean(rmse / np.std(samples.Y[tail], axis=0)))
+
+
+def test_tuned_values_are_no_worse_than_defaults_on_holdout(data) -> None:
+    config, samples = data
+    result = tune(config, samples, holdout=0.2, grid=GRID)
+    assert len(result.grid) == 3 * 3 * 3  # the configuration's own values join each axis
+    default_error = direct_holdout_nrmse(config, samples)
+    assert result.default["score"] == pytest.approx(default_error, rel=1e-9)
+    tuned_error = direct_holdout_nrmse(result.config, samples)
+    assert tuned_error == pytest.approx(result.best["score"], rel=1e-9)
+    assert tuned_error <= default_error
+    assert result.best["score"] == min(row["score"] for row in result.grid)
+    for key in ("parametric.lam", "nonparametric.lam", "nonparametric.sigma"):
+        assert result.config[key] == result.best[key]
+
+
+def test_tune_cli_writes_a_parameter_file_evaluate_accepts(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "tuned.yaml"
+    argv = ["--train", str(XY), "--config", str(CONFIG), "--limit", "500", "--n-features", "40",
+            "--set", "nonparametric.standardizer_warmup=100", "--lam-p", "0.01", "1", "--lam-np", "1",
+            "--sigma", "2", "4", "--out", str(out), "--no-progress"]
+    assert tune_main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "| best" in printed or "best |" in printed
+    tuned = load_config(out)  # the same loader the node's parameter declaration and evaluate use
+    assert tuned["nonparametric.n_features"] == 40
+    assert tuned["robot.joints"] == load_config(CONFIG)["robot.joints"]
+    selected = [line for line in printed.splitlines() if "| best" in line][0].split("|")
+    assert tuned["parametric.lam"] == float(selected[1])
+    assert tuned["nonparametric.sigma"] == float(selected[3])
+    from semiparam_ros.cli.evaluate import main as evaluate_main
+
+    assert evaluate_main(["--train", str(XY), "--test", str(XY), "--config", str(out), "--train-limit", "200",
+                          "--test-limit", "200", "--splits", "2", "--no-progress"]) == 0
+
+
+def test_tune_rejects_bad_input(data) -> None:
+    config, samples = data
+    with pytest.raises(ValueError, match="holdout"):
+        split_holdout(samples, 1.5)
+    with pytest.raises(ValueError, match="cannot tune"):
+        tune(config, samples.head(100), grid={"robot.joints": [1.0]})
+    with pytest.raises(ValueError, match="out of range"):
+        tune(config, samples.head(100), grid={"nonparametric.sigma": [-1.0]})
+    assert tune_main(["--train", str(tmp_missing := XY.parent / "no_such_bag"), "--no-progress"]) == 2
+    assert not tmp_missing.exists()
+
+
+def test_cached_regressor_matches_the_regressor(data) -> None:
+    from semiparam_ros.core.estimator import build_regressor
+
+    config, samples = data
+    reg = build_regressor(config)
+    cached = CachedRegressor(reg)
+    n = reg.n_joints
+    for x in samples.X[:5]:
+        q, dq, ddq = x[:n], x[n: 2 * n], x[2 * n:]
+        np.testing.assert_array_equal(cached.base_regressor(q, dq, ddq), reg.base_regressor(q, dq, ddq))
+        assert cached.base_regressor(q, dq, ddq) is cached.base_regressor(q, dq, ddq)
+    assert cached.n_base == reg.n_base
