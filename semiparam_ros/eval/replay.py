@@ -4,8 +4,8 @@ Samples come from exactly the objects the live node uses: :func:`~semiparam_ros.
 (joint mapping, stamp pairing, acceleration estimate, drops counted) fed by
 :func:`~semiparam_ros.io.bags.iter_samples`, and the learners of
 :func:`~semiparam_ros.core.estimator.build_model`. When the bag also holds the noise-free wrench of a
-simulation (``/ground_truth/wrench``), a second pass of a fresh pipeline over that topic gives the
-noise-free outputs at the same stamps, so errors can be split into model error and sensor noise.
+simulation (``/ground_truth/wrench``), the noise-free wrench with the stamp of each sample (samples carry
+the wrench stamp) is its noise-free output, so errors can be split into model error and sensor noise.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from semiparam_ros.eval.protocol import (
     run_adaptation,
     run_protocol,
 )
-from semiparam_ros.io.bags import iter_samples, topic_info
+from semiparam_ros.io.bags import iter_samples, read_messages, topic_info
 
 __all__ = [
     "GROUND_TRUTH_WRENCH_TOPIC",
@@ -100,9 +100,9 @@ def load_samples(path: str | Path, config: EstimatorConfig, topics: Topics | Non
     samples = iter_samples(path, pipeline, **kwargs)
     truth: dict[int, np.ndarray] | None = None
     if config["robot.output"] == "wrench" and topics.ground_truth and topics.ground_truth in topic_info(path):
-        truth_pipeline = build_pipeline(config)
-        truth = {s.stamp_ns: np.asarray(s.y) for s in iter_samples(
-            path, truth_pipeline, joint_states_topic=topics.joint_states, wrench_topic=topics.ground_truth)}
+        # samples carry the wrench stamp: the noise-free wrench of the same stamp is the exact target
+        truth = {m.stamp_ns: m.wrench for m in read_messages(path, joint_states_topic=None,
+                                                             wrench_topic=topics.ground_truth)}
     try:
         arrays = SampleArrays.from_samples(samples, truth, limit=limit)
     except ValueError as err:

@@ -60,14 +60,19 @@ def _segment_stats(result: ProtocolResult, kind: str, first_s: float, truth: boo
     return stats
 
 
+def _rounded(values: np.ndarray, digits: int = 7) -> list[float]:
+    """Curve values to ``digits`` significant digits (compact JSON; far below any plotted resolution)."""
+    return [float(f"{v:.{digits}g}") for v in np.asarray(values, dtype=np.float64)]
+
+
 def _curves(result: ProtocolResult, truth: bool) -> dict[str, Any]:
     curves: dict[str, Any] = {}
     for kind in result.kinds:
         entry: dict[str, list[float]] = {}
         for group in result.groups:
             per_split = result.curves(kind, group, truth)
-            entry[f"{group}_mean"] = np.mean(per_split, axis=0).tolist()
-            entry[f"{group}_std"] = np.std(per_split, axis=0).tolist()
+            entry[f"{group}_mean"] = _rounded(np.mean(per_split, axis=0))
+            entry[f"{group}_std"] = _rounded(np.std(per_split, axis=0))
         curves[kind] = entry
     return curves
 
@@ -114,7 +119,7 @@ def protocol_report(result: ProtocolResult, *, config: Mapping[str, Any] | None 
             **dict(protocol or {}),
         },
         "config": dict(config or {}),
-        "curves": {"time_s": result.time_s.tolist(), **_curves(result, truth=False)},
+        "curves": {"time_s": _rounded(result.time_s, 9), **_curves(result, truth=False)},
     }
     if has_truth:
         noise = result.targets - result.targets_true
@@ -226,8 +231,8 @@ def adaptation_report(result: AdaptationResult, *, config: Mapping[str, Any] | N
         "window_samples": int(result.window),
         "protocol": dict(protocol or {}),
         "config": dict(config or {}),
-        "curves": {"time_s": result.time_s[keep].tolist(),
-                   **{k: {g: c[keep].tolist() for g, c in v.items()} for k, v in result.curves.items()}},
+        "curves": {"time_s": _rounded(result.time_s[keep], 9),
+                   **{k: {g: _rounded(c[keep]) for g, c in v.items()} for k, v in result.curves.items()}},
     }
 
 
