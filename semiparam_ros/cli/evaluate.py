@@ -79,9 +79,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--train-limit", type=int, default=None, help="use only the first N training samples")
     p.add_argument("--test-limit", type=int, default=None, help="use only the first N test samples")
     p.add_argument("--pickup-time", type=float, default=None,
-                   help="payload pickup [s from the first sample]; default from the bag's scenario.yaml")
+                   help="payload pickup [s from the bag's first joint state]; default from the bag's "
+                        "scenario.yaml")
     p.add_argument("--forgetting", type=float, default=0.995,
-                   help="forgetting factor of both stages with adaptation on (default 0.995)")
+                   help="forgetting factor per sample with adaptation on (default 0.995)")
+    p.add_argument("--forgetting-np", type=float, default=None,
+                   help="forgetting factor of the residual stage with adaptation on (default: --forgetting)")
     p.add_argument("--json", type=Path, help="write the JSON report here")
     p.add_argument("--plot", type=Path, help="write the figure (PNG) here")
     p.add_argument("--plot-truth", type=Path,
@@ -115,7 +118,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             wrench_topic=args.wrench_topic, models=args.models, splits=args.splits,
             split_size=args.split_size,
             window_s=args.window, train_limit=args.train_limit, test_limit=args.test_limit,
-            pickup_time_s=args.pickup_time, forgetting=args.forgetting, json_path=args.json,
+            pickup_time_s=args.pickup_time, forgetting=args.forgetting,
+            forgetting_nonparametric=args.forgetting_np, json_path=args.json,
             plot_path=args.plot, plot_truth_path=args.plot_truth, markdown_path=args.markdown,
             progress=not args.no_progress)
     except ValueError as err:

@@ -170,7 +170,7 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
 
 
 def read_change_time(bag: str | Path) -> float:
-    """Read the payload pickup time [s from the bag start] from the simulator's ``scenario.yaml``.
+    """Read the payload pickup time [s from the first joint state] from the simulator's ``scenario.yaml``.
 
     Looks for ``scenario.yaml`` in the bag folder (or next to a bare ``.mcap`` file) and accepts the keys
     ``pickup_time_s``, ``pickup_time``, ``payload.pickup_time_s`` or ``payload.time_s``.
@@ -211,30 +211,35 @@ def read_change_time(bag: str | Path) -> float:
     return found
 
 
-def adaptation_configs(config: EstimatorConfig, forgetting: float) -> dict[str, EstimatorConfig]:
+def adaptation_configs(config: EstimatorConfig, forgetting: float,
+                       forgetting_nonparametric: float | None = None) -> dict[str, EstimatorConfig]:
     """Return the two configurations compared in the payload scenario.
 
     Args:
         config: Base configuration.
-        forgetting: Forgetting factor β of both stages with adaptation on (``0.9 <= β < 1``).
+        forgetting: Forgetting factor β of the parametric stage with adaptation on (``0.9 <= β < 1``).
+        forgetting_nonparametric: β of the residual stage with adaptation on (default: ``forgetting``;
+            may be 1).
 
     Returns:
-        ``{"on": β in both stages, "off": β = 1 in both stages}``.
+        ``{"on": the given β, "off": β = 1 in both stages}``.
 
     Raises:
         ValueError: If ``forgetting`` is out of range.
     """
     if not 0.9 <= forgetting < 1.0:
         raise ValueError(f"forgetting for the adaptive model must be in [0.9, 1), got {forgetting}")
+    beta_np = forgetting if forgetting_nonparametric is None else forgetting_nonparametric
     return {
         "on": config.with_overrides({"parametric.forgetting": forgetting,
-                                     "nonparametric.forgetting": forgetting}),
+                                     "nonparametric.forgetting": beta_np}),
         "off": config.with_overrides({"parametric.forgetting": 1.0, "nonparametric.forgetting": 1.0}),
     }
 
 
 def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting: float,
-                        change_s: float | None = None, pretrain_path: str | Path | None = None,
+                        forgetting_nonparametric: float | None = None, change_s: float | None = None,
+                        pretrain_path: str | Path | None = None,
                         topics: Topics | None = None, kinds: Sequence[str] = ("SP",), window_s: float = 3.0,
                         pre_s: float = 10.0, deadline_s: float = 10.0, tolerance: float = 1.5,
                         progress: bool = False) -> tuple[AdaptationResult, dict[str, Any]]:
@@ -243,8 +248,10 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
     Args:
         bag: Bag with the payload change.
         config: Base configuration.
-        forgetting: β of both stages for the adaptive learners.
-        change_s: Pickup time [s from the first sample]; read from ``scenario.yaml`` when omitted.
+        forgetting: β of the parametric stage (and by default of the residual stage) when adaptive.
+        forgetting_nonparametric: β of the residual stage when adaptive (default: ``forgetting``).
+        change_s: Pickup time [s from the bag's first joint state]; read from ``scenario.yaml`` when
+            omitted.
         pretrain_path: Optional bag every learner is trained on first.
         topics: Topics to read.
         kinds: Learners (``"SP"`` by default; ``"P"`` and ``"NP"`` possible).
@@ -264,17 +271,23 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
     if change_s is None:
         change_s = read_change_time(bag)
     stream, drops = load_samples(bag, config, topics)
-    # scenario times are from the bag start; the protocol measures from the first sample
-    change_from_first = change_s
+    # the pickup time counts from the first joint state of the bag; the first sample comes later (the
+    # acceleration estimator's warm-up), and run_adaptation counts from the first sample
+    first_joint_state = next(iter(read_messages(bag, joint_states_topic=topics.joint_states,
+                                                wrench_topic=None))).stamp_ns
+    change_from_first = change_s - (int(stream.stamps_ns[0]) - first_joint_state) * 1e-9
     pretrain = load_samples(pretrain_path, config, topics)[0] if pretrain_path is not None else None
-    configs = adaptation_configs(config, forgetting)
+    configs = adaptation_configs(config, forgetting, forgetting_nonparametric)
+    beta_np = forgetting if forgetting_nonparametric is None else forgetting_nonparametric
+    label = f"β={forgetting:g}" if beta_np == forgetting else f"β_P={forgetting:g}, β_NP={beta_np:g}"
     models: dict[str, Any] = {}
     for kind in kinds:
-        models[f"{kind} adaptive (β={forgetting:g})"] = build_models(configs["on"], [kind])[kind]
+        models[f"{kind} adaptive ({label})"] = build_models(configs["on"], [kind])[kind]
         models[f"{kind} no adaptation"] = build_models(configs["off"], [kind])[kind]
     result = run_adaptation(models, stream, change_from_first, pretrain=pretrain, window_s=window_s,
                             pre_s=pre_s, deadline_s=deadline_s, tolerance=tolerance, progress=progress)
     info = {"bag": str(bag), "pretrain_bag": None if pretrain_path is None else str(pretrain_path),
-            "forgetting": forgetting, "pickup_time_s": change_s, "drops": drops,
+            "forgetting": forgetting, "forgetting_nonparametric": beta_np, "pickup_time_s": change_s,
+            "drops": drops,
             "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench}
     return result, info

@@ -72,6 +72,7 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
                  wrench_topic: str | None = None, models: Sequence[str] | None = None, splits: int = 10,
                  split_size: int | None = None, window_s: float = 3.0, train_limit: int | None = None,
                  test_limit: int | None = None, pickup_time_s: float | None = None, forgetting: float = 0.995,
+                 forgetting_nonparametric: float | None = None,
                  json_path: Path | None = None, plot_path: Path | None = None,
                  plot_truth_path: Path | None = None, markdown_path: Path | None = None,
                  progress: bool = True) -> str:
@@ -92,7 +93,8 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
         train_limit: Use only the first training samples.
         test_limit: Use only the first test samples.
         pickup_time_s: Payload pickup time [s]; default from the bag's ``scenario.yaml``.
-        forgetting: β of the adaptive learners.
+        forgetting: β of the adaptive learners (parametric stage; residual stage too by default).
+        forgetting_nonparametric: β of the adaptive learners' residual stage (default: ``forgetting``).
         json_path: JSON report destination.
         plot_path: Figure destination.
         plot_truth_path: Figure against the noise-free wrench (paper protocol, simulated bags).
@@ -108,7 +110,9 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
     cfg = load_evaluation_config(config, overrides)
     topics = Topics.from_config(cfg, joint_states_topic, wrench_topic)
     if payload is not None:
-        result, info = evaluate_adaptation(payload, cfg, forgetting=forgetting, change_s=pickup_time_s,
+        result, info = evaluate_adaptation(payload, cfg, forgetting=forgetting,
+                                           forgetting_nonparametric=forgetting_nonparametric,
+                                           change_s=pickup_time_s,
                                            pretrain_path=train, topics=topics, kinds=models or ("SP",),
                                            window_s=window_s, progress=progress)
         report = adaptation_report(result, config=cfg.to_flat(), protocol=info)
