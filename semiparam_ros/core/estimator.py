@@ -33,6 +33,7 @@ from semiparam_ros.core.semiparametric import (
 )
 
 __all__ = [
+    "DROP_REJECTED_SAMPLE",
     "ModelKind",
     "OnlineEstimator",
     "StepResult",
@@ -44,6 +45,10 @@ __all__ = [
 
 ModelKind = Literal["P", "NP", "SP"]
 Model = ParametricModel | NonparametricModel | SemiparametricModel
+
+DROP_REJECTED_SAMPLE = "rejected_sample"
+"""Key of :attr:`OnlineEstimator.drops`: a paired sample the learner refused (values beyond its input
+bound or a regressor overflow), typically after a finite but absurd joint state passed the pipeline."""
 
 _CHECKPOINT_VERSION = 1
 # Parameters that fix the shape or meaning of the learned state: a checkpoint is only loaded when these
@@ -217,15 +222,33 @@ class OnlineEstimator:
         self.model = build_model(config, kind, self.regressor)
         self.learning_enabled = bool(config["learning_enabled"])
         self.n_samples_learned = 0
+        self._rejected = 0
 
     # ------------------------------------------------------------------ streaming
     def process_joint_state(self, msg: JointStateData) -> list[StepResult]:
-        """Feed a joint state; return the results of the samples it completed (often none or one)."""
-        return [self.step(sample) for sample in self.pipeline.add_joint_state(msg)]
+        """Feed a joint state; return the results of the samples it completed (often none or one).
+
+        Never raises on bad data: the pipeline drops and counts bad messages, and a sample the learner
+        rejects is counted under ``rejected_sample`` in :attr:`drops` (the learned state is unchanged).
+        """
+        return self._step_all(self.pipeline.add_joint_state(msg))
 
     def process_wrench(self, msg: WrenchData) -> list[StepResult]:
-        """Feed an F/T reading; return the results of the samples it completed."""
-        return [self.step(sample) for sample in self.pipeline.add_wrench(msg)]
+        """Feed an F/T reading; return the results of the samples it completed (never raises on bad data)."""
+        return self._step_all(self.pipeline.add_wrench(msg))
+
+    def _step_all(self, samples: list[Sample]) -> list[StepResult]:
+        # The pipeline only screens for NaN/inf: a finite but absurd value (e.g. a velocity of 1e200 rad/s)
+        # is accepted and poisons the q̈ window, and the learners then refuse those samples with a
+        # ValueError (state untouched). Streaming must count that as a drop, not abort the message and
+        # lose the other samples it completed.
+        results: list[StepResult] = []
+        for sample in samples:
+            try:
+                results.append(self.step(sample))
+            except ValueError:
+                self._rejected += 1
+        return results
 
     def step(self, sample: Sample) -> StepResult:
         """Predict y for a sample, then learn it (unless learning is disabled).
@@ -235,6 +258,10 @@ class OnlineEstimator:
 
         Returns:
             The a-priori prediction and the time it took.
+
+        Raises:
+            ValueError: If the learner rejects the sample (wrong sizes, non-finite or absurdly large
+                values, regressor overflow); the learned state is then unchanged.
         """
         start = time.perf_counter()
         if self.learning_enabled:
@@ -247,8 +274,10 @@ class OnlineEstimator:
     # ------------------------------------------------------------------ inspection
     @property
     def drops(self) -> dict[str, int]:
-        """Input messages dropped so far, by reason."""
-        return dict(self.pipeline.drops)
+        """Input messages dropped so far, by reason (the pipeline's reasons and ``rejected_sample``)."""
+        drops = dict(self.pipeline.drops)
+        drops[DROP_REJECTED_SAMPLE] = self._rejected
+        return drops
 
     @property
     def parameters(self) -> np.ndarray | None:
@@ -277,6 +306,7 @@ class OnlineEstimator:
         self.model.reset()
         self.pipeline.reset()
         self.n_samples_learned = 0
+        self._rejected = 0
 
     def _fingerprint(self) -> str:
         structure = {name: self.config[name] for name in _STRUCTURAL}
