@@ -237,3 +237,39 @@ def test_evaluate_cli_rejects_bad_input(tmp_path: Path, capsys) -> None:
     assert "fewer than" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["--train", str(BAGS / "icub_xy")])
+
+
+def test_results_page_renders_from_reports(tmp_path: Path) -> None:
+    from semiparam_ros.eval.report import adaptation_report
+    from semiparam_ros.eval.results import write_results
+
+    models = {"P": ToyRidge(3, 6, lam=1e6), "NP": ToyRidge(3, 6), "SP": ToyRidge(3, 6, lam=0.5)}
+    paper = protocol_report(run_protocol(models, toy_stream(100, 8), toy_stream(200, 9), splits=2),
+                            protocol={"train_bag": "xy", "test_bag": "xz"})
+    stream = toy_stream(4000, 5, shift_at=2000)
+    adapt = run_adaptation({"P adaptive": ToyRidge(3, 6, forgetting=0.99), "P no adaptation": ToyRidge(3, 6)},
+                           stream, change_s=20.0, window_s=1.0)
+    payload = adaptation_report(adapt, protocol={"bag": "payload", "pickup_time_s": 20.0, "forgetting": 0.99})
+    figs = tmp_path / "figures"
+    write_json(paper, figs / "paper.json")
+    write_json(payload, figs / "payload.json")
+    page = write_results(figs / "paper.json", figs / "payload.json", tmp_path / "results.md")
+    text = page.read_text()
+    assert "](figures/paper_fig3.png)" in text and "](figures/payload.png)" in text
+    assert f"{paper['models']['SP']['force_rmse']:.3g}" in text
+    assert "| P adaptive | force [N] |" in text and "| P no adaptation | force [N] |" in text
+    assert text.count("| pass |") + text.count("| FAIL |") == 8
+
+
+def test_adaptation_figure_is_a_valid_png(tmp_path: Path) -> None:
+    from matplotlib.image import imread
+
+    from semiparam_ros.eval.figures import plot_adaptation
+    from semiparam_ros.eval.report import adaptation_report
+
+    stream = toy_stream(3000, 10, shift_at=1500)
+    adapt = run_adaptation({"SP adaptive": ToyRidge(3, 6, forgetting=0.99), "SP": ToyRidge(3, 6)}, stream,
+                           change_s=15.0, window_s=1.0)
+    path = plot_adaptation(adaptation_report(adapt), tmp_path / "payload.png")
+    assert path.read_bytes()[:8] == PNG_MAGIC
+    assert imread(path).shape[2] in (3, 4)
