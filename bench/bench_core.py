@@ -71,14 +71,20 @@ def time_per_call(step: Callable[[int], object], calls: int, repeats: int) -> di
     """Median/min/max over repeats of the mean µs per call of ``calls`` back-to-back calls."""
     step(0)  # warm-up (compilation, caches)
     samples, i = [], 1
+    wall = cpu = 0.0
     for _ in range(repeats):
+        c0 = time.process_time()
         t0 = time.perf_counter()
         for _ in range(calls):
             step(i)
             i += 1
-        samples.append((time.perf_counter() - t0) / calls * 1e6)
+        dt = time.perf_counter() - t0
+        cpu += time.process_time() - c0
+        wall += dt
+        samples.append(dt / calls * 1e6)
+    # cpu_share < 1 means the process was descheduled (the machine is shared): timings are inflated
     return {"median_us": statistics.median(samples), "min_us": min(samples), "max_us": max(samples),
-            "calls": calls, "repeats": repeats}
+            "calls": calls, "repeats": repeats, "cpu_share": cpu / wall if wall > 0 else float("nan")}
 
 
 def features_stream(rng: np.random.Generator, n: int, D: int) -> tuple[np.ndarray, np.ndarray]:
@@ -221,7 +227,8 @@ def main(argv: list[str] | None = None) -> int:
             ("Sherman–Morrison", "sherman_morrison"), ("padasip RLS (1 output)", "padasip_1out"),
             (f"RBFSampler+Ridge refit (n={REFIT_WINDOW})", "sklearn_refit_n1000")]
     print("Per-sample predict + update, µs (median), 6 outputs, 1 BLAS thread\n")
-    header = ["D", *[c for c, _ in cols], "limit (bytes/BW)", "ours β=1 / limit", "target"]
+    header = ["D", *[c for c, _ in cols], "limit (bytes/BW)", "ours β=1 / limit", "target",
+              "CPU share (ours β=1)"]
     print("| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
     for r in rows:
@@ -229,7 +236,8 @@ def main(argv: list[str] | None = None) -> int:
         ours = r["ours_beta1"]["median_us"]  # type: ignore[index]
         target = TARGETS_US.get(int(r["D"]))  # type: ignore[arg-type]
         cells = [str(r["D"]), *[fmt(r.get(k)) for _, k in cols], f"{lim:.1f}", f"{ours / lim:.2f}",
-                 f"≤ {target:.0f}" if target else "–"]
+                 f"≤ {target:.0f}" if target else "–",
+                 f"{r['ours_beta1']['cpu_share']:.2f}"]  # type: ignore[index]
         print("| " + " | ".join(cells) + " |")
     print(f"\nMemory (D={mem['D']}, β={BETA}): " + ", ".join(
         f"{k}: RSS {v['rss_MB']:.1f} MB, learner state {v['state_bytes'] / 1e6:.2f} MB"

@@ -86,11 +86,16 @@ class RandomFourierFeatures:
             ValueError: Wrong shape, NaN or inf.
         """
         X2, single = _as_inputs(X, self.n_inputs)
-        F = X2 @ self.omega_
+        F = self._map(X2)
+        return F[0] if single else F
+
+    def _map(self, X: np.ndarray) -> np.ndarray:
+        """Features of already validated input (1-D or 2-D float64), without checks."""
+        F = X @ self.omega_
         F += self.offset_
         np.cos(F, out=F)
         F *= self._scale
-        return F[0] if single else F
+        return F
 
     __call__ = transform
 
@@ -254,8 +259,12 @@ class Standardizer:
             raise ValueError(f"Standardizer is not ready (warm-up {self.count_}/{self.warmup} samples); "
                              "fit it or feed the warm-up first")
         X2, single = _as_inputs(X, self.n_inputs)
-        Y = (X2 - self.mean_) / self.scale_
+        Y = self._apply(X2)
         return Y[0] if single else Y
+
+    def _apply(self, X: np.ndarray) -> np.ndarray:
+        """Standardize already validated input with the current statistics, without checks."""
+        return (X - self.mean_) / self.scale_
 
     def copy(self) -> Standardizer:
         """Return an independent copy."""

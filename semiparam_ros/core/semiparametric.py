@@ -66,7 +66,7 @@ def _check_vector(name: str, v: Any, size: int | None) -> np.ndarray:
         raise ValueError(f"{name} must have shape {want}, got {np.shape(v)}")
     if not (np.abs(a).max() <= MAX_ABS_INPUT):
         raise ValueError(f"{name} contains NaN, inf or absurdly large entries")
-    return a
+    return np.ascontiguousarray(a)
 
 
 class _Model:
@@ -178,7 +178,7 @@ class ParametricModel(_Model):
         """
         xv, yv = self._check(x, y)
         Phi = self._phi(xv)
-        self.rls.update(Phi, yv[:, None])
+        self.rls._update_valid(Phi, yv.reshape(-1, 1))
         self.n_samples_seen += 1
 
     def predict_learn_one(self, x: Any, y: Any) -> Prediction:
@@ -189,7 +189,7 @@ class ParametricModel(_Model):
         """
         xv, yv = self._check(x, y)
         Phi = self._phi(xv)
-        yp = self.rls.predict_update(Phi, yv[:, None])[:, 0]
+        yp = self.rls._predict_update_valid(Phi, yv.reshape(-1, 1))[:, 0]
         self.n_samples_seen += 1
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy())
 
@@ -263,15 +263,16 @@ class NonparametricModel(_Model):
         self.n_samples_seen = 0
 
     def _features(self, x: np.ndarray) -> np.ndarray:
-        return self.rff.transform(self.standardizer.transform(x))
+        """φ(s(x)) for a validated 1-D x, as a (1, D) row (finite by construction: cos of finite input)."""
+        return self.rff._map(self.standardizer._apply(x[None, :]))
 
     def _predict(self, xin: np.ndarray, return_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
         if not self.standardizer.ready:
             var = np.full(self.n_outputs, np.nan) if return_variance else None
             return np.zeros(self.n_outputs), var
         phi = self._features(xin)
-        var = np.full(self.n_outputs, float(self.rls.variance(phi))) if return_variance else None
-        return self.rls.predict(phi), var
+        var = np.full(self.n_outputs, float(self.rls.variance(phi)[0])) if return_variance else None
+        return (phi @ self.rls.weights)[0], var
 
     def _learn(self, xin: np.ndarray, target: np.ndarray, want_prediction: bool) -> np.ndarray:
         """Warm-up or update with validated inputs; returns the a-priori prediction if asked."""
@@ -280,8 +281,8 @@ class NonparametricModel(_Model):
             return np.zeros(self.n_outputs)
         phi = self._features(xin)
         if want_prediction:
-            return self.rls.predict_update(phi, target)
-        self.rls.update(phi, target)
+            return self.rls._predict_update_valid(phi, target.reshape(1, -1))[0]
+        self.rls._update_valid(phi, target.reshape(1, -1))
         return np.zeros(0)
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
@@ -451,7 +452,7 @@ class SemiparametricModel(_Model):
     def _step(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
         xv, yv, Phi = self._check(x, y)
         assert yv is not None
-        yp = self.parametric.rls.predict_update(Phi, yv[:, None])[:, 0]
+        yp = self.parametric.rls._predict_update_valid(Phi, yv.reshape(-1, 1))[:, 0]
         self.parametric.n_samples_seen += 1
         r = self.nonparametric._learn(np.concatenate([xv, yp]), yv - yp, want_prediction)
         self.nonparametric.n_samples_seen += 1
