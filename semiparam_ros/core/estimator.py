@@ -52,7 +52,10 @@ bound or a regressor overflow), typically after a finite but absurd joint state 
 
 _CHECKPOINT_VERSION = 1
 # Parameters that fix the shape or meaning of the learned state: a checkpoint is only loaded when these
-# match. Regularization, forgetting and run-time switches may change between runs.
+# match. The learners' hyperparameters are part of it: λ is baked into the factor (RᵀR = λI + ΦᵀΦ), and a
+# loaded RecursiveRLS/Standardizer keeps the checkpoint's λ, β and warm-up (even through reset()), so
+# accepting a checkpoint written with other values would silently run those while the configuration
+# says otherwise. Run-time switches (learning_enabled, checkpoint.*, diagnostics.*) may change.
 _STRUCTURAL = (
     "robot.joints",
     "robot.output",
@@ -60,9 +63,14 @@ _STRUCTURAL = (
     "robot.locked_joints",
     "robot.locked_positions",
     "parametric.sensor_offset",
+    "parametric.lam",
+    "parametric.forgetting",
     "nonparametric.n_features",
     "nonparametric.sigma",
     "nonparametric.seed",
+    "nonparametric.lam",
+    "nonparametric.forgetting",
+    "nonparametric.standardizer_warmup",
 )
 
 
@@ -346,9 +354,22 @@ class OnlineEstimator:
         if version != _CHECKPOINT_VERSION:
             raise ValueError(f"{path}: checkpoint version {version}, expected {_CHECKPOINT_VERSION}")
         if fingerprint != self._fingerprint():
-            raise ValueError(f"{path}: checkpoint was written for another model structure:\n"
-                             f"  checkpoint: {fingerprint}\n  current:    {self._fingerprint()}")
+            raise ValueError(f"{path}: checkpoint was written for another model structure: "
+                             f"{_fingerprint_difference(fingerprint, self._fingerprint())}")
         model = self.model.copy()
         model.load_state_dict(state, "model.")
         self.model = model
         self.n_samples_learned = n_learned
+
+
+def _fingerprint_difference(saved: str, current: str) -> str:
+    """Name the entries that differ between two fingerprints (for the error message)."""
+    try:
+        a, b = json.loads(saved), json.loads(current)
+    except ValueError:
+        return f"unreadable fingerprint {saved!r}"
+    if not isinstance(a, dict):
+        return f"unreadable fingerprint {saved!r}"
+    names = sorted(set(a) | set(b))
+    return "; ".join(f"{k} = {a.get(k)!r} in the checkpoint, {b.get(k)!r} now" for k in names
+                     if a.get(k) != b.get(k))
