@@ -657,3 +657,72 @@ def test_absurd_finite_values_are_counted_not_raised(config, regressor):
     with pytest.raises(ValueError):
         est.step(Sample(T0_NS, np.zeros(4), np.full(4, 1e200), np.zeros(4), np.zeros(6)))
     assert_same_state(snapshot(est), before)
+
+
+# ----------------------------------------------------------------------------- other outputs and options
+def test_joint_torque_stream_one_data_path(config):
+    """output = joint_torques: JointState.effort (RNEA torques + residual) is the label, wrenches ignored."""
+    import pinocchio as pin
+
+    cfg = config.with_overrides({"robot.output": "joint_torques"})
+    est = OnlineEstimator(cfg)
+    reg = est.regressor
+    assert reg.n_outputs == 4
+    model, data = reg.pinocchio_model, reg.pinocchio_model.createData()
+    traj = make_trajectory(reg, seed=5)
+    t = np.arange(1, 401) * DT_NS * 1e-9
+    q, dq, ddq = traj(t)
+    tau = np.array([pin.rnea(model, data, q[i], dq[i], ddq[i]) for i in range(len(t))])
+    tau = tau + 0.3 * np.tanh(3 * dq)  # friction-like residual (N·m)
+    rng = np.random.default_rng(5)
+    names = JOINTS + EXTRA_JOINTS
+    msgs: list[JointStateData | WrenchData] = []
+    for i in range(len(t)):
+        perm = rng.permutation(len(names))
+        pad = np.zeros(len(EXTRA_JOINTS))
+        stamp = T0_NS + (i + 1) * DT_NS
+        msgs.append(JointStateData(stamp, tuple(names[j] for j in perm), np.concatenate([q[i], pad])[perm],
+                                   np.concatenate([dq[i], pad])[perm], np.concatenate([tau[i], pad])[perm]))
+        if i % 10 == 0:
+            msgs.append(WrenchData(stamp, FRAME, [1.0, 2.0, 3.0], [0.1, 0.2, 0.3]))
+    results = feed(est, msgs)
+    assert est.drops["wrench_ignored"] == 40
+
+    samples = pipeline_samples(cfg, msgs)
+    hand = build_model(cfg, "SP")
+    assert len(results) == len(samples) > 380
+    for r, s in zip(results, samples, strict=True):
+        p = hand.predict_one(s.x)
+        hand.learn_one(s.x, s.y)
+        for part in ("parametric", "residual", "total"):
+            np.testing.assert_allclose(getattr(r.prediction, part), getattr(p, part), rtol=0, atol=1e-9)
+    # labels are the efforts of the configured joints, in the configured order, at the sample stamp
+    k = np.array([(r.sample.stamp_ns - T0_NS) // DT_NS - 1 for r in results])
+    np.testing.assert_array_equal(np.array([r.sample.y for r in results]), tau[k])
+    assert est.model_size == reg.n_base * 4 + N_FEATURES * 4
+
+
+def test_sensor_offset_is_identified(config):
+    """parametric.sensor_offset adds six constant wrench offsets to the base parameters; with exact q̈
+    they and the inertial base parameters are recovered within the ridge bias bound."""
+    cfg = config.with_overrides({"parametric.sensor_offset": True})
+    est = OnlineEstimator(cfg, kind="P")
+    reg = est.regressor
+    plain = build_regressor(config)
+    assert reg.n_base == plain.n_base + 6
+    assert est.parameter_names[-6:] == tuple(f"offset_{a}" for a in ("fx", "fy", "fz", "tx", "ty", "tz"))
+    offset = np.array([1.5, -0.7, 2.0, 0.05, -0.12, 0.3])  # N, N·m
+    traj = make_trajectory(plain, seed=3)
+    t = np.arange(1, 2001) * DT_NS * 1e-9
+    q, dq, ddq = traj(t)
+    y = plain.wrench(q, dq, ddq) + offset  # generated without the offset machinery
+    for i in range(len(t)):
+        est.step(Sample(T0_NS + i, q[i], dq[i], ddq[i], y[i]))
+    pi_full = reg.urdf_parameters()
+    pi_full[-6:] = offset
+    pi_b = reg.to_base(pi_full)
+    Phi = reg.base_regressor(q, dq, ddq).reshape(-1, reg.n_base)
+    lam = cfg["parametric.lam"]
+    bound = lam * np.linalg.norm(pi_b) / np.linalg.svd(Phi, compute_uv=False)[-1] ** 2
+    assert np.linalg.norm(est.parameters - pi_b) <= bound * (1 + 1e-6) + 1e-10
+    np.testing.assert_allclose(est.parameters[-6:], offset, rtol=0, atol=1e-4)
