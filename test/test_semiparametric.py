@@ -286,3 +286,41 @@ def test_forgetting_adapts_to_a_parameter_change():
         forget.learn_one(x, target)
     assert np.abs(forget.parameters - new).max() < 0.01
     assert np.abs(keep.parameters - new).max() > 0.1
+
+
+@pytest.mark.parametrize("kind", ["P", "NP", "SP"])
+def test_inputs_not_mutated_and_prediction_does_not_learn(kind):
+    rng = np.random.default_rng(11)
+    X, Y = toy_data(rng, 30)
+    m = make(kind, D=20, warmup=5)
+    Xc, Yc = X.copy(), Y.copy()
+    for x, y in zip(X, Y, strict=True):
+        m.predict_learn_one(x, y)
+        m.learn_one(x, y)
+    np.testing.assert_array_equal(X, Xc)
+    np.testing.assert_array_equal(Y, Yc)
+    before = m.state_dict()
+    for x in X:
+        m.predict_one(x)
+        m.predict_one(x, return_variance=True)
+    after = m.state_dict()
+    assert all(np.array_equal(before[k], after[k]) for k in before)
+    # strided (non-contiguous) views are accepted and give the same answer as contiguous copies
+    Xf = np.asfortranarray(X)
+    np.testing.assert_array_equal(m.predict_one(Xf[3]).total, m.predict_one(X[3].copy()).total)
+
+
+def test_semiparametric_with_forgetting_tracks_a_payload_change():
+    """After π changes mid-stream, SP with prior-keeping forgetting recovers; without forgetting it lags."""
+    rng = np.random.default_rng(12)
+    X, Y = toy_data(rng, 4000, noise=0.02)
+    shift = np.array([0.8, 0.5, 0.0, 0.0])
+    Y2 = Y + np.array([regressor(x) @ shift for x in X])
+    fixed, adaptive = make("SP", D=100, warmup=100), make("SP", D=100, warmup=100, beta=0.99)
+    for i in range(3000):
+        y = Y[i] if i < 2000 else Y2[i]
+        fixed.predict_learn_one(X[i], y)
+        adaptive.predict_learn_one(X[i], y)
+    Xt, Yt = X[3000:], Y2[3000:]
+    assert rmse(adaptive, Xt, Yt) < 0.5 * rmse(fixed, Xt, Yt)
+    assert np.all(np.isfinite(adaptive.parameters))
