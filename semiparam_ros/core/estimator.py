@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -346,20 +346,46 @@ class OnlineEstimator:
         """
         state = load_npz(Path(path).expanduser())
         try:
-            version = int(state["meta.version"])
-            fingerprint = str(state["meta.fingerprint"])
-            n_learned = int(state["meta.n_samples_learned"])
+            version = _scalar(state["meta.version"], int)
+            fingerprint = _scalar(state["meta.fingerprint"], str)
+            n_learned = _scalar(state["meta.n_samples_learned"], int)
         except KeyError as err:
             raise ValueError(f"{path}: not a semiparam_ros checkpoint (missing {err})") from err
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{path}: corrupt checkpoint metadata: {err}") from err
         if version != _CHECKPOINT_VERSION:
             raise ValueError(f"{path}: checkpoint version {version}, expected {_CHECKPOINT_VERSION}")
         if fingerprint != self._fingerprint():
             raise ValueError(f"{path}: checkpoint was written for another model structure: "
                              f"{_fingerprint_difference(fingerprint, self._fingerprint())}")
+        if n_learned < 0:
+            raise ValueError(f"{path}: corrupt checkpoint: {n_learned} samples learned")
         model = self.model.copy()
-        model.load_state_dict(state, "model.")
+        try:
+            model.load_state_dict(state, "model.")
+        except (TypeError, KeyError, IndexError, OverflowError) as err:
+            # e.g. a counter stored as a vector: the learners' checks expect scalars; still a bad file
+            raise ValueError(f"{path}: corrupt checkpoint: {type(err).__name__}: {err}") from err
         self.model = model
         self.n_samples_learned = n_learned
+
+
+def _scalar(value: np.ndarray, kind: type[int] | type[str]) -> Any:
+    """Read a 0-d array of a checkpoint as an int or a str.
+
+    Raises:
+        ValueError: If the array is not 0-d or not of that kind.
+    """
+    arr = np.asarray(value)
+    if arr.ndim != 0:
+        raise ValueError(f"expected a scalar, got an array of shape {arr.shape}")
+    if kind is int:
+        if arr.dtype.kind not in "iu":
+            raise ValueError(f"expected an integer, got dtype {arr.dtype}")
+        return int(arr)
+    if arr.dtype.kind != "U":
+        raise ValueError(f"expected a string, got dtype {arr.dtype}")
+    return str(arr)
 
 
 def _fingerprint_difference(saved: str, current: str) -> str:
