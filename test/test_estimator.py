@@ -435,10 +435,27 @@ def _missing_model_key(src: Path, dst: Path) -> None:
         np.savez(fh, **arrays)
 
 
-@pytest.mark.parametrize("corrupt", [_truncate, _garbage, _flip_middle, _missing_meta, _nan_state,
-                                     _wrong_version, _missing_model_key, None],
-                         ids=["truncated", "garbage", "flipped_bytes", "missing_meta", "nan_state",
-                              "wrong_version", "missing_model_key", "missing_file"])
+def _tamper(**changes):
+    """A valid archive with some arrays replaced (crafted or bit-rotted metadata and counters)."""
+    def corrupt(src: Path, dst: Path) -> None:
+        with np.load(src) as z:
+            arrays = {k: z[k] for k in z.files}
+        arrays.update({k.replace("__", "."): v for k, v in changes.items()})
+        with dst.open("wb") as fh:
+            np.savez(fh, **arrays)
+    return corrupt
+
+
+@pytest.mark.parametrize("corrupt", [
+    _truncate, _garbage, _flip_middle, _missing_meta, _nan_state, _wrong_version, _missing_model_key, None,
+    _tamper(meta__version=np.arange(3)),
+    _tamper(meta__n_samples_learned=np.array([1, 2])),
+    _tamper(meta__n_samples_learned=np.array(-5)),
+    _tamper(meta__fingerprint=np.array(3.0)),
+    _tamper(model__n_samples_seen=np.arange(2)),
+], ids=["truncated", "garbage", "flipped_bytes", "missing_meta", "nan_state", "wrong_version",
+        "missing_model_key", "missing_file", "version_vector", "n_learned_vector", "n_learned_negative",
+        "fingerprint_number", "model_counter_vector"])
 def test_corrupt_checkpoint_raises_value_error_and_keeps_state(config, regressor, tmp_path, corrupt):
     est, _ = clean_stream_results(config, regressor, 600)
     good = tmp_path / "good.npz"
