@@ -360,3 +360,17 @@ def test_sparse_rows_exercise_every_kernel_path(k, beta):
     assert rel(rls.weights, W) < 1e-9
     assert rel(rls.R.T @ rls.R, A) < 1e-12
     assert np.all(np.diag(rls.R) > 0)
+
+
+@pytest.mark.parametrize("b", [1, 2, 3])
+@pytest.mark.parametrize("k", [1, 2, 7])
+def test_tiny_problems(b, k):
+    rng = np.random.default_rng(40 + 10 * b + k)
+    steps = random_steps(rng, 50, k, b, 2)
+    rls = RecursiveRLS(b, 2, 0.3, forgetting=0.9)
+    for Z, U in steps:
+        before = rls.predict(Z)
+        np.testing.assert_allclose(rls.predict_update(Z, U), before, rtol=1e-9, atol=1e-12)
+    A, _, W = closed_form(steps, b, 2, 0.3, 0.9)
+    assert rel(rls.weights, W) < 1e-9
+    assert rel(rls.R.T @ rls.R, A) < 1e-12
