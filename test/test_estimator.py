@@ -201,14 +201,15 @@ def clean_stream_results(config, regressor, n: int | None = None) -> tuple[Onlin
 
 
 # ----------------------------------------------------------------------------- 1. one data path
-def test_stream_predictions_equal_a_priori_predictions_of_hand_loop(config, regressor):
+@pytest.mark.parametrize("kind", ["SP", "P", "NP"])
+def test_stream_predictions_equal_a_priori_predictions_of_hand_loop(config, regressor, kind):
     stream = rich_stream()
-    est = OnlineEstimator(config, regressor=regressor)
+    est = OnlineEstimator(config, regressor=regressor, kind=kind)
     results = feed(est, stream.messages)
 
     # independent path: a second pipeline and a second model (own regressor), predict BEFORE learn
     samples = pipeline_samples(config, stream.messages)
-    model = build_model(config, "SP")
+    model = build_model(config, kind)
     expected = []
     for s in samples:
         expected.append(model.predict_one(s.x))
@@ -228,14 +229,27 @@ def test_stream_predictions_equal_a_priori_predictions_of_hand_loop(config, regr
         np.testing.assert_allclose(r.prediction.total, r.prediction.parametric + r.prediction.residual,
                                    rtol=0, atol=1e-12)
     assert est.n_samples_learned == model.n_samples_seen == len(samples)
-    np.testing.assert_allclose(est.parameters, model.parameters, rtol=0, atol=1e-10)
+    n_out = 6
+    if kind == "NP":
+        assert est.parameters is None and model.parameters is None
+        assert est.model_size == N_FEATURES * n_out
+    else:
+        np.testing.assert_allclose(est.parameters, model.parameters, rtol=0, atol=1e-10)
+        assert len(est.parameter_names) == len(est.parameters) == regressor.n_base
+        assert est.model_size == regressor.n_base * n_out + (N_FEATURES * n_out if kind == "SP" else 0)
 
     # a-priori: the very first prediction is made with zero parameters (0 up to the round-off of the
     # in-rotation prediction), not with the sample's own label; the residual stage starts after its
     # standardizer warm-up and then actually contributes
     assert np.abs(results[0].prediction.total).max() < 1e-12 < np.abs(results[0].sample.y).max()
     residuals = np.array([r.prediction.residual for r in results])
-    assert np.all(residuals[:WARMUP] == 0) and np.abs(residuals[WARMUP + 1:]).max(axis=1).min() > 0
+    parametric = np.array([r.prediction.parametric for r in results])
+    if kind == "P":
+        assert np.all(residuals == 0)
+    else:
+        assert np.all(residuals[:WARMUP] == 0) and np.abs(residuals[WARMUP + 1:]).max(axis=1).min() > 0
+    if kind == "NP":
+        assert np.all(parametric == 0)
 
     # samples: configured joint order, q and q̇ of the nearest joint state (2 ms before the wrench), q̈ the
     # closed-form Savitzky–Golay estimate at that stamp, y the wrench at the wrench stamp
