@@ -212,8 +212,12 @@ def qr_rls_steps(
     reg: float,
     j0: int,
     P: np.ndarray,
+    max_abs: float,
 ) -> int:
     """Apply ``len(Z) // rows_per_step`` consecutive time steps to ``M = [R | d]`` in place.
+
+    Every entry of ``Z`` and ``U`` is checked first (``|v| ≤ max_abs``, which also rejects NaN and inf);
+    on failure nothing is modified and −1 is returned.
 
     Step m uses rows ``Z[m·k:(m+1)·k]``, targets ``U[m·k:(m+1)·k]``: ``A ← β·A + ZᵀZ + c·e_j e_jᵀ``,
     ``B ← β·B + ZᵀU`` with ``scale = √β``, ``reg = c`` (no regularizer row if ``reg == 0``) and the
@@ -229,12 +233,20 @@ def qr_rls_steps(
         j0: coordinate of the first step's regularizer row.
         P: ``(n, t)`` output for the a-priori predictions ``Z W_old`` of every row (W before its step),
             or a ``(0, t)`` array to skip them.
+        max_abs: Largest accepted magnitude of an entry of Z and U.
 
     Returns:
-        The coordinate of the regularizer row of the next step.
+        The coordinate of the regularizer row of the next step, or −1 if the input was rejected.
     """
     b = M.shape[0]
     bt = M.shape[1]
+    for r in range(Z.shape[0]):
+        for q in range(Z.shape[1]):
+            if not (abs(Z[r, q]) <= max_abs):
+                return -1
+        for q in range(U.shape[1]):
+            if not (abs(U[r, q]) <= max_abs):
+                return -1
     k = rows_per_step
     n_steps = Z.shape[0] // k
     track = P.shape[0] > 0

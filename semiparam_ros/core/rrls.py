@@ -225,8 +225,13 @@ class RecursiveRLS:
         return P if predict else None
 
     def _step(self, Z: np.ndarray, U: np.ndarray, rows_per_step: int, P: np.ndarray) -> None:
+        # the kernel checks every value (NaN, inf, > MAX_ABS_INPUT) before it touches the state
+        j = int(qr_rls_steps(self._M, Z, U, rows_per_step, self._scale, self._reg, self._j, P, MAX_ABS_INPUT))
+        if j < 0:
+            raise ValueError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in "
+                             "magnitude")
         self._W = None
-        self._j = int(qr_rls_steps(self._M, Z, U, rows_per_step, self._scale, self._reg, self._j, P))
+        self._j = j
         n_steps = Z.shape[0] // rows_per_step
         self.n_steps += n_steps
         self.n_samples_seen += Z.shape[0]
@@ -269,7 +274,7 @@ class RecursiveRLS:
         return out[0] if single else out
 
     # ------------------------------------------------------------------ validation
-    def _check_features(self, Z: Any) -> tuple[np.ndarray, bool]:
+    def _check_features(self, Z: Any, values: bool = True) -> tuple[np.ndarray, bool]:
         Z2 = np.asarray(Z, dtype=np.float64)
         single = Z2.ndim == 1
         if single:
@@ -279,11 +284,12 @@ class RecursiveRLS:
                              f"got {np.shape(Z)}")
         if Z2.shape[0] == 0:
             raise ValueError("Z has no rows")
-        _check_finite("Z", Z2)
+        if values:
+            _check_finite("Z", Z2)
         return np.ascontiguousarray(Z2), single
 
     def _check_rows(self, Z: Any, U: Any) -> tuple[np.ndarray, np.ndarray, bool]:
-        Z2, single = self._check_features(Z)
+        Z2, single = self._check_features(Z, values=False)  # values are checked in the kernel
         U2 = np.asarray(U, dtype=np.float64)
         t = self.n_outputs
         if single:
@@ -292,7 +298,6 @@ class RecursiveRLS:
             U2 = U2[None, :]
         elif U2.shape != (Z2.shape[0], t):
             raise ValueError(f"U must have shape ({Z2.shape[0]}, {t}), got {np.shape(U)}")
-        _check_finite("U", U2)
         return Z2, np.ascontiguousarray(U2), single
 
     # ------------------------------------------------------------------ persistence
