@@ -1,0 +1,507 @@
+"""Synthetic recordings of the iCub right arm: trajectories, true and measured signals, as arrays.
+
+A :class:`ScenarioConfig` describes one recording (trajectory, duration, stream rates, payload, effects,
+seed); :func:`simulate` turns it into a :class:`SimulatedRecording` of stamped arrays, which
+:mod:`semiparam_ros.sim.writer` writes as a rosbag2/MCAP bag. :func:`generate` does both for a preset.
+
+Trajectories (joints ``r_shoulder_pitch, r_shoulder_roll, r_shoulder_yaw, r_elbow``; every other joint
+locked — wrist, head and torso pitch/roll at 0, torso yaw as below):
+
+* ``xy`` — the hand (``r_hand_dh_frame``) tracks a horizontal (transverse) circle in the root frame,
+  centre (0.10, 0.17, 0.45) m, i.e. above the right shoulder with the arm raised; torso yaw locked at
+  0.6 rad. Default radius 0.10 m and speed 0.6 m/s (period 1.05 s).
+* ``xz`` — a vertical (sagittal) circle in the root frame, centre (−0.144, −0.205, 0.113) m, in front of
+  the chest with the torso turned (torso yaw locked at −1.0 rad).
+* ``multisine`` — a random multi-sine of the four joints inside their limits (torso yaw 0).
+
+The circles are tracked by closed-loop inverse kinematics (:mod:`semiparam_ros.sim.ik`); the centres and
+torso postures were chosen so that the whole circle stays ≥ 0.15 rad inside every joint limit with bounded
+joint accelerations (≤ ≈17 rad/s²): with the wrist locked, the iCub arm's limits leave little room for a
+10 cm circle, and a torso yaw (a rotation about the vertical, which changes neither the gravity direction
+in the chest nor the sensor's dynamics) orients the arm towards the plane. The circle's position in the
+root frame and the torso posture are part of each bag's ``scenario.yaml``.
+
+Time t is measured in seconds from the first joint-state stamp; every signal is evaluated at its own
+stamps, so ``q``, ``q̇``, ``q̈`` and the wrench are exactly consistent at every stamp.
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from semiparam_ros.core.dynamics import RigidBodyRegressor, icub_urdf_path, point_mass_parameters
+from semiparam_ros.sim.effects import (
+    DEFAULT_EFFECTS,
+    SENSOR_FRAME,
+    EffectParameters,
+    harness_wrench,
+    sensor_reading,
+)
+from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics, ClikResult, clik_periodic_orbit
+from semiparam_ros.sim.trajectories import CartesianCircle, FourierTrajectory, multisine
+
+__all__ = [
+    "CIRCLES",
+    "DEFAULT_START_NS",
+    "OTHER_JOINTS",
+    "PRESETS",
+    "PUBLISHED_JOINT_ORDER",
+    "CircleSetup",
+    "ScenarioConfig",
+    "SimulatedRecording",
+    "preset_configs",
+    "simulate",
+]
+
+#: Joints published besides the four arm joints (locked; see ``SimulatedRecording.other_positions``).
+OTHER_JOINTS: tuple[str, ...] = (
+    "torso_pitch",
+    "torso_roll",
+    "torso_yaw",
+    "neck_pitch",
+    "neck_roll",
+    "neck_yaw",
+    "r_wrist_prosup",
+    "r_wrist_pitch",
+    "r_wrist_yaw",
+)
+
+#: Order of the names in the published ``JointState`` (deliberately not the configured order).
+PUBLISHED_JOINT_ORDER: tuple[str, ...] = (
+    "neck_pitch",
+    "neck_roll",
+    "neck_yaw",
+    "torso_yaw",
+    "torso_roll",
+    "torso_pitch",
+    "r_elbow",
+    "r_shoulder_yaw",
+    "r_shoulder_roll",
+    "r_shoulder_pitch",
+    "r_wrist_prosup",
+    "r_wrist_pitch",
+    "r_wrist_yaw",
+)
+
+#: First stamp of every bag (2023-11-14T22:13:20Z), ns; fixed so that bags are deterministic.
+DEFAULT_START_NS = 1_700_000_000 * 10**9
+
+_HAND_FRAME = "r_hand_dh_frame"
+
+
+@dataclass(frozen=True)
+class CircleSetup:
+    """Where and how the hand draws a circle.
+
+    Attributes:
+        plane: ``"xy"`` or ``"xz"`` (root frame).
+        centre: Circle centre in the root frame (m).
+        torso_yaw: Locked torso yaw (rad).
+        q_rest: Null-space rest posture of the four arm joints (rad).
+        posture_gain: Null-space posture gain (1/s).
+        limit_gain: Null-space joint-limit barrier gain (rad/s).
+    """
+
+    plane: str
+    centre: tuple[float, float, float]
+    torso_yaw: float
+    q_rest: tuple[float, float, float, float]
+    posture_gain: float
+    limit_gain: float
+
+
+#: The two circles of the paper (positions chosen as described in the module docstring).
+CIRCLES: dict[str, CircleSetup] = {
+    "xy": CircleSetup("xy", (0.10, 0.17, 0.45), 0.6, (-0.9, 2.35, -0.11, 1.39), 1.0, 0.1),
+    "xz": CircleSetup("xz", (-0.144, -0.205, 0.113), -1.0, (-0.81, 0.51, 1.0, 1.46), 4.0, 0.0),
+}
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """One synthetic recording.
+
+    Attributes:
+        name: Bag folder name (e.g. ``"icub_xy"``).
+        trajectory: ``"xy"``, ``"xz"`` or ``"multisine"``.
+        duration: Length of the recording (s).
+        joint_rate: Joint-state rate (Hz).
+        wrench_rate: Wrench rate (Hz).
+        delay: The wrench is sampled ``delay`` s after the joint-state grid (may be negative; stamps are
+            the true sampling instants of each stream).
+        radius: Circle radius (m).
+        speed: Hand speed on the circle (m/s).
+        seed: Seed of the random multi-sine and of all noise.
+        payload_mass: Mass picked up by the hand (kg); 0 for none.
+        payload_time: Pickup time (s from the start); None for the middle of the recording.
+        effects: Non-rigid effects and noise levels (already scaled).
+        start_ns: First joint-state stamp (ns).
+    """
+
+    name: str
+    trajectory: str = "xy"
+    duration: float = 60.0
+    joint_rate: float = 100.0
+    wrench_rate: float = 100.0
+    delay: float = 0.0
+    radius: float = 0.10
+    speed: float = 0.6
+    seed: int = 0
+    payload_mass: float = 0.0
+    payload_time: float | None = None
+    effects: EffectParameters = field(default=DEFAULT_EFFECTS)
+    start_ns: int = DEFAULT_START_NS
+
+    def __post_init__(self) -> None:
+        if not self.name or "/" in self.name:
+            raise ValueError(f"name must be a plain folder name, got {self.name!r}")
+        if self.trajectory not in ("xy", "xz", "multisine"):
+            raise ValueError(f"trajectory must be 'xy', 'xz' or 'multisine', got {self.trajectory!r}")
+        for attr in ("duration", "joint_rate", "wrench_rate", "radius", "speed"):
+            value = getattr(self, attr)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise ValueError(f"{attr} must be a positive number, got {value!r}")
+        if self.joint_rate > 10_000 or self.wrench_rate > 10_000:
+            raise ValueError("rates above 10 kHz are not supported")
+        if not (np.isfinite(self.delay) and abs(self.delay) < 1.0):
+            raise ValueError(f"delay must be finite and below 1 s in magnitude, got {self.delay!r}")
+        if not (np.isfinite(self.payload_mass) and self.payload_mass >= 0):
+            raise ValueError(f"payload_mass must be >= 0 kg, got {self.payload_mass!r}")
+        if self.payload_time is not None and not (0 <= self.payload_time <= self.duration):
+            raise ValueError(f"payload_time must be within [0, duration] = [0, {self.duration}] s")
+        if int(self.seed) < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed!r}")
+        if int(self.start_ns) + min(0, round(self.delay * 1e9)) < 0:
+            raise ValueError("start_ns + delay must be >= 0")
+
+    @property
+    def pickup_time(self) -> float | None:
+        """Pickup time (s from the start), or None without payload."""
+        if self.payload_mass <= 0:
+            return None
+        return 0.5 * self.duration if self.payload_time is None else float(self.payload_time)
+
+
+@dataclass(frozen=True)
+class SimulatedRecording:
+    """Stamped arrays of one synthetic recording (true and measured).
+
+    Joint arrays are in the order of :data:`~semiparam_ros.sim.ik.ARM_JOINTS`; wrenches are
+    ``[fx, fy, fz, tx, ty, tz]`` (N, N·m) in the sensor frame.
+
+    Attributes:
+        config: The scenario.
+        joint_names: The four arm joints.
+        joint_stamps: (N,) joint-state stamps (ns).
+        q, dq, ddq: (N, 4) true positions, velocities, accelerations at the joint stamps (rad, rad/s, rad/s²).
+        q_measured, dq_measured: (N, 4) noisy positions and velocities (rad, rad/s).
+        other_positions: Positions of :data:`OTHER_JOINTS` (rad).
+        wrench_stamps: (M,) wrench stamps (ns).
+        rigid_wrench: (M, 6) rigid-body wrench Φπ(t) (payload included after the pickup).
+        cable_wrench: (M, 6) harness cable wrench.
+        true_wrench: (M, 6) the noiseless sensor output (calibration, offset and drift applied).
+        measured_wrench: (M, 6) ``true_wrench`` plus noise.
+        wrench_q, wrench_dq, wrench_ddq: (M, 4) true joint state at the wrench stamps.
+        parameters_before, parameters_after: Full inertial parameters before and after the pickup.
+        info: Scenario description for ``scenario.yaml`` (plain Python).
+    """
+
+    config: ScenarioConfig
+    joint_names: tuple[str, ...]
+    joint_stamps: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    q_measured: np.ndarray
+    dq_measured: np.ndarray
+    other_positions: dict[str, float]
+    wrench_stamps: np.ndarray
+    rigid_wrench: np.ndarray
+    cable_wrench: np.ndarray
+    true_wrench: np.ndarray
+    measured_wrench: np.ndarray
+    wrench_q: np.ndarray
+    wrench_dq: np.ndarray
+    wrench_ddq: np.ndarray
+    parameters_before: np.ndarray
+    parameters_after: np.ndarray
+    info: dict[str, Any]
+
+
+def _stamps(start_ns: int, count: int, rate: float, offset_ns: int = 0) -> np.ndarray:
+    """``start + offset + round(i·1e9/rate)`` for i < count, as int64 ns."""
+    return start_ns + offset_ns + np.rint(np.arange(count, dtype=np.float64) * (1e9 / rate)).astype(np.int64)
+
+
+def _seed_sequence(config: ScenarioConfig) -> np.random.SeedSequence:
+    """Seed sequence of a recording: the seed and the bag name (so each bag gets its own noise)."""
+    return np.random.SeedSequence([int(config.seed), zlib.crc32(config.name.encode())])
+
+
+@lru_cache(maxsize=8)
+def _kinematics(torso_yaw: float) -> ArmKinematics:
+    return ArmKinematics(
+        icub_urdf_path(), ARM_JOINTS, locked={"torso_yaw": torso_yaw}, end_effector=_HAND_FRAME
+    )
+
+
+@lru_cache(maxsize=8)
+def _regressor(torso_yaw: float) -> RigidBodyRegressor:
+    return RigidBodyRegressor.from_urdf(
+        icub_urdf_path(), ARM_JOINTS, ft_sensor=SENSOR_FRAME, locked={"torso_yaw": torso_yaw}
+    )
+
+
+@lru_cache(maxsize=16)
+def _circle_orbit(plane: str, radius: float, speed: float) -> tuple[ClikResult, CartesianCircle]:
+    setup = CIRCLES[plane]
+    circle = CartesianCircle(np.array(setup.centre), radius, speed, plane)
+    result = clik_periodic_orbit(
+        _kinematics(setup.torso_yaw),
+        circle,
+        np.array(setup.q_rest),
+        posture_gain=setup.posture_gain,
+        limit_gain=setup.limit_gain,
+    )
+    return result, circle
+
+
+def _trajectory(
+    config: ScenarioConfig, rng: np.random.Generator
+) -> tuple[FourierTrajectory, float, dict[str, Any]]:
+    """Return the joint trajectory, the locked torso yaw and its description."""
+    if config.trajectory == "multisine":
+        kin = _kinematics(0.0)
+        traj = multisine(kin.lower, kin.upper, seed=int(rng.integers(2**31)))
+        return (
+            traj,
+            0.0,
+            {
+                "type": "multisine",
+                "base_period_s": traj.period,
+                "harmonics": [int(k) for k in np.flatnonzero(np.any(traj.cos_coef != 0, axis=1)) + 1],
+            },
+        )
+    setup = CIRCLES[config.trajectory]
+    result, circle = _circle_orbit(config.trajectory, float(config.radius), float(config.speed))
+    return (
+        result.trajectory,
+        setup.torso_yaw,
+        {
+            "type": "circle",
+            "plane": setup.plane,
+            "frame": "root_link",
+            "end_effector": _HAND_FRAME,
+            "centre_m": list(setup.centre),
+            "radius_m": float(config.radius),
+            "speed_m_per_s": float(config.speed),
+            "period_s": circle.period,
+            "clik": {
+                "q_rest_rad": list(setup.q_rest),
+                "posture_gain_per_s": setup.posture_gain,
+                "limit_gain_rad_per_s": setup.limit_gain,
+                "periodicity_error_rad": result.periodicity_error,
+                "fourier_harmonics": result.trajectory.n_harmonics,
+                "fourier_fit_error_rad": result.fit_error,
+                "hand_tracking_error_m": result.tracking_error,
+                "min_joint_limit_margin_rad": result.min_limit_margin,
+            },
+        },
+    )
+
+
+def _rms(x: np.ndarray) -> list[float]:
+    """Component-averaged RMS of the force and torque parts (N, N·m)."""
+    x = np.asarray(x)
+    comp = np.sqrt(np.mean(x * x, axis=0))
+    return [float(np.mean(comp[:3])), float(np.mean(comp[3:]))]
+
+
+def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None = None) -> SimulatedRecording:
+    """Simulate one recording.
+
+    Args:
+        config: The scenario.
+        progress: Optional callback, called with a count of finished wrench samples.
+
+    Returns:
+        The stamped true and measured signals.
+
+    Raises:
+        ValueError: If the circle cannot be tracked within the joint limits (radius/speed too large).
+    """
+    seq = _seed_sequence(config)
+    rng_traj, rng_joint, rng_wrench = (np.random.default_rng(s) for s in seq.spawn(3))
+    traj, torso_yaw, traj_info = _trajectory(config, rng_traj)
+    kin = _kinematics(torso_yaw)
+    reg = _regressor(torso_yaw)
+    fx = config.effects
+
+    n_joint = round(config.duration * config.joint_rate)
+    n_wrench = round(config.duration * config.wrench_rate)
+    delay_ns = round(config.delay * 1e9)
+    joint_stamps = _stamps(config.start_ns, n_joint, config.joint_rate)
+    wrench_stamps = _stamps(config.start_ns, n_wrench, config.wrench_rate, delay_ns)
+    t_joint = (joint_stamps - config.start_ns) * 1e-9
+    t_wrench = (wrench_stamps - config.start_ns) * 1e-9
+
+    q, dq, ddq = traj.evaluate(t_joint)
+    q_meas = q + fx.position_noise_std * rng_joint.standard_normal(q.shape)
+    dq_meas = dq + fx.velocity_noise_std * rng_joint.standard_normal(dq.shape)
+
+    wq, wdq, wddq = traj.evaluate(t_wrench)
+    params_before = reg.urdf_parameters()
+    params_after = params_before.copy()
+    pickup = config.pickup_time
+    payload_info: dict[str, Any] | None = None
+    if pickup is not None:
+        body, T = reg.frame_in_body(_HAND_FRAME)
+        point = T[:3, 3]
+        slot = reg.body_index(body)
+        params_after[10 * slot : 10 * slot + 10] += point_mass_parameters(config.payload_mass, point)
+        payload_info = {
+            "mass_kg": float(config.payload_mass),
+            "time_s": float(pickup),
+            "stamp_ns": int(config.start_ns + round(pickup * 1e9)),
+            "body": body,
+            "frame": _HAND_FRAME,
+            "point_in_body_m": [float(v) for v in point],
+        }
+
+    rigid = np.empty((n_wrench, 6))
+    cables = np.empty((n_wrench, 6))
+    after = np.zeros(n_wrench, dtype=bool) if pickup is None else t_wrench >= pickup
+    chunk = 500
+    for start in range(0, n_wrench, chunk):
+        stop = min(start + chunk, n_wrench)
+        phi = reg.regressor(wq[start:stop], wdq[start:stop], wddq[start:stop])
+        sl_after = after[start:stop]
+        rigid[start:stop] = np.where(sl_after[:, None], phi @ params_after, phi @ params_before)
+        cables[start:stop] = harness_wrench(kin, wq[start:stop], wdq[start:stop], fx)
+        if progress is not None:
+            progress(stop - start)
+    truth = sensor_reading(rigid + cables, t_wrench, fx)
+    noise = np.empty((n_wrench, 6))
+    noise[:, :3] = fx.force_noise_std * rng_wrench.standard_normal((n_wrench, 3))
+    noise[:, 3:] = fx.torque_noise_std * rng_wrench.standard_normal((n_wrench, 3))
+    measured = truth + noise
+
+    other = dict.fromkeys(OTHER_JOINTS, 0.0)
+    other.update({k: v for k, v in kin.locked_positions.items() if k in other})
+    info: dict[str, Any] = {
+        "name": config.name,
+        "seed": int(config.seed),
+        "duration_s": float(config.duration),
+        "start_stamp_ns": int(config.start_ns),
+        "joint_states": {"rate_hz": float(config.joint_rate), "count": n_joint},
+        "wrench": {"rate_hz": float(config.wrench_rate), "count": n_wrench, "delay_s": float(config.delay)},
+        "joints": list(ARM_JOINTS),
+        "locked_joints_rad": {k: float(v) for k, v in other.items()},
+        "trajectory": traj_info,
+        "payload": payload_info,
+        "effects": fx.as_dict(),
+        "measured_rms": {
+            "non_rigid_N_Nm": _rms(truth - rigid),
+            "cables_N_Nm": _rms(cables),
+            "noise_N_Nm": _rms(noise),
+            "rigid_N_Nm": _rms(rigid),
+        },
+        "limits": {
+            "q_min_rad": [float(v) for v in q.min(axis=0)],
+            "q_max_rad": [float(v) for v in q.max(axis=0)],
+            "joint_lower_rad": [float(v) for v in kin.lower],
+            "joint_upper_rad": [float(v) for v in kin.upper],
+            "max_abs_dq_rad_per_s": [float(v) for v in np.abs(dq).max(axis=0)],
+            "max_abs_ddq_rad_per_s2": [float(v) for v in np.abs(ddq).max(axis=0)],
+        },
+    }
+    return SimulatedRecording(
+        config=config,
+        joint_names=ARM_JOINTS,
+        joint_stamps=joint_stamps,
+        q=q,
+        dq=dq,
+        ddq=ddq,
+        q_measured=q_meas,
+        dq_measured=dq_meas,
+        other_positions=other,
+        wrench_stamps=wrench_stamps,
+        rigid_wrench=rigid,
+        cable_wrench=cables,
+        true_wrench=truth,
+        measured_wrench=measured,
+        wrench_q=wq,
+        wrench_dq=wdq,
+        wrench_ddq=wddq,
+        parameters_before=params_before,
+        parameters_after=params_after,
+        info=info,
+    )
+
+
+#: Presets: stream rates and length of the bags ``simulate --preset`` writes.
+PRESETS: dict[str, dict[str, float]] = {
+    "default": {"joint_rate": 100.0, "wrench_rate": 100.0, "duration": 60.0},
+    # The paper's logs: 10 000 wrench samples at 10 Hz; joint states at 100 Hz for the q̈ estimate.
+    "paper": {"joint_rate": 100.0, "wrench_rate": 10.0, "duration": 1000.0},
+}
+
+_SCENARIO_NAMES = {"xy": "icub_xy", "xz": "icub_xz", "payload": "icub_payload", "multisine": "icub_multisine"}
+
+
+def preset_configs(
+    preset: str = "default",
+    scenarios: tuple[str, ...] = ("xy", "xz", "payload"),
+    *,
+    effects: EffectParameters = DEFAULT_EFFECTS,
+    payload_mass: float = 0.5,
+    payload_trajectory: str = "xy",
+    **overrides: Any,
+) -> list[ScenarioConfig]:
+    """Return the scenario configurations of a preset.
+
+    Args:
+        preset: ``"default"`` (60 s, both streams 100 Hz) or ``"paper"`` (1000 s, wrench 10 Hz, joint
+            states 100 Hz).
+        scenarios: Any of ``"xy"``, ``"xz"``, ``"payload"``, ``"multisine"``; bag names are
+            ``icub_<scenario>``.
+        effects: Effect parameters (already scaled).
+        payload_mass: Payload of the ``payload`` scenario (kg).
+        payload_trajectory: Trajectory of the ``payload`` scenario.
+        **overrides: Any :class:`ScenarioConfig` field (duration, rates, delay, radius, speed, seed,
+            payload_time, start_ns); None values are ignored.
+
+    Returns:
+        One configuration per scenario.
+
+    Raises:
+        ValueError: On an unknown preset or scenario, or invalid values.
+    """
+    if preset not in PRESETS:
+        raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")
+    unknown = [s for s in scenarios if s not in _SCENARIO_NAMES]
+    if unknown:
+        raise ValueError(f"unknown scenarios {unknown}; choose from {sorted(_SCENARIO_NAMES)}")
+    base: dict[str, Any] = dict(PRESETS[preset])
+    base.update({k: v for k, v in overrides.items() if v is not None})
+    out = []
+    for scenario in scenarios:
+        kwargs = dict(base)
+        if scenario == "payload":
+            kwargs.update(trajectory=payload_trajectory, payload_mass=payload_mass)
+        else:
+            kwargs.update(trajectory=scenario, payload_mass=0.0)
+        out.append(replace(ScenarioConfig(name=_SCENARIO_NAMES[scenario]), effects=effects, **kwargs))
+    return out
+
+
+def default_output_dir() -> Path:
+    """``bags/generated`` under the current directory."""
+    return Path("bags") / "generated"

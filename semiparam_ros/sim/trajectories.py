@@ -1,0 +1,264 @@
+"""Periodic joint trajectories with analytic derivatives, and the Cartesian circles of the paper.
+
+Every joint trajectory the simulator produces is a truncated Fourier series
+
+    q(t) = a₀ + Σₖ [aₖ cos(kωt) + bₖ sin(kωt)],   k = 1 … K,
+
+so that q (rad), q̇ (rad/s) and q̈ (rad/s²) are evaluated in closed form and are consistent to machine
+precision: a rigid-body model fed the true q̈ reproduces the true wrench exactly, which the tests rely on.
+
+* :class:`FourierTrajectory` — the series itself, fitted to one sampled period (the converged closed-loop
+  inverse-kinematics orbit of :mod:`semiparam_ros.sim.ik`) or drawn at random (:func:`multisine`).
+* :class:`CartesianCircle` — the hand's reference path: a circle of radius r (m) travelled at constant speed
+  v (m/s) in the XY (transverse) or XZ (sagittal) plane of the robot's root frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "CartesianCircle",
+    "FourierTrajectory",
+    "multisine",
+]
+
+
+@dataclass(frozen=True)
+class FourierTrajectory:
+    """A periodic joint trajectory as a truncated Fourier series with analytic derivatives.
+
+    Attributes:
+        omega: Fundamental angular frequency ω = 2π/T (rad/s).
+        offset: Mean joint positions a₀, shape ``(n,)`` (rad).
+        cos_coef: Cosine coefficients aₖ, shape ``(K, n)`` (rad), k = 1 … K.
+        sin_coef: Sine coefficients bₖ, shape ``(K, n)`` (rad).
+    """
+
+    omega: float
+    offset: np.ndarray
+    cos_coef: np.ndarray
+    sin_coef: np.ndarray
+
+    def __post_init__(self) -> None:
+        offset = np.atleast_1d(np.asarray(self.offset, dtype=np.float64))
+        cos_coef = np.asarray(self.cos_coef, dtype=np.float64).reshape(-1, offset.size)
+        sin_coef = np.asarray(self.sin_coef, dtype=np.float64).reshape(-1, offset.size)
+        if cos_coef.shape != sin_coef.shape:
+            raise ValueError("cos_coef and sin_coef must have the same shape (K, n)")
+        if not (np.isfinite(self.omega) and self.omega > 0):
+            raise ValueError(f"omega must be a positive finite angular frequency, got {self.omega!r}")
+        if not (
+            np.all(np.isfinite(offset)) and np.all(np.isfinite(cos_coef)) and np.all(np.isfinite(sin_coef))
+        ):
+            raise ValueError("Fourier coefficients must be finite")
+        object.__setattr__(self, "omega", float(self.omega))
+        object.__setattr__(self, "offset", offset)
+        object.__setattr__(self, "cos_coef", cos_coef)
+        object.__setattr__(self, "sin_coef", sin_coef)
+
+    @property
+    def period(self) -> float:
+        """The period T = 2π/ω (s)."""
+        return 2.0 * np.pi / self.omega
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints n."""
+        return int(self.offset.size)
+
+    @property
+    def n_harmonics(self) -> int:
+        """Number of harmonics K."""
+        return int(self.cos_coef.shape[0])
+
+    def evaluate(self, t: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities and accelerations at the times ``t``.
+
+        Args:
+            t: Times (s), scalar or 1-D array of length m.
+
+        Returns:
+            ``(q, dq, ddq)``, each of shape ``(m, n)`` (rad, rad/s, rad/s²).
+
+        Raises:
+            ValueError: If a time is not finite.
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        if t.ndim != 1 or not np.all(np.isfinite(t)):
+            raise ValueError("t must be a finite scalar or 1-D array of times (s)")
+        k = np.arange(1, self.n_harmonics + 1, dtype=np.float64)
+        kw = k * self.omega
+        # Reduce the phase modulo 2π per harmonic in exact integer-period steps: for long bags
+        # (t ~ 1000 s) this keeps the argument of cos/sin small without changing the value.
+        t_red = np.mod(t, self.period)
+        phase = np.outer(t_red, kw)
+        c, s = np.cos(phase), np.sin(phase)
+        q = self.offset + c @ self.cos_coef + s @ self.sin_coef
+        dq = s @ (-kw[:, None] * self.cos_coef) + c @ (kw[:, None] * self.sin_coef)
+        kw2 = (kw * kw)[:, None]
+        ddq = -(c @ (kw2 * self.cos_coef) + s @ (kw2 * self.sin_coef))
+        return q, dq, ddq
+
+    @classmethod
+    def fit_periodic(cls, samples: np.ndarray, period: float, n_harmonics: int) -> FourierTrajectory:
+        """Fit the series to one period sampled on a uniform grid (least squares = truncated DFT).
+
+        Args:
+            samples: ``(N, n)`` joint positions at ``t = i·T/N``, i = 0 … N−1 (rad); the sample at
+                ``t = T`` equals the first and is not included.
+            period: The period T (s).
+            n_harmonics: Number of harmonics K to keep; must satisfy ``K < N/2``.
+
+        Returns:
+            The fitted trajectory.
+
+        Raises:
+            ValueError: On bad shapes, non-finite samples or too many harmonics.
+        """
+        samples = np.asarray(samples, dtype=np.float64)
+        if samples.ndim != 2 or samples.shape[0] < 4:
+            raise ValueError("samples must have shape (N, n) with N >= 4")
+        n_grid = samples.shape[0]
+        if not (0 < n_harmonics < n_grid / 2):
+            raise ValueError(f"n_harmonics must be in (0, N/2) = (0, {n_grid / 2}), got {n_harmonics}")
+        if not np.all(np.isfinite(samples)):
+            raise ValueError("samples must be finite")
+        if not (np.isfinite(period) and period > 0):
+            raise ValueError(f"period must be positive, got {period!r}")
+        spectrum = np.fft.rfft(samples, axis=0) / n_grid
+        offset = spectrum[0].real
+        cos_coef = 2.0 * spectrum[1 : n_harmonics + 1].real
+        sin_coef = -2.0 * spectrum[1 : n_harmonics + 1].imag
+        return cls(2.0 * np.pi / period, offset, cos_coef, sin_coef)
+
+
+def multisine(
+    lower: np.ndarray,
+    upper: np.ndarray,
+    *,
+    seed: int,
+    base_period: float = 20.0,
+    harmonics: tuple[int, ...] = (1, 2, 3, 5, 7, 9, 11, 13),
+    margin: float = 0.1,
+    max_velocity: float = 1.5,
+    max_acceleration: float = 8.0,
+) -> FourierTrajectory:
+    """Return a random multi-sine excitation that stays inside the joint limits.
+
+    Each joint gets the listed harmonics of ``1/base_period`` with random phases and amplitudes ∝ 1/k;
+    amplitudes are then scaled so that the sum of their absolute values (a bound on the excursion) fits in
+    the range ``[lower + m, upper − m]`` (m = ``margin`` × range) and the velocity/acceleration bounds
+    ``Σ|aₖ|kω ≤ max_velocity`` and ``Σ|aₖ|(kω)² ≤ max_acceleration`` hold, so limits hold for all t.
+
+    Args:
+        lower: Lower joint limits (rad), shape ``(n,)``.
+        upper: Upper joint limits (rad), shape ``(n,)``.
+        seed: Seed of the random phases and amplitudes (deterministic).
+        base_period: Period of the fundamental (s).
+        harmonics: Harmonic numbers k used (positive integers).
+        margin: Fraction of each joint's range kept free at both ends.
+        max_velocity: Bound on every |q̇| (rad/s).
+        max_acceleration: Bound on every |q̈| (rad/s²).
+
+    Returns:
+        The excitation as a :class:`FourierTrajectory` of period ``base_period``.
+
+    Raises:
+        ValueError: On inconsistent limits or parameters.
+    """
+    lower = np.asarray(lower, dtype=np.float64).reshape(-1)
+    upper = np.asarray(upper, dtype=np.float64).reshape(-1)
+    if lower.shape != upper.shape or not np.all(upper > lower):
+        raise ValueError("lower/upper must have the same shape with upper > lower")
+    if not (0 <= margin < 0.5):
+        raise ValueError(f"margin must be in [0, 0.5), got {margin}")
+    if not (base_period > 0 and max_velocity > 0 and max_acceleration > 0):
+        raise ValueError("base_period, max_velocity and max_acceleration must be positive")
+    ks = np.asarray(sorted(set(harmonics)), dtype=np.int64)
+    if ks.size == 0 or ks[0] < 1:
+        raise ValueError("harmonics must be positive integers")
+    rng = np.random.default_rng(seed)
+    n = lower.size
+    omega = 2.0 * np.pi / base_period
+    half = 0.5 * (upper - lower) * (1.0 - 2.0 * margin)
+    centre = 0.5 * (upper + lower)
+    n_harm = int(ks[-1])
+    cos_coef = np.zeros((n_harm, n))
+    sin_coef = np.zeros((n_harm, n))
+    for j in range(n):
+        amp = rng.uniform(0.5, 1.0, ks.size) / ks
+        phase = rng.uniform(0.0, 2.0 * np.pi, ks.size)
+        kw = ks * omega
+        scale = min(
+            half[j] / amp.sum(),
+            max_velocity / float(np.sum(amp * kw)),
+            max_acceleration / float(np.sum(amp * kw * kw)),
+        )
+        amp = amp * scale
+        cos_coef[ks - 1, j] = amp * np.sin(phase)
+        sin_coef[ks - 1, j] = amp * np.cos(phase)
+    return FourierTrajectory(omega, centre, cos_coef, sin_coef)
+
+
+@dataclass(frozen=True)
+class CartesianCircle:
+    """A circle travelled at constant speed by the hand, in a coordinate plane of the root frame.
+
+    The angle is θ(t) = v·t/r, starting at ``centre + r·e₁`` and turning from e₁ towards e₂, where
+    (e₁, e₂) = (x, y) for ``plane="xy"`` and (x, z) for ``plane="xz"``.
+
+    Attributes:
+        centre: Circle centre in the root frame (m), shape ``(3,)``.
+        radius: Radius r (m).
+        speed: Tangential speed v (m/s).
+        plane: ``"xy"`` (transverse) or ``"xz"`` (sagittal).
+    """
+
+    centre: np.ndarray
+    radius: float
+    speed: float
+    plane: str
+
+    def __post_init__(self) -> None:
+        centre = np.asarray(self.centre, dtype=np.float64).reshape(-1)
+        if centre.shape != (3,) or not np.all(np.isfinite(centre)):
+            raise ValueError("centre must be a finite 3-vector (m)")
+        if not (np.isfinite(self.radius) and self.radius > 0):
+            raise ValueError(f"radius must be positive (m), got {self.radius!r}")
+        if not (np.isfinite(self.speed) and self.speed > 0):
+            raise ValueError(f"speed must be positive (m/s), got {self.speed!r}")
+        if self.plane not in ("xy", "xz"):
+            raise ValueError(f"plane must be 'xy' or 'xz', got {self.plane!r}")
+        object.__setattr__(self, "centre", centre)
+        object.__setattr__(self, "radius", float(self.radius))
+        object.__setattr__(self, "speed", float(self.speed))
+
+    @property
+    def omega(self) -> float:
+        """Angular rate v/r (rad/s)."""
+        return self.speed / self.radius
+
+    @property
+    def period(self) -> float:
+        """Time for one revolution, 2πr/v (s)."""
+        return 2.0 * np.pi / self.omega
+
+    def _axes(self) -> tuple[np.ndarray, np.ndarray]:
+        e1 = np.array([1.0, 0.0, 0.0])
+        e2 = np.array([0.0, 1.0, 0.0]) if self.plane == "xy" else np.array([0.0, 0.0, 1.0])
+        return e1, e2
+
+    def position(self, t: np.ndarray | float) -> np.ndarray:
+        """Return the reference hand position (m) at times ``t`` (s); shape ``(m, 3)``."""
+        th = self.omega * np.atleast_1d(np.asarray(t, dtype=np.float64))
+        e1, e2 = self._axes()
+        return self.centre + self.radius * (np.outer(np.cos(th), e1) + np.outer(np.sin(th), e2))
+
+    def velocity(self, t: np.ndarray | float) -> np.ndarray:
+        """Return the reference hand velocity (m/s) at times ``t`` (s); shape ``(m, 3)``."""
+        th = self.omega * np.atleast_1d(np.asarray(t, dtype=np.float64))
+        e1, e2 = self._axes()
+        return self.speed * (np.outer(-np.sin(th), e1) + np.outer(np.cos(th), e2))
