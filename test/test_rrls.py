@@ -342,6 +342,9 @@ def test_checkpoint_errors(tmp_path):
     state["M"] = np.ones((2, 2))
     with pytest.raises(ValueError, match="shape"):
         RecursiveRLS.from_state_dict(state)
+    state["M"] = np.ones((3, 4))
+    with pytest.raises(ValueError, match="triangular"):
+        RecursiveRLS.from_state_dict(state)
 
 
 @pytest.mark.parametrize("k", [1, 2, 3, 6])

@@ -346,6 +346,9 @@ class RecursiveRLS:
             raise ValueError(f"RecursiveRLS state M has shape {M.shape}, expected {obj._M.shape}")
         if not np.isfinite(M).all():
             raise ValueError("RecursiveRLS state M is not finite")
+        R = M[:, : obj.n_features]
+        if np.any(np.tril(R, -1) != 0.0) or np.any(np.diag(R) < 0.0):
+            raise ValueError("RecursiveRLS state R is not upper triangular with a non-negative diagonal")
         if not (0 <= j < obj.n_features) or n_samples_seen < 0 or n_steps < 0:
             raise ValueError("RecursiveRLS state counters are out of range")
         obj._M[:] = M
