@@ -16,6 +16,7 @@ learning_enabled                ``true`` / ``false``
 input_rate_hz                   paired samples per second over the last period
 joint_states_rate_hz            JointState messages received per second
 wrench_rate_hz                  WrenchStamped messages received per second
+joint_states_received, ...      messages received since start (JointState, WrenchStamped)
 update_latency_mean_ms / _max   core step (predict + learn) wall time over the last period
 pipeline_latency_mean_ms / _max message received → prediction published, over the last period
 acceleration_delay_ms           inherent lag of the acceleration estimate (centred window)
@@ -94,6 +95,8 @@ class NodeStatistics:
         self._period_start = time.monotonic()
         self._reset_period()
         self.samples_predicted = 0
+        self.joint_states_received = 0
+        self.wrench_received = 0
         self.queue_drops = 0
         self.node_drops: dict[str, int] = {}
         self.last_checkpoint_time: float | None = None
@@ -115,8 +118,10 @@ class NodeStatistics:
         with self._lock:
             if kind == "joint_states":
                 self._n_js += 1
+                self.joint_states_received += 1
             else:
                 self._n_wrench += 1
+                self.wrench_received += 1
 
     def count_drop(self, reason: str, n: int = 1) -> None:
         """Count input dropped by the node itself (queue overflow is ``"queue_full"``)."""
@@ -176,6 +181,8 @@ class NodeStatistics:
                 pipeline_latency_mean_ms=1e3 * self._e2e_sum / n if n else math.nan,
                 pipeline_latency_max_ms=1e3 * self._e2e_max if n else math.nan,
                 samples_predicted=self.samples_predicted,
+                joint_states_received=self.joint_states_received,
+                wrench_received=self.wrench_received,
                 queue_drops=self.queue_drops,
                 drops_in_period=self._drops_in_period,
                 inputs_in_period=self._n_js + self._n_wrench,
