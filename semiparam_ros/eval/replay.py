@@ -169,20 +169,21 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
     return result, info
 
 
-def read_change_time(bag: str | Path) -> float:
-    """Read the payload pickup time [s from the first joint state] from the simulator's ``scenario.yaml``.
+def read_change_time(bag: str | Path) -> tuple[float, int | None]:
+    """Read the payload pickup from the simulator's ``scenario.yaml`` next to the bag.
 
-    Looks for ``scenario.yaml`` in the bag folder (or next to a bare ``.mcap`` file) and accepts the keys
-    ``pickup_time_s``, ``pickup_time``, ``payload.pickup_time_s`` or ``payload.time_s``.
+    The simulator records ``payload: {time_s: <s from the bag start>, stamp_ns: <absolute stamp>}``;
+    the stamp is exact and preferred by :func:`evaluate_adaptation`.
 
     Args:
-        bag: Bag folder or ``.mcap`` file.
+        bag: Bag folder or ``.mcap`` file (``scenario.yaml`` is read from the folder).
 
     Returns:
-        The pickup time [s].
+        ``(time_s, stamp_ns)``: the pickup time [s from the first joint state] and its stamp [ns] (``None``
+        if not recorded).
 
     Raises:
-        ValueError: If the file or the key is missing.
+        ValueError: If the file is missing or records no payload pickup.
     """
     bag = Path(bag)
     folder = bag if bag.is_dir() else bag.parent
@@ -191,24 +192,13 @@ def read_change_time(bag: str | Path) -> float:
         doc = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as err:
         raise ValueError(f"cannot read the pickup time from {path}: {err}; pass --pickup-time") from err
-
-    def find(node: Any, depth: int = 0) -> float | None:
-        if not isinstance(node, Mapping) or depth > 3:
-            return None
-        for key in ("pickup_time_s", "pickup_time", "pickup_s", "time_s"):
-            value = node.get(key)
-            if isinstance(value, int | float) and not isinstance(value, bool):
-                return float(value)
-        for value in node.values():
-            found = find(value, depth + 1)
-            if found is not None:
-                return found
-        return None
-
-    found = find(doc)
-    if found is None:
-        raise ValueError(f"{path} has no pickup time (pickup_time_s); pass --pickup-time")
-    return found
+    payload = doc.get("payload") if isinstance(doc, Mapping) else None
+    time_s = payload.get("time_s") if isinstance(payload, Mapping) else None
+    if isinstance(time_s, bool) or not isinstance(time_s, int | float):
+        raise ValueError(f"{path} records no payload pickup (payload.time_s); pass --pickup-time")
+    stamp = payload.get("stamp_ns")
+    stamp_ns = int(stamp) if isinstance(stamp, int) and not isinstance(stamp, bool) else None
+    return float(time_s), stamp_ns
 
 
 def adaptation_configs(config: EstimatorConfig, forgetting: float,
@@ -268,14 +258,17 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
         ValueError: On unreadable bags, a missing pickup time or an invalid β.
     """
     topics = topics or Topics.from_config(config)
+    change_stamp_ns = None
     if change_s is None:
-        change_s = read_change_time(bag)
+        change_s, change_stamp_ns = read_change_time(bag)
     stream, drops = load_samples(bag, config, topics)
-    # the pickup time counts from the first joint state of the bag; the first sample comes later (the
-    # acceleration estimator's warm-up), and run_adaptation counts from the first sample
-    first_joint_state = next(iter(read_messages(bag, joint_states_topic=topics.joint_states,
-                                                wrench_topic=None))).stamp_ns
-    change_from_first = change_s - (int(stream.stamps_ns[0]) - first_joint_state) * 1e-9
+    # run_adaptation counts from the first sample, which comes after the bag's first joint state (the
+    # acceleration estimator's warm-up); the pickup stamp, when recorded, is exact
+    if change_stamp_ns is None:
+        first_joint_state = next(iter(read_messages(bag, joint_states_topic=topics.joint_states,
+                                                    wrench_topic=None))).stamp_ns
+        change_stamp_ns = first_joint_state + round(change_s * 1e9)
+    change_from_first = (change_stamp_ns - int(stream.stamps_ns[0])) * 1e-9
     pretrain = load_samples(pretrain_path, config, topics)[0] if pretrain_path is not None else None
     configs = adaptation_configs(config, forgetting, forgetting_nonparametric)
     beta_np = forgetting if forgetting_nonparametric is None else forgetting_nonparametric
@@ -288,6 +281,7 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
                             pre_s=pre_s, deadline_s=deadline_s, tolerance=tolerance, progress=progress)
     info = {"bag": str(bag), "pretrain_bag": None if pretrain_path is None else str(pretrain_path),
             "forgetting": forgetting, "forgetting_nonparametric": beta_np, "pickup_time_s": change_s,
+            "pickup_stamp_ns": change_stamp_ns,
             "drops": drops,
             "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench}
     return result, info
