@@ -24,12 +24,20 @@ The measurement model, applied at every wrench stamp t (s from the start of the 
 4. **Gaussian noise** ε with standard deviations ``force_noise_std`` (N) and ``torque_noise_std`` (N·m),
    independent per component and sample.
 
-Default magnitudes (:data:`DEFAULT_EFFECTS`, iCub XY circle, 0.6 m/s; component-averaged RMS over a bag,
-measured by ``test/test_simulate.py`` and listed in ``bags/README.md``): the non-rigid part (everything
-but noise, minus the rigid-body wrench) has an RMS of ≈2 N and ≈0.35 N·m; the part a rigid-body
-least-squares fit cannot explain is ≈1.6 N and ≈0.3 N·m; noise 0.3 N and 0.03 N·m. Joint measurements get
-noise of 1e-4 rad (position) and 2e-3 rad/s (velocity). All magnitudes scale with
-:meth:`EffectParameters.scaled`.
+Default magnitudes (:data:`DEFAULT_EFFECTS`; component-averaged RMS — the mean over fx, fy, fz (tx, ty,
+tz) of each component's RMS, as the paper's error metric — over a 60 s bag at 0.6 m/s; also in
+:data:`NOMINAL_RMS` and ``bags/README.md``, checked by ``test/test_simulate.py``):
+
+=========== ================================ ===================================================
+trajectory  non-rigid part (all effects)     left by a rigid-body least-squares fit of that bag
+=========== ================================ ===================================================
+xy circle   2.6 N, 0.66 N·m                  1.9 N, 0.28 N·m
+xz circle   1.6 N, 0.58 N·m                  1.4 N, 0.46 N·m
+multi-sine  3.7 N, 0.22 N·m                  2.9 N, 0.10 N·m
+=========== ================================ ===================================================
+
+Noise: 0.3 N and 0.03 N·m on the wrench; 1e-4 rad (position) and 2e-3 rad/s (velocity) on the joints.
+Every magnitude scales with :meth:`EffectParameters.scaled` (``simulate --effects-scale/--noise-scale``).
 """
 
 from __future__ import annotations
@@ -45,6 +53,7 @@ from semiparam_ros.sim.ik import ArmKinematics
 
 __all__ = [
     "DEFAULT_EFFECTS",
+    "NOMINAL_RMS",
     "SENSOR_FRAME",
     "BendingParameters",
     "CableParameters",
@@ -264,6 +273,15 @@ class EffectParameters:
             "joint_velocity_noise_std_rad_per_s": float(self.velocity_noise_std),
         }
 
+
+#: Component-averaged RMS (force N, torque N·m) of the default effects on 60 s bags at 0.6 m/s:
+#: ``non_rigid`` = true reading − rigid-body wrench; ``unexplained`` = what a least-squares fit of the
+#: base parameters to the noiseless reading leaves.
+NOMINAL_RMS: dict[str, dict[str, tuple[float, float]]] = {
+    "xy": {"non_rigid": (2.6, 0.66), "unexplained": (1.93, 0.28)},
+    "xz": {"non_rigid": (1.59, 0.58), "unexplained": (1.40, 0.46)},
+    "multisine": {"non_rigid": (3.69, 0.22), "unexplained": (2.86, 0.098)},
+}
 
 #: Default sensor and harness of the simulated iCub right arm (magnitudes in the module docstring).
 DEFAULT_EFFECTS = EffectParameters(

@@ -130,6 +130,29 @@ class ArmKinematics:
         pin.framesForwardKinematics(self.model, self.data, self._to_model(np.asarray(q, dtype=np.float64)))
         return [(self.data.oMf[i].rotation.copy(), self.data.oMf[i].translation.copy()) for i in ids]
 
+    def frame_acceleration(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, frame: str) -> np.ndarray:
+        """Classical linear acceleration (m/s²) of a frame origin in the root frame.
+
+        Args:
+            q: Joint positions (rad), configured order.
+            dq: Joint velocities (rad/s).
+            ddq: Joint accelerations (rad/s²).
+            frame: Frame name.
+
+        Returns:
+            (3,) acceleration of the frame origin, root-frame axes.
+
+        Raises:
+            ValueError: If the frame is unknown.
+        """
+        if not self.model.existFrame(frame):
+            raise ValueError(f"frame {frame!r} not in the URDF")
+        args = (self._to_model(np.asarray(v, dtype=np.float64)) for v in (q, dq, ddq))
+        pin.forwardKinematics(self.model, self.data, *args)
+        fid = self.model.getFrameId(frame)
+        acc = pin.getFrameClassicalAcceleration(self.model, self.data, fid, pin.LOCAL_WORLD_ALIGNED)
+        return acc.linear.copy()
+
     def position_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Hand position (m) and its 3×n Jacobian (m/rad) in the root frame, columns in configured order."""
         qm = self._to_model(np.asarray(q, dtype=np.float64))
