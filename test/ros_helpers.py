@@ -304,3 +304,16 @@ def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.02
             return True
         time.sleep(poll)
     return predicate()
+
+
+def wait_quiet(collector: Collector, predicate: Callable[[list[Any]], bool], timeout: float,
+               quiet: float = 0.5) -> bool:
+    """Wait until ``predicate`` holds and no message arrived for ``quiet`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        n = len(collector.snapshot())
+        time.sleep(quiet)
+        msgs = collector.snapshot()
+        if len(msgs) == n and predicate(msgs):
+            return True
+    return False
