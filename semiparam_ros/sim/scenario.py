@@ -409,7 +409,7 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
         "effects": fx.as_dict(),
         "measured_rms": {
             "non_rigid_N_Nm": _rms(truth - rigid),
-            "cables_N_Nm": _rms(cables),
+            "harness_N_Nm": _rms(cables),
             "noise_N_Nm": _rms(noise),
             "rigid_N_Nm": _rms(rigid),
         },
