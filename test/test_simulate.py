@@ -390,3 +390,35 @@ def test_cli_writes_bags_and_rejects_bad_input(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "x"), "--samples", "0", "--quiet"]) == 2
     with pytest.raises(SystemExit):
         main(["--scenario", "nope"])
+
+
+@pytest.mark.slow
+def test_committed_bags_are_reproducible(tmp_path):
+    """The bags in bags/ are what the command in bags/README.md writes (same stamps and names; values equal
+    up to floating-point summation order, so the test also holds on other CPUs/BLAS builds)."""
+    root = Path(__file__).resolve().parents[1] / "bags"
+    readme = (root / "README.md").read_text()
+    assert "simulate --out bags --duration 40 --overwrite" in readme
+    assert main(["--out", str(tmp_path), "--duration", "40", "--quiet"]) == 0
+    for name in ("icub_xy", "icub_xz", "icub_payload"):
+        for topic in TOPIC_TYPES:
+            ours = read_topic_arrays(tmp_path / name, topic)
+            committed = read_topic_arrays(root / name, topic)
+            np.testing.assert_array_equal(ours.stamp_ns, committed.stamp_ns)
+            assert ours.names == committed.names and ours.frame_id == committed.frame_id
+            assert ours.fields.keys() == committed.fields.keys()
+            for key, values in ours.fields.items():
+                np.testing.assert_allclose(values, committed.fields[key], rtol=1e-9, atol=1e-9, err_msg=topic)
+        info = yaml.safe_load((tmp_path / name / "scenario.yaml").read_text())
+        old = yaml.safe_load((root / name / "scenario.yaml").read_text())
+        for key in (
+            "seed",
+            "duration_s",
+            "joint_states",
+            "wrench",
+            "locked_joints_rad",
+            "payload",
+            "effects",
+            "topics",
+        ):
+            assert info[key] == old[key], (name, key)
