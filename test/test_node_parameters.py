@@ -1,0 +1,118 @@
+"""Parameters: invalid values refused at start-up and at run time; learning switch, reset, remap, sim time."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import WrenchStamped
+from ros_helpers import (
+    CONFIG,
+    LATCHED_QOS,
+    TOPICS,
+    NodeProcess,
+    TestClient,
+    diagnostic_values,
+    make_ros_env,
+    source_bag,
+    wait_quiet,
+)
+from std_msgs.msg import Float64MultiArray
+
+from semiparam_ros.core.config import load_config
+from semiparam_ros.core.estimator import OnlineEstimator
+from semiparam_ros.ros.bag_player import BagPlayer, load_raw
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture
+def ros_env(tmp_path, monkeypatch):
+    return make_ros_env(tmp_path, monkeypatch)
+
+
+def test_invalid_startup_values_exit_with_a_clear_message(ros_env, tmp_path):
+    incompatible = tmp_path / "d100.npz"
+    OnlineEstimator(load_config(CONFIG).with_overrides({"nonparametric.n_features": 100})).save(incompatible)
+    cases = {
+        "n_features": (["nonparametric.n_features:=0"], ["nonparametric.n_features", ">= 1"]),
+        "lam": (["parametric.lam:=-1.0"], ["parametric.lam", "> 0"]),
+        "choice": (["robot.output:=torque"], ["robot.output", "'joint_torques'"]),
+        "type": (["checkpoint.period:=abc"], ["checkpoint.period", "double"]),
+        "odd_window": (["acceleration.window:=10"], ["acceleration.window", "odd"]),
+        "joint": (["robot.joints:=[r_shoulder_pitch, no_such_joint]"], ["no_such_joint"]),
+        "checkpoint": ([f"checkpoint.path:={incompatible}"], ["d100.npz", "load_on_start"]),
+    }
+    procs = {name: NodeProcess(ros_env, params, tag=name) for name, (params, _) in cases.items()}
+    for name, (_, needles) in cases.items():
+        proc = procs[name]
+        code = proc.wait(timeout=120)
+        out = proc.output()
+        assert code == 2, (name, out)
+        assert "FATAL" in out, (name, out)
+        for needle in needles:
+            assert needle in out, (name, needle, out)
+        assert "Traceback" not in out, (name, out)
+        proc.stop()
+
+
+def test_runtime_parameters_learning_switch_reset_remap_and_sim_time(ros_env, tmp_path_factory):
+    bag = source_bag(tmp_path_factory.mktemp("bags"))
+    messages = load_raw(bag, TOPICS, limit=300)
+    params = ["use_sim_time:=true", "diagnostics.period:=0.2", "learning_enabled:=false",
+              "qos_overrides./robot/joint_states.subscription.reliability:=reliable",
+              "qos_overrides./robot/joint_states.subscription.depth:=1000",
+              "qos_overrides./robot/wrench.subscription.reliability:=reliable",
+              "qos_overrides./robot/wrench.subscription.depth:=1000"]
+    node = NodeProcess(ros_env, params, extra_args=["-r", "joint_states:=/robot/joint_states",
+                                                     "-r", "wrench:=/robot/wrench"])
+    client = TestClient(ros_env)
+    try:
+        preds = client.collect(WrenchStamped, "/estimator/predicted_wrench")
+        diagnostics = client.collect(DiagnosticArray, "/diagnostics")
+        inertial = client.collect(Float64MultiArray, "/estimator/inertial_parameters", LATCHED_QOS)
+        assert client.wait_for_publisher("/estimator/predicted_wrench", timeout=60.0), node.output()
+
+        # run-time refusals: out of range, read-only, wrong type
+        refused = client.set_parameters("/estimator", {"checkpoint.period": -1.0})[0]
+        assert not refused.successful and "checkpoint.period" in refused.reason and "range" in refused.reason
+        refused = client.set_parameters("/estimator", {"nonparametric.n_features": 10})[0]
+        assert not refused.successful and "read-only" in refused.reason
+        refused = client.set_parameters("/estimator", {"learning_enabled": "yes"})[0]
+        assert not refused.successful
+
+        # predict only: the remapped inputs are used, nothing is learned
+        player = BagPlayer(client.node, messages, remap={t: "/robot" + t for t in TOPICS}, publish_clock=True)
+        assert player.wait_for_subscribers(timeout=60.0), node.output()
+        player.play(hz=500.0)
+        assert wait_quiet(preds, lambda m: len(m) > 100, timeout=30.0), node.output()
+        assert diagnostics.wait_for(lambda m: int(diagnostic_values(m[-1])["samples_predicted"]) > 100,
+                          timeout=10.0)
+        diag_msg = diagnostics.snapshot()[-1]
+        diag = diagnostic_values(diag_msg)
+        assert diag["samples_learned"] == "0" and diag["learning_enabled"] == "false"
+        assert all(np.all(np.asarray(m.data) == 0.0) for m in inertial.snapshot())
+        # use_sim_time: diagnostics are stamped with the bag's /clock, not the wall clock
+        stamp = diag_msg.header.stamp.sec * 10**9 + diag_msg.header.stamp.nanosec
+        assert messages[0].log_time_ns <= stamp <= messages[-1].log_time_ns
+
+        # learning on: the same input is now learned
+        assert client.set_parameters("/estimator", {"learning_enabled": True})[0].successful
+        later = load_raw(bag, TOPICS, start_ns=messages[-1].log_time_ns + 1, end_ns=None, limit=300)
+        remap = {t: "/robot" + t for t in TOPICS}
+        BagPlayer(client.node, later, remap=remap, publish_clock=True).play(hz=500.0)
+        assert diagnostics.wait_for(lambda m: int(diagnostic_values(m[-1])["samples_learned"]) > 100,
+                          timeout=30.0), node.output()
+        assert inertial.wait_for(lambda m: bool(m) and np.any(np.asarray(m[-1].data) != 0.0), timeout=10.0)
+
+        # ~/reset forgets it all
+        reply = client.trigger("/estimator/reset")
+        assert reply.success, reply.message
+        assert diagnostics.wait_for(lambda m: diagnostic_values(m[-1])["samples_learned"] == "0",
+                          timeout=10.0)
+        assert inertial.wait_for(lambda m: np.all(np.asarray(m[-1].data) == 0.0), timeout=10.0)
+        assert node.alive(), node.output()
+    finally:
+        client.close()
+        code = node.stop()
+    assert code == 0, node.output()
