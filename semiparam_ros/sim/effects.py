@@ -31,9 +31,9 @@ tz) of each component's RMS, as the paper's error metric — over a 60 s bag at 
 =========== ================================ ===================================================
 trajectory  non-rigid part (all effects)     left by a rigid-body least-squares fit of that bag
 =========== ================================ ===================================================
-xy circle   2.6 N, 0.66 N·m                  1.9 N, 0.28 N·m
-xz circle   1.6 N, 0.58 N·m                  1.4 N, 0.46 N·m
-multi-sine  3.7 N, 0.22 N·m                  2.9 N, 0.10 N·m
+xy circle   3.6 N, 0.56 N·m                  2.6 N, 0.23 N·m
+xz circle   2.1 N, 0.49 N·m                  1.85 N, 0.38 N·m
+multi-sine  4.8 N, 0.21 N·m                  3.9 N, 0.09 N·m
 =========== ================================ ===================================================
 
 Noise: 0.3 N and 0.03 N·m on the wrench; 1e-4 rad (position) and 2e-3 rad/s (velocity) on the joints.
@@ -278,9 +278,9 @@ class EffectParameters:
 #: ``non_rigid`` = true reading − rigid-body wrench; ``unexplained`` = what a least-squares fit of the
 #: base parameters to the noiseless reading leaves.
 NOMINAL_RMS: dict[str, dict[str, tuple[float, float]]] = {
-    "xy": {"non_rigid": (2.6, 0.66), "unexplained": (1.93, 0.28)},
-    "xz": {"non_rigid": (1.59, 0.58), "unexplained": (1.40, 0.46)},
-    "multisine": {"non_rigid": (3.69, 0.22), "unexplained": (2.86, 0.098)},
+    "xy": {"non_rigid": (3.59, 0.555), "unexplained": (2.60, 0.232)},
+    "xz": {"non_rigid": (2.08, 0.494), "unexplained": (1.85, 0.384)},
+    "multisine": {"non_rigid": (4.84, 0.205), "unexplained": (3.90, 0.089)},
 }
 
 #: Default sensor and harness of the simulated iCub right arm (magnitudes in the module docstring).
@@ -291,25 +291,25 @@ DEFAULT_EFFECTS = EffectParameters(
             chest_anchor=(-0.04, 0.10, 0.05),
             distal_frame="r_upper_arm",
             distal_anchor=(0.03, 0.0, 0.07),
-            tension_ref=1.6,
+            tension_ref=2.1,
             length_ref=0.18,
             length_scale=0.04,
-            coulomb=0.5,
-            viscous=2.4,
+            coulomb=0.65,
+            viscous=3.1,
         ),
         CableParameters(
             name="forearm_harness",
             chest_anchor=(-0.03, 0.09, 0.07),
             distal_frame="r_forearm",
             distal_anchor=(0.0, -0.10, 0.02),
-            tension_ref=1.3,
+            tension_ref=1.7,
             length_ref=0.25,
             length_scale=0.05,
-            coulomb=0.3,
-            viscous=1.6,
+            coulomb=0.4,
+            viscous=2.1,
         ),
     ),
-    bending=BendingParameters(stiffness=0.4, stiffening_angle=1.0, rest_posture=(-0.85, 1.4, 0.45, 1.4)),
+    bending=BendingParameters(stiffness=0.35, stiffening_angle=1.0, rest_posture=(-0.85, 1.4, 0.45, 1.4)),
 )
 
 
