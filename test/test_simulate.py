@@ -422,3 +422,24 @@ def test_committed_bags_are_reproducible(tmp_path):
             "topics",
         ):
             assert info[key] == old[key], (name, key)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"duration": float("nan")},
+        {"duration": True},
+        {"wrench_rate": 0.0},
+        {"radius": -0.1},
+        {"speed": float("inf")},
+        {"trajectory": "yz"},
+        {"delay": 2.0},
+        {"payload_mass": -1.0},
+        {"payload_mass": 0.5, "payload_time": 100.0},
+        {"name": "a/b"},
+        {"seed": -1},
+    ],
+)
+def test_invalid_scenarios_raise_value_error(bad):
+    with pytest.raises(ValueError):
+        ScenarioConfig(**{"name": "bad", **bad})

@@ -31,7 +31,6 @@ import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -166,7 +165,9 @@ class ScenarioConfig:
             raise ValueError(f"trajectory must be 'xy', 'xz' or 'multisine', got {self.trajectory!r}")
         for attr in ("duration", "joint_rate", "wrench_rate", "radius", "speed"):
             value = getattr(self, attr)
-            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+            if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+                raise ValueError(f"{attr} must be a number, got {value!r}")
+            if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{attr} must be a positive number, got {value!r}")
         if self.joint_rate > 10_000 or self.wrench_rate > 10_000:
             raise ValueError("rates above 10 kHz are not supported")
@@ -500,8 +501,3 @@ def preset_configs(
             kwargs.update(trajectory=scenario, payload_mass=0.0)
         out.append(replace(ScenarioConfig(name=_SCENARIO_NAMES[scenario]), effects=effects, **kwargs))
     return out
-
-
-def default_output_dir() -> Path:
-    """``bags/generated`` under the current directory."""
-    return Path("bags") / "generated"
