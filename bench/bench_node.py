@@ -105,6 +105,7 @@ def run(seconds: float, hz: float, features: int, tmp: Path) -> dict:
 
     from semiparam_ros.ros.bag_player import BagPlayer, load_raw
 
+    load_before = os.getloadavg()[0]  # other processes competing for the 2 cores
     bag = tmp / "bag_1khz"
     t_gen = time.perf_counter()
     n_pairs = make_bag(bag, seconds=seconds, hz=hz)
@@ -215,7 +216,8 @@ def run(seconds: float, hz: float, features: int, tmp: Path) -> dict:
         "config": {"seconds": seconds, "hz": hz, "n_features": features, "pairs_sent": n_pairs,
                    "messages_sent": report.published, "bag_generation_s": round(t_gen, 2)},
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "processor": platform.processor() or platform.machine()},
+                    "processor": platform.processor() or platform.machine(),
+                    "load_average_1min_before": load_before, "load_average_1min_after": os.getloadavg()[0]},
         "startup_s": round(startup_s, 2),
         "playback_s": report.wall_s,
         "player_max_lag_ms": 1e3 * report.late_s,

@@ -58,9 +58,11 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -112,6 +114,7 @@ PARAMETERS_QOS = QoSProfile(
 )
 _OUTPUT_QOS = 100
 _LOG_THROTTLE_S = 5.0
+_MAX_DRAIN = 64  # messages taken per subscription callback at most (bounds the executor's time away)
 
 
 class StartupError(RuntimeError):
@@ -190,26 +193,36 @@ class EstimatorNode(Node):
         self._stats = NodeStatistics(self._output, n_out, int(cfg["diagnostics.rmse_window"]))
 
         # Outputs.
+        # Outputs carry no event handlers: every handler is one more entity in each executor wait, and at
+        # 2 kHz input the wait-set overhead is the executor's main cost.
+        def publisher(msg_type: type, topic: str, qos: QoSProfile | int) -> Any:
+            return self.create_publisher(msg_type, topic, qos,
+                                         event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+
         if self._output == "wrench":
-            self._pub_total = self.create_publisher(WrenchStamped, "~/predicted_wrench", _OUTPUT_QOS)
-            self._pub_param = self.create_publisher(
-                WrenchStamped, "~/predicted_wrench/parametric", _OUTPUT_QOS)
-            self._pub_resid = self.create_publisher(
-                WrenchStamped, "~/predicted_wrench/nonparametric", _OUTPUT_QOS)
+            self._pub_total = publisher(WrenchStamped, "~/predicted_wrench", _OUTPUT_QOS)
+            self._pub_param = publisher(WrenchStamped, "~/predicted_wrench/parametric", _OUTPUT_QOS)
+            self._pub_resid = publisher(WrenchStamped, "~/predicted_wrench/nonparametric", _OUTPUT_QOS)
         else:
-            self._pub_total = self.create_publisher(JointState, "predicted_joint_torques", _OUTPUT_QOS)
+            self._pub_total = publisher(JointState, "predicted_joint_torques", _OUTPUT_QOS)
             self._pub_param = self._pub_resid = None
-        self._pub_params = self.create_publisher(Float64MultiArray, "~/inertial_parameters", PARAMETERS_QOS)
-        from diagnostic_msgs.msg import DiagnosticArray
+        self._pub_params = publisher(Float64MultiArray, "~/inertial_parameters", PARAMETERS_QOS)
+        self._pub_diag = publisher(DiagnosticArray, "/diagnostics", 10)
 
-        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-
-        # Inputs: callbacks only convert and enqueue.
+        # Inputs: callbacks only convert and enqueue. Messages lost inside DDS (a best-effort history
+        # overflowing) are reported by the middleware and counted too.
         overrides = QoSOverridingOptions.with_default_policies()
-        self.create_subscription(JointState, cfg["topics.joint_states"], self._on_joint_state, INPUT_QOS,
-                                 qos_overriding_options=overrides)
-        self.create_subscription(WrenchStamped, cfg["topics.wrench"], self._on_wrench, INPUT_QOS,
-                                 qos_overriding_options=overrides)
+        self._subscriptions_by_kind: dict[str, Any] = {}
+        for msg_type, key, callback in ((JointState, "topics.joint_states", self._on_joint_state),
+                                        (WrenchStamped, "topics.wrench", self._on_wrench)):
+            topic = cfg[key]
+            events = SubscriptionEventCallbacks(
+                incompatible_qos=self._incompatible_qos_logger(topic),
+                message_lost=self._message_lost_counter(topic),
+                use_default_callbacks=False)
+            self._subscriptions_by_kind[key.split(".")[1]] = self.create_subscription(
+                msg_type, topic, callback, INPUT_QOS, qos_overriding_options=overrides,
+                event_callbacks=events)
 
         # Services, parameters and timers (wall time, so diagnostics go on when /clock stops).
         services = MutuallyExclusiveCallbackGroup()
@@ -256,22 +269,57 @@ class EstimatorNode(Node):
                 throttle_duration_sec=_LOG_THROTTLE_S)
 
     def _on_joint_state(self, msg: JointState) -> None:
-        self._stats.count_input("joint_states")
-        try:
-            data = joint_state_from_msg(msg)
-        except Exception as err:  # a malformed message must never stop the node
-            self._conversion_failed("joint_states", err)
-            return
-        self._enqueue("joint_states", data)
+        self._intake("joint_states", msg)
+        self._drain("joint_states")
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
-        self._stats.count_input("wrench")
+        self._intake("wrench", msg)
+        self._drain("wrench")
+
+    def _intake(self, kind: str, msg: Any) -> None:
+        self._stats.count_input(kind)
         try:
-            data = wrench_from_msg(msg)
+            data = joint_state_from_msg(msg) if kind == "joint_states" else wrench_from_msg(msg)
         except Exception as err:  # a malformed message must never stop the node
-            self._conversion_failed("wrench", err)
+            self._conversion_failed(kind, err)
             return
-        self._enqueue("wrench", data)
+        self._enqueue(kind, data)
+
+    def _drain(self, kind: str) -> None:
+        """Take the messages already waiting on this subscription without another executor wait.
+
+        The executor takes one message per subscription per wait, and building its wait set costs far
+        more than taking a message; when input is queued in DDS (a burst, or the learner held the GIL)
+        this catches up at the cost of a take each. Same call the executor makes.
+        """
+        sub = self._subscriptions_by_kind[kind]
+        for _ in range(_MAX_DRAIN):
+            try:
+                with sub.handle:
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            except Exception:  # the subscription is being destroyed: the executor will notice
+                return
+            if taken is None:
+                return
+            self._intake(kind, taken[0])
+
+    def _incompatible_qos_logger(self, topic: str) -> Callable[[Any], None]:
+        def warn(event: Any) -> None:
+            self.get_logger().warning(
+                f"a publisher on {self.resolve_topic_name(topic)} offers an incompatible QoS "
+                f"({event.last_policy_kind}); its messages will not be received")
+
+        return warn
+
+    def _message_lost_counter(self, topic: str) -> Callable[[Any], None]:
+        def count(event: Any) -> None:
+            self._stats.count_drop("dds_message_lost", int(event.total_count_change))
+            self.get_logger().warning(
+                f"{event.total_count_change} messages on {self.resolve_topic_name(topic)} were lost in the "
+                "middleware (history overflow: the node is not taking them fast enough)",
+                throttle_duration_sec=_LOG_THROTTLE_S)
+
+        return count
 
     def _conversion_failed(self, topic: str, err: Exception) -> None:
         self._stats.count_drop("conversion_error")
