@@ -66,7 +66,7 @@ def test_tune_cli_writes_a_parameter_file_evaluate_accepts(tmp_path: Path, capsy
     tuned = load_config(out)  # the same loader the node's parameter declaration and evaluate use
     assert tuned["nonparametric.n_features"] == 40
     assert tuned["robot.joints"] == load_config(CONFIG)["robot.joints"]
-    selected = [line for line in printed.splitlines() if "| best" in line][0].split("|")
+    selected = next(line for line in printed.splitlines() if "| best" in line).split("|")
     assert tuned["parametric.lam"] == float(selected[1])
     assert tuned["nonparametric.sigma"] == float(selected[3])
     from semiparam_ros.cli.evaluate import main as evaluate_main
