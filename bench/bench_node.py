@@ -236,6 +236,8 @@ def run(seconds: float, hz: float, features: int, tmp: Path) -> dict:
                          "max": max(during("update_latency_max_ms"), default=float("nan"))},
         "acceleration_delay_ms": float(diag_after.get("acceleration_delay_ms", "nan")),
         "node_cpu_percent": 100.0 * cpu_s / wall_s if wall_s > 0 else float("nan"),
+        "worker_thread_cpu_percent_median": float(np.median(during("worker_cpu_percent")))
+        if during("worker_cpu_percent") else float("nan"),
         "queue_drops": int(diag_after.get("queue_drops", "0")),
         "drops_total": int(diag_after.get("drops_total", "0")),
         "drops": {k: v for k, v in diag_after.items() if k.startswith("drops.")},
@@ -261,6 +263,11 @@ def table(res: dict) -> str:
         ("core step predict + learn (mean, max)",
          f"{res['core_step_ms']['mean_of_periods']:.3f} ms, {res['core_step_ms']['max']:.2f} ms"),
         ("node CPU (100 % = one core)", f"{res['node_cpu_percent']:.0f} %"),
+        ("  of which the learning thread (median over periods)",
+         f"{res['worker_thread_cpu_percent_median']:.0f} %"),
+        ("machine load average (1 min) before / after",
+         "{:.1f} / {:.1f}".format(res["machine"]["load_average_1min_before"],
+                                  res["machine"]["load_average_1min_after"])),
         ("queue drops / all drops", f"{res['queue_drops']} / {res['drops_total']}"),
         ("player max lag behind schedule", f"{res['player_max_lag_ms']:.1f} ms"),
     ]

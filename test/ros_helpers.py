@@ -317,3 +317,23 @@ def wait_quiet(collector: Collector, predicate: Callable[[list[Any]], bool], tim
         if len(msgs) == n and predicate(msgs):
             return True
     return False
+
+
+def write_torque_bag(path: Path, n: int, hz: float = 100.0) -> None:
+    """Joint states with efforts = the URDF rigid-body joint torques (N·m) of a smooth motion."""
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.core.estimator import build_regressor
+    from semiparam_ros.core.messages import JointStateData
+    from semiparam_ros.io.bags import BagWriter
+
+    regressor = build_regressor(load_config(CONFIG).with_overrides({"robot.output": "joint_torques"}))
+    t = np.arange(n)[:, None] / hz
+    w = 2 * np.pi * np.array([0.3, 0.4, 0.25, 0.5])
+    q = np.array([-0.5, 0.5, 0.2, 0.9]) + 0.3 * np.sin(w * t)
+    dq, ddq = 0.3 * w * np.cos(w * t), -0.3 * w**2 * np.sin(w * t)
+    tau = regressor.wrench(q, dq, ddq) + 0.05 * np.tanh(5 * dq)  # + friction the rigid body cannot explain
+    with BagWriter(path) as bag:
+        for k in range(n):
+            stamp = 1_700_000_000_000_000_000 + round(k * 1e9 / hz)
+            bag.write_joint_state("/joint_states", JointStateData(stamp, regressor.joint_names, q[k], dq[k],
+                                                                  tau[k]))

@@ -114,3 +114,36 @@ def test_replay_matches_offline_core_and_beats_parametric(ros_env, tmp_path_fact
     assert diag["queue_drops"] == "0"
     assert int(diag["joint_states_received"]) + int(diag["wrench_received"]) == N_MESSAGES
     assert float(diag["rmse_force_N"]) < float(diag["rmse_parametric_force_N"])
+
+
+def test_joint_torque_output(ros_env, tmp_path):
+    from ros_helpers import write_torque_bag
+    from sensor_msgs.msg import JointState
+
+    from semiparam_ros.io.bags import read_messages
+
+    bag = tmp_path / "torques"
+    write_torque_bag(bag, 300)
+    messages = load_raw(bag, ["/joint_states"])
+    overrides = {"robot.output": "joint_torques", "nonparametric.standardizer_warmup": 50}
+    offline = offline_replay(bag, len(messages), overrides, read_messages(bag, wrench_topic=None))
+    assert len(offline.order) > 250
+    node = NodeProcess(ros_env, [*RELIABLE_INPUTS[:2], "robot.output:=joint_torques",
+                                 "nonparametric.standardizer_warmup:=50"])
+    client = TestClient(ros_env)
+    try:
+        torques = client.collect(JointState, "/predicted_joint_torques")
+        assert client.wait_for_publisher("/predicted_joint_torques", timeout=60.0), node.output()
+        player = BagPlayer(client.node, messages)
+        assert player.wait_for_subscribers(timeout=60.0), node.output()
+        player.play(hz=400.0)
+        assert torques.wait_for(lambda m: len(m) >= len(offline.order), timeout=60.0), node.output()
+        assert client.node.count_publishers("/estimator/predicted_wrench") == 0
+    finally:
+        client.close()
+        assert node.stop() == 0, node.output()
+    got = {stamp_ns(m): m for m in torques.snapshot()}
+    assert set(got) == set(offline.predictions)
+    for stamp, pred in offline.predictions.items():
+        assert list(got[stamp].name) == ["r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow"]
+        np.testing.assert_allclose(np.asarray(got[stamp].effort), pred.total, rtol=1e-9, atol=1e-9)

@@ -19,6 +19,7 @@ wrench_rate_hz                  WrenchStamped messages received per second
 joint_states_received, ...      messages received since start (JointState, WrenchStamped)
 update_latency_mean_ms / _max   core step (predict + learn) wall time over the last period
 pipeline_latency_mean_ms / _max message received → prediction published, over the last period
+worker_cpu_percent              CPU time of the learning thread over the last period (100 = one core)
 acceleration_delay_ms           inherent lag of the acceleration estimate (centred window)
 queue_length / queue_size       input queue occupancy and bound
 queue_drops                     messages dropped because the queue was full (oldest first)
@@ -111,6 +112,7 @@ class NodeStatistics:
         self._e2e_sum = 0.0
         self._e2e_max = 0.0
         self._drops_in_period = 0
+        self._worker_cpu = 0.0
 
     # ---------------------------------------------------------------- updates (hot path, cheap)
     def count_input(self, kind: str) -> None:
@@ -159,6 +161,11 @@ class NodeStatistics:
             self._rmse_total.add(y - total)
             self._rmse_param.add(y - parametric)
 
+    def add_worker_cpu(self, seconds: float) -> None:
+        """Add CPU time spent by the learning thread on one message [s]."""
+        with self._lock:
+            self._worker_cpu += seconds
+
     def clear_errors(self) -> None:
         """Forget the RMSE windows (after a model reset)."""
         with self._lock:
@@ -180,6 +187,7 @@ class NodeStatistics:
                 update_latency_max_ms=1e3 * self._step_max if n else math.nan,
                 pipeline_latency_mean_ms=1e3 * self._e2e_sum / n if n else math.nan,
                 pipeline_latency_max_ms=1e3 * self._e2e_max if n else math.nan,
+                worker_cpu_percent=100.0 * self._worker_cpu / dt,
                 samples_predicted=self.samples_predicted,
                 joint_states_received=self.joint_states_received,
                 wrench_received=self.wrench_received,

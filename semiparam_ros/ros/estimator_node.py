@@ -411,7 +411,9 @@ class EstimatorNode(Node):
                     self._queue_cond.wait(0.1)
                     continue
                 kind, data, t_recv = self._queue.popleft()
+            cpu = time.thread_time()
             self._process(kind, data, t_recv)
+            self._stats.add_worker_cpu(time.thread_time() - cpu)
 
     def _process(self, kind: str, data: JointStateData | WrenchData, t_recv: float) -> None:
         est = self._estimator
