@@ -1,0 +1,123 @@
+"""In-process unit tests of the ROS side: conversions, parameter descriptors and validation, statistics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
+from rcl_interfaces.msg import ParameterType
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import JointState
+
+from semiparam_ros.core.config import PARAMETERS, EstimatorConfig, parameter_spec
+from semiparam_ros.core.messages import joint_state_from_msg
+from semiparam_ros.ros.conversions import (
+    joint_torques_msg,
+    parameters_msg,
+    parameters_names_from_msg,
+    stamp_msg,
+    wrench_from_msg,
+    wrench_stamped_msg,
+)
+from semiparam_ros.ros.diagnostics import NodeStatistics, diagnostic_array
+from semiparam_ros.ros.parameters import descriptor_for, make_parameter_validator, runtime_parameter_names
+
+
+def test_wrench_round_trip_through_cdr():
+    w = np.array([1.5, -2.25, 9.81, 0.125, -0.5, 3e-7])
+    msg = deserialize_message(serialize_message(wrench_stamped_msg(1_700_000_000_123_456_789, "s", w)),
+                              type(wrench_stamped_msg(0, "", w)))
+    data = wrench_from_msg(msg)
+    assert data.stamp_ns == 1_700_000_000_123_456_789 and data.frame_id == "s"
+    np.testing.assert_array_equal(data.wrench, w)
+    with pytest.raises(ValueError, match="6 entries"):
+        wrench_stamped_msg(0, "s", np.zeros(5))
+
+
+def test_stamp_conversion_is_exact_and_clamps_negative():
+    t = stamp_msg(5_000_000_001)
+    assert (t.sec, t.nanosec) == (5, 1)
+    t = stamp_msg(-3)
+    assert (t.sec, t.nanosec) == (0, 0)
+
+
+def test_joint_torques_and_joint_state_conversion():
+    msg = joint_torques_msg(42, ["a", "b"], np.array([1.0, -2.0]))
+    assert list(msg.name) == ["a", "b"] and list(msg.effort) == [1.0, -2.0] and len(msg.position) == 0
+    with pytest.raises(ValueError):
+        joint_torques_msg(42, ["a"], np.array([1.0, 2.0]))
+    js = JointState(name=["x", "y"], position=[0.1, float("nan")], velocity=[1.0, 2.0])
+    data = joint_state_from_msg(deserialize_message(serialize_message(js), JointState))
+    assert data.names == ("x", "y") and math.isnan(data.position[1])  # kept: the pipeline drops it
+
+
+def test_parameters_message_names_and_layout():
+    names = ["m_r_upper_arm", "mcx_r_upper_arm + 0.3*m,x", "Izz"]
+    msg = parameters_msg(names, np.array([1.0, 2.0, 3.0]))
+    assert parameters_names_from_msg(msg) == ["m_r_upper_arm", "mcx_r_upper_arm + 0.3*m;x", "Izz"]
+    assert msg.layout.dim[0].size == 3 and list(msg.data) == [1.0, 2.0, 3.0]
+    with pytest.raises(ValueError):
+        parameters_msg(names, np.zeros(2))
+
+
+@pytest.mark.parametrize("spec", PARAMETERS, ids=lambda s: s.name)
+def test_descriptor_matches_the_table(spec):
+    desc = descriptor_for(spec)
+    assert desc.name == spec.name and desc.description == spec.description
+    assert desc.read_only == spec.read_only
+    assert desc.additional_constraints == spec.range_text()
+    expected_type = {"double": ParameterType.PARAMETER_DOUBLE, "integer": ParameterType.PARAMETER_INTEGER,
+                     "bool": ParameterType.PARAMETER_BOOL, "string": ParameterType.PARAMETER_STRING,
+                     "string_array": ParameterType.PARAMETER_STRING_ARRAY,
+                     "double_array": ParameterType.PARAMETER_DOUBLE_ARRAY}[spec.type]
+    assert desc.type == expected_type
+    if spec.type == "integer" and spec.min is not None:
+        assert desc.integer_range[0].from_value == int(spec.min) + (1 if spec.min_exclusive else 0)
+    if spec.type == "double" and spec.min is not None and not spec.min_exclusive:
+        assert desc.floating_point_range[0].from_value == spec.min
+        assert desc.floating_point_range[0].to_value == (spec.max if spec.max is not None else math.inf)
+
+
+def test_runtime_validator():
+    config = EstimatorConfig.defaults()
+    validate = make_parameter_validator(lambda: config)
+    assert set(runtime_parameter_names()) == {p.name for p in PARAMETERS if not p.read_only}
+    assert "learning_enabled" in runtime_parameter_names()
+    ok = validate([Parameter("learning_enabled", Parameter.Type.BOOL, False)])
+    assert ok.successful
+    bad = validate([Parameter("checkpoint.period", Parameter.Type.DOUBLE, -1.0)])
+    assert not bad.successful and "checkpoint.period" in bad.reason and parameter_spec(
+        "checkpoint.period").range_text() in bad.reason
+    ro = validate([Parameter("nonparametric.n_features", Parameter.Type.INTEGER, 10)])
+    assert not ro.successful and "read-only" in ro.reason
+    other = validate([Parameter("use_sim_time", Parameter.Type.BOOL, True)])  # left to rclpy
+    assert other.successful
+
+
+def test_statistics_windowed_rmse_latency_and_levels():
+    stats = NodeStatistics("wrench", 6, rmse_window=3)
+    y = np.zeros(6)
+    for k, err in enumerate([10.0, 1.0, 2.0, 3.0]):  # the window keeps the last 3
+        stats.count_input("joint_states")
+        stats.count_input("wrench")
+        stats.add_sample(1e-3 * (k + 1), 2e-3, y, np.full(6, err), np.full(6, 2 * err))
+    snap = stats.snapshot()
+    assert snap["rmse_force_N"] == pytest.approx(math.sqrt((1 + 4 + 9) / 3))
+    assert snap["rmse_parametric_force_N"] == pytest.approx(2 * math.sqrt((1 + 4 + 9) / 3))
+    assert snap["update_latency_max_ms"] == pytest.approx(4.0)
+    assert snap["update_latency_mean_ms"] == pytest.approx(2.5)
+    assert snap["joint_states_received"] == 4 and snap["samples_predicted"] == 4
+    assert diagnostic_array(stamp_msg(0), "n", "h", snap).status[0].level == DiagnosticStatus.OK
+    stats.count_drop("queue_full", 2)
+    snap = stats.snapshot()
+    assert snap["queue_drops"] == 2 and snap["inputs_in_period"] == 0
+    assert math.isnan(snap["update_latency_mean_ms"])  # a new period without samples
+    msg = diagnostic_array(stamp_msg(0), "n", "h", snap)
+    assert msg.status[0].level == DiagnosticStatus.WARN
+    assert diagnostic_array(stamp_msg(0), "n", "h", snap, worker_alive=False).status[0].level == \
+        DiagnosticStatus.ERROR
+    values = {kv.key: kv.value for kv in msg.status[0].values}
+    assert values["queue_drops"] == "2"
