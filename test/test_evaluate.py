@@ -273,3 +273,71 @@ def test_adaptation_figure_is_a_valid_png(tmp_path: Path) -> None:
     path = plot_adaptation(adaptation_report(adapt), tmp_path / "payload.png")
     assert path.read_bytes()[:8] == PNG_MAGIC
     assert imread(path).shape[2] in (3, 4)
+
+
+# ------------------------------------------------------------------- reproduction on the committed bags
+# The tuned hyperparameters proposed for config/icub_right_arm.yaml (docs/results.md); set explicitly so
+# that the test does not depend on the shipped file's current values.
+TUNED = {"parametric.lam": 0.01, "nonparametric.lam": 0.01, "nonparametric.sigma": 4.0,
+         "nonparametric.n_features": 500}
+
+
+@pytest.fixture(scope="module")
+def committed_protocol_report():
+    """Fast variant of the paper protocol: the committed 40 s, 100 Hz bags (≈3900 samples each) instead
+    of the 1000 s, 10 Hz paper-preset bags; 2 test parts of ≈20 s; windows of 3 s as in the paper."""
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.eval.replay import evaluate_bags
+
+    config = load_config(CONFIG).with_overrides(TUNED)
+    result, _ = evaluate_bags(BAGS / "icub_xy", BAGS / "icub_xz", config, splits=2)
+    return protocol_report(result)
+
+
+def test_reproduction_fast_variant_on_committed_bags(committed_protocol_report) -> None:
+    report = committed_protocol_report
+    checks = {c["check"]: c for c in paper_checks(report)}
+    # the paper's main finding: NP and SP far better than P at regime (force ≤ 0.5×, torque ≤ 0.4×)
+    for kind in ("SP", "NP"):
+        assert checks[f"{kind} force RMSE at regime / P's"]["passed"]
+        assert checks[f"{kind} torque RMSE at regime / P's"]["passed"]
+    # and SP much better than NP on the forces during the transient (the rigid-body prior)
+    assert checks["SP force RMSE over the first 3 s / NP's"]["value"] < 0.8
+    # at regime SP and NP both reach the sensor noise of the synthetic data (they tie within 5 %)
+    noise = report["noise"]
+    for group in ("force", "torque"):
+        sp, np_ = report["models"]["SP"][f"{group}_rmse"], report["models"]["NP"][f"{group}_rmse"]
+        assert abs(sp / np_ - 1) < 0.05
+        assert sp < 1.1 * noise[f"{group}_rmse"]
+
+
+@pytest.mark.xfail(strict=True, reason="known gap (docs/results.md): on the synthetic bags SP and NP tie at "
+                   "the sensor-noise floor at regime (SP ≈1 % above NP) and SP's torque prior from the XY "
+                   "rigid-body fit does not transfer to XZ; strict: remove this mark when the data allow it")
+def test_reproduction_strict_sp_ordering_on_committed_bags(committed_protocol_report) -> None:
+    checks = paper_checks(committed_protocol_report)
+    failed = [c["check"] for c in checks if not c["passed"]]
+    assert not failed, failed
+
+
+def test_payload_adaptation_on_committed_bag(tmp_path: Path) -> None:
+    from matplotlib.image import imread
+
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.eval.figures import plot_adaptation
+    from semiparam_ros.eval.replay import evaluate_adaptation
+    from semiparam_ros.eval.report import adaptation_report
+
+    config = load_config(CONFIG).with_overrides(TUNED)
+    result, info = evaluate_adaptation(BAGS / "icub_payload", config, forgetting=0.995)
+    assert info["pickup_time_s"] == 20.0  # from the bag's scenario.yaml
+    on = result.summary["SP adaptive (β=0.995)"]["force"]
+    off = result.summary["SP no adaptation"]["force"]
+    # with adaptation the force error is back within 1.5x its pre-pickup level within 10 s, and stays
+    assert on["recovered"] and on["recovery_time_s"] <= 10.0 and on["post_rmse"] < 1.5 * on["pre_rmse"]
+    # without adaptation it is not
+    assert not off["recovered"] and off["ratio_at_deadline"] > 1.5
+    # the pickup is a real disturbance for both
+    assert on["peak"] > 1.5 * on["pre_rmse"] and off["peak"] > 3 * off["pre_rmse"]
+    path = plot_adaptation(adaptation_report(result, protocol=info), tmp_path / "payload.png")
+    assert path.read_bytes()[:8] == PNG_MAGIC and imread(path).ndim == 3
