@@ -212,6 +212,10 @@ def run(seconds: float, hz: float, features: int, tmp: Path) -> dict:
                 out.append(value)
         return out
 
+    if os.environ.get("BENCH_TRACE"):
+        for d in diag_during:
+            print({k: d.get(k) for k in ("queue_length", "pipeline_latency_mean_ms", "input_rate_hz",
+                                         "learning_cpu_percent", "processed_in_period")})
     return {
         "config": {"seconds": seconds, "hz": hz, "n_features": features, "pairs_sent": n_pairs,
                    "messages_sent": report.published, "bag_generation_s": round(t_gen, 2)},
@@ -236,8 +240,8 @@ def run(seconds: float, hz: float, features: int, tmp: Path) -> dict:
                          "max": max(during("update_latency_max_ms"), default=float("nan"))},
         "acceleration_delay_ms": float(diag_after.get("acceleration_delay_ms", "nan")),
         "node_cpu_percent": 100.0 * cpu_s / wall_s if wall_s > 0 else float("nan"),
-        "worker_thread_cpu_percent_median": float(np.median(during("worker_cpu_percent")))
-        if during("worker_cpu_percent") else float("nan"),
+        "learning_cpu_percent_median": float(np.median(during("learning_cpu_percent")))
+        if during("learning_cpu_percent") else float("nan"),
         "queue_drops": int(diag_after.get("queue_drops", "0")),
         "drops_total": int(diag_after.get("drops_total", "0")),
         "drops": {k: v for k, v in diag_after.items() if k.startswith("drops.")},
@@ -263,8 +267,8 @@ def table(res: dict) -> str:
         ("core step predict + learn (mean, max)",
          f"{res['core_step_ms']['mean_of_periods']:.3f} ms, {res['core_step_ms']['max']:.2f} ms"),
         ("node CPU (100 % = one core)", f"{res['node_cpu_percent']:.0f} %"),
-        ("  of which the learning thread (median over periods)",
-         f"{res['worker_thread_cpu_percent_median']:.0f} %"),
+        ("  of which running the estimator (median over periods)",
+         f"{res['learning_cpu_percent_median']:.0f} %"),
         ("machine load average (1 min) before / after",
          "{:.1f} / {:.1f}".format(res["machine"]["load_average_1min_before"],
                                   res["machine"]["load_average_1min_after"])),

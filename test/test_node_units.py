@@ -117,7 +117,7 @@ def test_statistics_windowed_rmse_latency_and_levels():
     assert math.isnan(snap["update_latency_mean_ms"])  # a new period without samples
     msg = diagnostic_array(stamp_msg(0), "n", "h", snap)
     assert msg.status[0].level == DiagnosticStatus.WARN
-    assert diagnostic_array(stamp_msg(0), "n", "h", snap, worker_alive=False).status[0].level == \
+    assert diagnostic_array(stamp_msg(0), "n", "h", snap, stalled=True).status[0].level == \
         DiagnosticStatus.ERROR
     values = {kv.key: kv.value for kv in msg.status[0].values}
     assert values["queue_drops"] == "2"

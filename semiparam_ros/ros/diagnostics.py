@@ -1,9 +1,10 @@
 """Run-time statistics of the estimator node and their ``diagnostic_msgs/DiagnosticArray`` form.
 
-:class:`NodeStatistics` is updated by the worker thread (one call per processed sample) and by the
+:class:`NodeStatistics` is updated by the estimator's processing (one call per sample) and by the
 subscription callbacks (one counter increment per message), and read by the diagnostics timer; a lock
-makes each read a consistent snapshot. Memory is bounded: the RMSE window is a fixed-size ring of squared
-errors and the latency statistics are reset every diagnostics period.
+makes each read a consistent snapshot (the checkpoint thread records its outcomes too). Memory is
+bounded: the RMSE window is a fixed-size ring of squared errors and the latency statistics are reset
+every diagnostics period.
 
 Published values (``DiagnosticStatus.values``, all strings as the message requires):
 
@@ -19,7 +20,8 @@ wrench_rate_hz                  WrenchStamped messages received per second
 joint_states_received, ...      messages received since start (JointState, WrenchStamped)
 update_latency_mean_ms / _max   core step (predict + learn) wall time over the last period
 pipeline_latency_mean_ms / _max message received → prediction published, over the last period
-worker_cpu_percent              CPU time of the learning thread over the last period (100 = one core)
+learning_cpu_percent            CPU time spent in the estimator over the last period (100 = one core)
+processed_in_period             queued messages run through the estimator in the last period
 acceleration_delay_ms           inherent lag of the acceleration estimate (centred window)
 queue_length / queue_size       input queue occupancy and bound
 queue_drops                     messages dropped because the queue was full (oldest first)
@@ -35,8 +37,8 @@ checkpoint_age_s                seconds since the last successful checkpoint wri
 checkpoint_errors               failed checkpoint writes
 ==============================  =================================================================
 
-Level: ERROR if the worker thread died, WARN if messages were dropped in the last period (bad input or a
-full queue) or no input arrived, OK otherwise.
+Level: ERROR if input is queued but nothing was processed for a whole period (stalled), WARN if messages
+were dropped in the last period (bad input or a full queue) or no input arrived, OK otherwise.
 """
 
 from __future__ import annotations
@@ -112,7 +114,8 @@ class NodeStatistics:
         self._e2e_sum = 0.0
         self._e2e_max = 0.0
         self._drops_in_period = 0
-        self._worker_cpu = 0.0
+        self._learning_cpu = 0.0
+        self._processed = 0
 
     # ---------------------------------------------------------------- updates (hot path, cheap)
     def count_input(self, kind: str) -> None:
@@ -161,10 +164,11 @@ class NodeStatistics:
             self._rmse_total.add(y - total)
             self._rmse_param.add(y - parametric)
 
-    def add_worker_cpu(self, seconds: float) -> None:
-        """Add CPU time spent by the learning thread on one message [s]."""
+    def add_learning_cpu(self, seconds: float) -> None:
+        """Add the CPU time spent running the estimator on one queued message [s]."""
         with self._lock:
-            self._worker_cpu += seconds
+            self._learning_cpu += seconds
+            self._processed += 1
 
     def clear_errors(self) -> None:
         """Forget the RMSE windows (after a model reset)."""
@@ -187,7 +191,8 @@ class NodeStatistics:
                 update_latency_max_ms=1e3 * self._step_max if n else math.nan,
                 pipeline_latency_mean_ms=1e3 * self._e2e_sum / n if n else math.nan,
                 pipeline_latency_max_ms=1e3 * self._e2e_max if n else math.nan,
-                worker_cpu_percent=100.0 * self._worker_cpu / dt,
+                learning_cpu_percent=100.0 * self._learning_cpu / dt,
+                processed_in_period=self._processed,
                 samples_predicted=self.samples_predicted,
                 joint_states_received=self.joint_states_received,
                 wrench_received=self.wrench_received,
@@ -236,7 +241,7 @@ def diagnostic_array(
     hardware_id: str,
     stats: Mapping[str, object],
     *,
-    worker_alive: bool = True,
+    stalled: bool = False,
 ) -> DiagnosticArray:
     """Build the ``/diagnostics`` message of the estimator.
 
@@ -245,7 +250,7 @@ def diagnostic_array(
         name: Status name (``"<node name>: online learning"``).
         hardware_id: Robot / sensor identifier.
         stats: Values to publish (see the module docstring), including ``drops.<reason>`` entries.
-        worker_alive: Whether the learning thread is running.
+        stalled: Input is waiting but none was processed during the period.
 
     Returns:
         The message with one :class:`DiagnosticStatus`.
@@ -253,8 +258,8 @@ def diagnostic_array(
     status = DiagnosticStatus()
     status.name = name
     status.hardware_id = hardware_id
-    if not worker_alive:
-        status.level, status.message = DiagnosticStatus.ERROR, "learning thread stopped"
+    if stalled:
+        status.level, status.message = DiagnosticStatus.ERROR, "stalled: queued input is not processed"
     elif int(stats.get("drops_in_period", 0)) > 0:  # type: ignore[call-overload]
         status.level, status.message = DiagnosticStatus.WARN, "input dropped (see drops.*)"
     elif int(stats.get("inputs_in_period", 0)) == 0:  # type: ignore[call-overload]
