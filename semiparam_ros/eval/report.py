@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -43,6 +44,7 @@ __all__ = [
 ]
 
 _UNITS = {"force": "N", "torque": "N·m"}
+_SCALAR_LIST = re.compile(r"\[((?:\s*[^\[\]{}\s][^\[\]{}]*?)?)\s*\]")
 
 
 def _first_key(first_s: float) -> str:
@@ -289,7 +291,10 @@ def write_json(report: Mapping[str, Any], path: str | Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        tmp.write_text(json.dumps(_plain(report), indent=1) + "\n")
+        text = json.dumps(_plain(report), indent=1)
+        # lists of scalars on one line each: readable structure, compact curves
+        text = _SCALAR_LIST.sub(lambda m: "[" + re.sub(r"\s*\n\s*", " ", m.group(1)).strip() + "]", text)
+        tmp.write_text(text + "\n")
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,49 @@ def _cfg_line(config: Mapping[str, Any]) -> str:
     keys = ("parametric.lam", "nonparametric.lam", "nonparametric.sigma", "nonparametric.n_features",
             "nonparametric.standardizer_warmup", "acceleration.method", "acceleration.window")
     return ", ".join(f"`{k}` = {config[k]}" for k in keys if k in config)
+
+
+_DIFFERENCES = """\
+- **Exactly repeating motion, noise floor.** The simulated hand tracks its circle exactly (one joint
+  period ≈1.05 s, repeated ≈95 times per 100 s test part), whereas the paper's real logs never repeat
+  exactly. At regime NP and SP have memorised the XZ circle and both sit at the sensor noise (noise
+  {noise_f} N, {noise_t} N·m; NP {np_f:.3g} N, {np_t:.3g} N·m; SP {sp_f:.3g} N, {sp_t:.3g} N·m), while
+  the paper's SP/NP were at ≈1 N, well above its noise. The SP-vs-NP order at regime is then decided at
+  the 1 % level, by how fast each residual settles, not by the benefit of the rigid-body prior.
+- **SP's residual chases a moving parametric stage.** SP's nonparametric stage learns y − ŷ while its
+  rigid-body stage keeps learning the XZ data, so the residual target drifts during each part; NP's
+  target does not. In a diagnostic run with SP's rigid-body stage frozen after training (not part of
+  this script) SP tied NP at regime. On real data, where NP cannot reach the noise, this drift is
+  negligible against the error.
+- **The rigid-body prior transfers less from XY to XZ than on the robot.** P, trained on XY, keeps
+  {p_f:.3g} N and {p_t:.3g} N·m at regime on XZ (paper ≈2 N, ≈0.4 N·m): the simulated harness cables and
+  bending act differently in the two planes, and the parameters fitted on XY absorb XY-specific effects.
+  SP's head start in the first seconds therefore shows on the forces (SP/NP = {first_f:.2f}) more than
+  on the torques (SP/NP = {first_t:.2f}).
+- **Sampling.** As in the paper the F/T wrench is learnt at 10 Hz; the simulated joint states come at
+  100 Hz without accelerations, and q̈ is estimated by the node's own pipeline (Savitzky–Golay), which
+  adds a little input noise the paper's logs did not have.
+- **The payload scenario** (below) is not in the paper; it measures the adaptation the paper claims.
+"""
+
+
+def _differences(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Return the comparison with the paper, with the numbers of this run, as markdown lines."""
+    m = paper["models"]
+    noise = paper.get("noise", {})
+    failed = [c["check"] for c in checks if not c["passed"]]
+    out = ["### Where the synthetic data differ from the paper's", ""]
+    if failed:
+        out += [f"**Not reproduced on these data:** {'; '.join(failed)}. Why:", ""]
+    out += _DIFFERENCES.format(
+        noise_f=f"{noise['force_rmse']:.3g}" if noise else "n/a",
+        noise_t=f"{noise['torque_rmse']:.3g}" if noise else "n/a",
+        np_f=m["NP"]["force_rmse"], np_t=m["NP"]["torque_rmse"], sp_f=m["SP"]["force_rmse"],
+        sp_t=m["SP"]["torque_rmse"], p_f=m["P"]["force_rmse"], p_t=m["P"]["torque_rmse"],
+        first_f=m["SP"]["force_rmse_first_3s"] / m["NP"]["force_rmse_first_3s"],
+        first_t=m["SP"]["torque_rmse_first_3s"] / m["NP"]["torque_rmse_first_3s"],
+    ).splitlines()
+    return [*out, ""]
 
 
 def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figures: Mapping[str, str],
@@ -83,6 +126,7 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
     lines += ["", f"![Fig. 3 reproduction]({figures['fig3']})", ""]
     if figures.get("fig3_noise_free"):
         lines += [f"Against the noise-free wrench: ![Fig. 3, noise-free]({figures['fig3_noise_free']})", ""]
+    lines += _differences(paper, checks)
     lines += [
         "Median update time (predict + learn, one sample, this machine): "
         + ", ".join(f"{k} {v:.0f} µs" for k, v in paper["update_us"].items()) + ".",

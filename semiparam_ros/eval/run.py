@@ -115,7 +115,8 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
                                            change_s=pickup_time_s,
                                            pretrain_path=train, topics=topics, kinds=models or ("SP",),
                                            window_s=window_s, progress=progress)
-        report = adaptation_report(result, config=cfg.to_flat(), protocol=info)
+        stride = max(1, len(result.time_s) // 2000)  # ≤ 2000 curve points in the JSON; summaries use all
+        report = adaptation_report(result, config=cfg.to_flat(), protocol=info, stride=stride)
         text = adaptation_markdown(report)
         if plot_path is not None:
             plot_adaptation(report, plot_path)
