@@ -49,16 +49,19 @@ def stamp_msg(stamp_ns: int) -> Time:
     return Time(sec=sec, nanosec=nanosec)
 
 
-def wrench_stamped_msg(stamp_ns: int, frame_id: str, wrench: np.ndarray) -> WrenchStamped:
-    """Build a ``geometry_msgs/WrenchStamped``.
+def wrench_stamped_msg(stamp_ns: int, frame_id: str, wrench: np.ndarray,
+                       out: WrenchStamped | None = None) -> WrenchStamped:
+    """Build (or refill) a ``geometry_msgs/WrenchStamped``.
 
     Args:
         stamp_ns: Header stamp in nanoseconds (the input sample's stamp).
         frame_id: Header frame (the sensor frame of the input).
         wrench: ``[fx, fy, fz, tx, ty, tz]`` in N and N·m, shape ``(6,)``.
+        out: A message to overwrite instead of building a new one (publishing serialises at once, so one
+            message per publisher can be reused; building the nested message costs more than filling it).
 
     Returns:
-        The message.
+        The message (``out`` when given).
 
     Raises:
         ValueError: If ``wrench`` does not have 6 entries.
@@ -66,8 +69,9 @@ def wrench_stamped_msg(stamp_ns: int, frame_id: str, wrench: np.ndarray) -> Wren
     w = np.asarray(wrench, dtype=np.float64).reshape(-1)
     if w.shape != (6,):
         raise ValueError(f"a wrench has 6 entries [fx, fy, fz, tx, ty, tz], got shape {w.shape}")
-    msg = WrenchStamped()
-    msg.header.stamp = stamp_msg(stamp_ns)
+    msg = WrenchStamped() if out is None else out
+    sec, nanosec = ns_to_stamp(max(int(stamp_ns), 0))
+    msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
     msg.header.frame_id = frame_id
     f, t = msg.wrench.force, msg.wrench.torque
     f.x, f.y, f.z, t.x, t.y, t.z = (float(v) for v in w)

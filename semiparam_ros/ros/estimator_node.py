@@ -203,6 +203,7 @@ class EstimatorNode(Node):
             return self.create_publisher(msg_type, topic, qos,
                                          event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
+        self._out_msgs = (WrenchStamped(), WrenchStamped(), WrenchStamped())  # refilled per sample
         if self._output == "wrench":
             self._pub_total = publisher(WrenchStamped, "~/predicted_wrench", _OUTPUT_QOS)
             self._pub_param = publisher(WrenchStamped, "~/predicted_wrench/parametric", _OUTPUT_QOS)
@@ -461,10 +462,12 @@ class EstimatorNode(Node):
         pred = result.prediction
         if self._output == "wrench":
             frame = self._last_wrench_frame
-            self._pub_total.publish(wrench_stamped_msg(stamp, frame, pred.total))
-            for pub, value in ((self._pub_param, pred.parametric), (self._pub_resid, pred.residual)):
+            out = self._out_msgs
+            self._pub_total.publish(wrench_stamped_msg(stamp, frame, pred.total, out[0]))
+            for k, (pub, value) in enumerate(((self._pub_param, pred.parametric),
+                                              (self._pub_resid, pred.residual)), start=1):
                 if pub is not None and pub.get_subscription_count() > 0:
-                    pub.publish(wrench_stamped_msg(stamp, frame, value))
+                    pub.publish(wrench_stamped_msg(stamp, frame, value, out[k]))
         else:
             self._pub_total.publish(joint_torques_msg(stamp, self._joints, pred.total))
 
