@@ -43,6 +43,11 @@ echo "== paper protocol: train on XY, test-then-train on 10 sequential parts of 
   --splits 10 --window 3.0 \
   --json "$figs/paper.json" --plot "$figs/paper_fig3.png" --plot-truth "$figs/paper_fig3_noise_free.png"
 
+echo "== diagnostic: SP with its rigid-body stage frozen after training (isolates the drift of that stage)"
+"$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
+  --splits 10 --window 3.0 --models NP SP SPfrozenP --json "$figs/diagnostic_frozen_p.json" --no-progress \
+  > /dev/null
+
 echo "== payload scenario: SP with and without adaptation around the pickup"
 "$bin/evaluate" --payload bags/icub_payload --config "$config" "${tuned[@]}" --forgetting 0.995 \
   --json "$figs/payload.json" --plot "$figs/payload.png"

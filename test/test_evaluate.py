@@ -341,3 +341,28 @@ def test_payload_adaptation_on_committed_bag(tmp_path: Path) -> None:
     assert on["peak"] > 1.5 * on["pre_rmse"] and off["peak"] > 3 * off["pre_rmse"]
     path = plot_adaptation(adaptation_report(result, protocol=info), tmp_path / "payload.png")
     assert path.read_bytes()[:8] == PNG_MAGIC and imread(path).ndim == 3
+
+
+def test_frozen_parametric_sp_diagnostic() -> None:
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.eval.replay import FROZEN_P, build_models
+
+    config = load_config(CONFIG).with_overrides({"nonparametric.n_features": 30,
+                                                 "nonparametric.standardizer_warmup": 5})
+    stream = toy_stream(40, 11, d=12, t=6)
+    models = build_models(config, ["SP", FROZEN_P], n_train=20)
+    sp, frozen = models["SP"], models[FROZEN_P]
+    for i in range(20):  # identical to SP while the rigid-body stage learns
+        a = sp.predict_learn_one(stream.X[i], stream.Y[i])
+        b = frozen.predict_learn_one(stream.X[i], stream.Y[i])
+        np.testing.assert_array_equal(a.total, b.total)
+    clone = frozen.copy()
+    pi = clone.model.parameters.copy()
+    for i in range(20, 40):
+        pred = clone.predict_learn_one(stream.X[i], stream.Y[i])
+        np.testing.assert_allclose(pred.parametric, clone.model.parametric.predict_one(stream.X[i]).total)
+    np.testing.assert_array_equal(clone.model.parameters, pi)  # π̂ frozen after 20 samples
+    # the residual stage keeps learning
+    assert clone.model.nonparametric.n_samples_seen > frozen.model.nonparametric.n_samples_seen
+    with pytest.raises(ValueError, match="needs"):
+        build_models(config, [FROZEN_P])

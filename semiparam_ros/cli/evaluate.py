@@ -70,8 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override a parameter, e.g. --set nonparametric.n_features=200 (repeatable)")
     p.add_argument("--joint-states-topic", help="JointState topic (default: /<topics.joint_states>)")
     p.add_argument("--wrench-topic", help="WrenchStamped topic (default: /<topics.wrench>)")
-    p.add_argument("--models", nargs="+", choices=("P", "NP", "SP"), default=None,
-                   help="learners (default: P NP SP; with --payload: SP)")
+    p.add_argument("--models", nargs="+", choices=("P", "NP", "SP", "SPfrozenP"), default=None,
+                   help="learners (default: P NP SP; with --payload: SP); SPfrozenP = diagnostic SP whose "
+                        "rigid-body stage stops learning after the training bag")
     p.add_argument("--splits", type=int, default=10, help="number of sequential test parts (default 10)")
     p.add_argument("--split-size", type=int, default=None,
                    help="samples per part (paper: 1000); omitted: the test bag in --splits equal parts")

@@ -20,6 +20,7 @@ import yaml
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import build_model, build_pipeline, build_regressor
+from semiparam_ros.eval.diagnostics import FrozenParametricSP
 from semiparam_ros.eval.protocol import (
     AdaptationResult,
     ProtocolResult,
@@ -30,6 +31,7 @@ from semiparam_ros.eval.protocol import (
 from semiparam_ros.io.bags import iter_samples, read_messages, topic_info
 
 __all__ = [
+    "FROZEN_P",
     "GROUND_TRUTH_WRENCH_TOPIC",
     "KINDS",
     "Topics",
@@ -45,6 +47,9 @@ __all__ = [
 GROUND_TRUTH_WRENCH_TOPIC = "/ground_truth/wrench"
 #: The paper's three learners.
 KINDS: tuple[str, ...] = ("P", "NP", "SP")
+#: Diagnostic variant (:class:`~semiparam_ros.eval.diagnostics.FrozenParametricSP`): SP whose rigid-body
+#: stage stops learning after the training stream.
+FROZEN_P = "SPfrozenP"
 
 
 def _absolute(topic: str) -> str:
@@ -111,18 +116,34 @@ def load_samples(path: str | Path, config: EstimatorConfig, topics: Topics | Non
     return arrays, dict(pipeline.drops)
 
 
-def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS) -> dict[str, Any]:
+def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
+                 n_train: int | None = None) -> dict[str, Any]:
     """Fresh learners (zero parameters) of the given kinds, sharing one rigid-body regressor.
 
     Args:
         config: Estimator configuration.
-        kinds: Any of ``"P"``, ``"NP"``, ``"SP"``.
+        kinds: Any of ``"P"``, ``"NP"``, ``"SP"`` and the diagnostic :data:`FROZEN_P`.
+        n_train: Samples the rigid-body stage of :data:`FROZEN_P` learns (required for it).
 
     Returns:
         Models by kind, in the given order.
+
+    Raises:
+        ValueError: On an unknown kind, or :data:`FROZEN_P` without ``n_train``.
     """
+    unknown = [k for k in kinds if k not in (*KINDS, FROZEN_P)]
+    if unknown:
+        raise ValueError(f"unknown model kind(s) {unknown}; choose from {[*KINDS, FROZEN_P]}")
     regressor = build_regressor(config) if any(k != "NP" for k in kinds) else None
-    return {k: build_model(config, k, regressor) for k in kinds}
+    models: dict[str, Any] = {}
+    for kind in kinds:
+        if kind == FROZEN_P:
+            if n_train is None:
+                raise ValueError(f"{FROZEN_P} needs the number of training samples")
+            models[kind] = FrozenParametricSP(build_model(config, "SP", regressor), n_train)
+        else:
+            models[kind] = build_model(config, kind, regressor)
+    return models
 
 
 def evaluate_bags(train_path: str | Path, test_path: str | Path, config: EstimatorConfig, *,
@@ -155,7 +176,7 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
     topics = topics or Topics.from_config(config)
     train_data, train_drops = load_samples(train_path, config, topics, limit=train_limit)
     test_data, test_drops = load_samples(test_path, config, topics, limit=test_limit)
-    models = build_models(config, kinds)
+    models = build_models(config, kinds, n_train=len(train_data))
     result = run_protocol(models, train_data, test_data, splits=splits, split_size=split_size,
                           window_s=window_s, first_s=first_s, progress=progress)
     info = {

@@ -36,9 +36,8 @@ _DIFFERENCES = """\
   the 1 % level, by how fast each residual settles, not by the benefit of the rigid-body prior.
 - **SP's residual chases a moving parametric stage.** SP's nonparametric stage learns y − ŷ while its
   rigid-body stage keeps learning the XZ data, so the residual target drifts during each part; NP's
-  target does not. In a diagnostic run with SP's rigid-body stage frozen after training (not part of
-  this script) SP tied NP at regime. On real data, where NP cannot reach the noise, this drift is
-  negligible against the error.
+  target does not. {frozen}On real data, where NP cannot reach the noise, this drift is negligible
+  against the error.
 - **The rigid-body prior transfers less from XY to XZ than on the robot.** P, trained on XY, keeps
   {p_f:.3g} N and {p_t:.3g} N·m at regime on XZ (paper ≈2 N, ≈0.4 N·m): the simulated harness cables and
   bending act differently in the two planes, and the parameters fitted on XY absorb XY-specific effects.
@@ -51,7 +50,19 @@ _DIFFERENCES = """\
 """
 
 
-def _differences(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]]) -> list[str]:
+def _frozen_text(diagnostic: Mapping[str, Any] | None) -> str:
+    if not diagnostic or "SPfrozenP" not in diagnostic.get("models", {}):
+        return ""
+    d = diagnostic["models"]
+    return (f"With SP's rigid-body stage frozen after training (diagnostic run, `--models NP SP SPfrozenP`, "
+            f"`figures/diagnostic_frozen_p.json`) the\n  residual at regime has "
+            f"{d['SPfrozenP']['force_rmse']:.4g} N and {d['SPfrozenP']['torque_rmse']:.4g} N·m against NP's "
+            f"{d['NP']['force_rmse']:.4g} N and {d['NP']['torque_rmse']:.4g} N·m\n  (SP "
+            f"{d['SP']['force_rmse']:.4g} N, {d['SP']['torque_rmse']:.4g} N·m). ")
+
+
+def _differences(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]],
+                 diagnostic: Mapping[str, Any] | None = None) -> list[str]:
     """Return the comparison with the paper, with the numbers of this run, as markdown lines."""
     m = paper["models"]
     noise = paper.get("noise", {})
@@ -66,12 +77,14 @@ def _differences(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]]) 
         sp_t=m["SP"]["torque_rmse"], p_f=m["P"]["force_rmse"], p_t=m["P"]["torque_rmse"],
         first_f=m["SP"]["force_rmse_first_3s"] / m["NP"]["force_rmse_first_3s"],
         first_t=m["SP"]["torque_rmse_first_3s"] / m["NP"]["torque_rmse_first_3s"],
+        frozen=_frozen_text(diagnostic),
     ).splitlines()
     return [*out, ""]
 
 
 def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figures: Mapping[str, str],
-                   command: str = "bash scripts/reproduce.sh") -> str:
+                   command: str = "bash scripts/reproduce.sh",
+                   diagnostic: Mapping[str, Any] | None = None) -> str:
     """Render the results page.
 
     Args:
@@ -79,6 +92,7 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
         payload: JSON report of the payload scenario (``evaluate --payload --json``).
         figures: Relative links of the figures: ``fig3``, ``fig3_noise_free`` (optional), ``payload``.
         command: The command that regenerates the page.
+        diagnostic: Optional report of the diagnostic run with ``SPfrozenP`` (same protocol).
 
     Returns:
         The markdown text.
@@ -126,7 +140,7 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
     lines += ["", f"![Fig. 3 reproduction]({figures['fig3']})", ""]
     if figures.get("fig3_noise_free"):
         lines += [f"Against the noise-free wrench: ![Fig. 3, noise-free]({figures['fig3_noise_free']})", ""]
-    lines += _differences(paper, checks)
+    lines += _differences(paper, checks, diagnostic)
     lines += [
         "Median update time (predict + learn, one sample, this machine): "
         + ", ".join(f"{k} {v:.0f} µs" for k, v in paper["update_us"].items()) + ".",
@@ -159,7 +173,7 @@ def write_results(paper_json: str | Path, payload_json: str | Path, out: str | P
     """Render the results page from the two JSON reports and write it (atomically).
 
     Figures are expected next to the JSON files (``paper_fig3.png``, ``paper_fig3_noise_free.png``,
-    ``payload.png``) and linked relative to the page.
+    ``payload.png``) and linked relative to the page; ``diagnostic_frozen_p.json`` there is used if present.
 
     Args:
         paper_json: Report of the paper protocol.
@@ -180,7 +194,9 @@ def write_results(paper_json: str | Path, payload_json: str | Path, out: str | P
     noise_free = paper_json.with_name("paper_fig3_noise_free.png")
     if noise_free.is_file():
         figures["fig3_noise_free"] = _rel(noise_free, base)
-    text = render_results(paper, payload, figures=figures, command=command)
+    diag_path = paper_json.with_name("diagnostic_frozen_p.json")
+    diagnostic = json.loads(diag_path.read_text()) if diag_path.is_file() else None
+    text = render_results(paper, payload, figures=figures, command=command, diagnostic=diagnostic)
     if notes is not None and Path(notes).is_file():
         text += "\n" + Path(notes).read_text()
     out.parent.mkdir(parents=True, exist_ok=True)
