@@ -52,6 +52,10 @@ echo "== payload scenario: SP with and without adaptation around the pickup"
 "$bin/evaluate" --payload bags/icub_payload --config "$config" "${tuned[@]}" --forgetting 0.995 \
   --json "$figs/payload.json" --plot "$figs/payload.png"
 
+echo "== hold-out selection on the XY bag alone (tune), for comparison with the values used above"
+"$bin/tune" --train "$gen/icub_xy" --config "$config" --n-features 500 --holdout 0.2 \
+  --lam-p 0.01 1 --lam-np 0.01 0.1 1 --sigma 2 3 4 --json "$figs/tune_xy.json" --no-progress > /dev/null
+
 echo "== results page"
 "$bin/python" -c '
 import sys
