@@ -22,7 +22,7 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ["build_parser", "default_config", "main", "parse_overrides"]
+__all__ = ["build_parser", "main", "parse_overrides"]
 
 
 def parse_overrides(items: Sequence[str]) -> dict[str, object]:
@@ -46,14 +46,6 @@ def parse_overrides(items: Sequence[str]) -> dict[str, object]:
     return out
 
 
-def default_config() -> str | None:
-    """Return the shipped parameter file (source tree, else installed share), or ``None``."""
-    from semiparam_ros.eval.run import default_config_path
-
-    path = default_config_path()
-    return None if path is None else str(path)
-
-
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``evaluate``."""
     p = argparse.ArgumentParser(
@@ -64,8 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "optional bag every learner is trained on first")
     p.add_argument("--test", type=Path, help="test bag (paper: the XZ circles)")
     p.add_argument("--payload", type=Path, help="bag with a payload pickup (adaptation scenario)")
-    p.add_argument("--config", type=Path, default=default_config(),
-                   help="ROS 2 parameter file (default: config/icub_right_arm.yaml)")
+    p.add_argument("--config", type=Path, default=None,
+                   help="ROS 2 parameter file (default: the shipped config/icub_right_arm.yaml)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
                    help="override a parameter, e.g. --set nonparametric.n_features=200 (repeatable)")
     p.add_argument("--joint-states-topic", help="JointState topic (default: /<topics.joint_states>)")

@@ -16,7 +16,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from semiparam_ros.cli.evaluate import default_config, parse_overrides
+from semiparam_ros.cli.evaluate import parse_overrides
 
 __all__ = ["build_parser", "main"]
 
@@ -26,8 +26,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="tune", description="Hold-out grid search of parametric.lam, "
                                 "nonparametric.lam and nonparametric.sigma for a given D.")
     p.add_argument("--train", type=Path, required=True, help="training bag (its last part is held out)")
-    p.add_argument("--config", type=Path, default=default_config(),
-                   help="ROS 2 parameter file (default: config/icub_right_arm.yaml)")
+    p.add_argument("--config", type=Path, default=None,
+                   help="ROS 2 parameter file (default: the shipped config/icub_right_arm.yaml)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
                    help="override a parameter before tuning (repeatable)")
     p.add_argument("--joint-states-topic", help="JointState topic (default: /<topics.joint_states>)")

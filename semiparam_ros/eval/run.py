@@ -41,10 +41,11 @@ def default_config_path() -> Path | None:
 
 def load_evaluation_config(path: str | Path | None, overrides: Mapping[str, Any] | None = None
                            ) -> EstimatorConfig:
-    """Load a parameter file (or the defaults when ``path`` is ``None``) and apply overrides.
+    """Load a parameter file and apply overrides.
 
     Args:
-        path: ROS 2 parameter file, or ``None``.
+        path: ROS 2 parameter file, or ``None`` for the shipped ``icub_right_arm.yaml`` (the parameter
+            defaults if it cannot be found).
         overrides: Dotted names to values.
 
     Returns:
@@ -53,6 +54,8 @@ def load_evaluation_config(path: str | Path | None, overrides: Mapping[str, Any]
     Raises:
         ValueError: On a bad file, unknown parameter or invalid value.
     """
+    if path is None:
+        path = default_config_path()
     config = load_config(path) if path is not None else EstimatorConfig.defaults()
     return config.with_overrides(dict(overrides)) if overrides else config
 
@@ -82,7 +85,7 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
         train: Training bag (paper protocol) or optional pre-training bag (payload scenario).
         test: Test bag (paper protocol).
         payload: Payload bag (adaptation scenario); exclusive with ``test``.
-        config: Parameter file (``None``: defaults).
+        config: Parameter file (``None``: the shipped one).
         overrides: Parameter overrides.
         joint_states_topic: JointState topic (default from the configuration).
         wrench_topic: WrenchStamped topic (default from the configuration).
@@ -157,7 +160,7 @@ def run_tune(*, train: Path, config: Path | None, overrides: Mapping[str, Any] |
 
     Args:
         train: Training bag (its last ``holdout`` fraction is held out).
-        config: Parameter file (``None``: defaults).
+        config: Parameter file (``None``: the shipped one).
         overrides: Parameter overrides applied before tuning.
         joint_states_topic: JointState topic (default from the configuration).
         wrench_topic: WrenchStamped topic (default from the configuration).
