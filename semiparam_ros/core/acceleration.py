@@ -28,10 +28,10 @@ Memory is bounded by ``window``.
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 __all__ = [
     "METHODS",
@@ -42,6 +42,7 @@ __all__ = [
     "SavitzkyGolayEstimator",
     "estimate_accelerations",
     "make_estimator",
+    "savgol_weights_reference",
 ]
 
 METHODS = ("savgol", "finite_difference")
@@ -93,10 +94,102 @@ class AccelerationConfig:
             )
 
 
+@njit(cache=True, nogil=True)
+def _savgol_weights(stamps_ns: np.ndarray, half: int, order: int) -> np.ndarray:
+    """Least-squares derivative weights at ``stamps_ns[half]`` (1/s) for a degree-``order`` fit.
+
+    The local times ``s = (t − t_mid)/scale`` (``scale`` = the larger end offset, so ``|s| ≤ 1``) get an
+    orthonormal polynomial basis ``φ_0 … φ_order`` on the window's points by Gram–Schmidt applied twice
+    (``φ_{k+1} ∝ s·φ_k`` minus its projections), tracking each ``φ_k(0)`` and ``φ_k'(0)`` through the
+    same linear operations. The least-squares fit of ``y`` is ``Σ_k (φ_k·y) φ_k``, so the derivative at
+    the middle is ``w·y`` with ``w = Σ_k φ_k'(0) φ_k / scale``. O(window · order²), no factorisation, and
+    well conditioned for any distinct stamps (the monomial Vandermonde matrix never appears).
+    """
+    m = stamps_ns.shape[0]
+    mid = stamps_ns[half]
+    scale = float(max(abs(stamps_ns[0] - mid), abs(stamps_ns[m - 1] - mid)))
+    s = np.empty(m)
+    for i in range(m):
+        s[i] = float(stamps_ns[i] - mid) / scale  # the int64 difference is exact
+    phi = np.empty((order + 1, m))
+    val0 = np.empty(order + 1)  # φ_k(0)
+    der0 = np.empty(order + 1)  # φ_k'(0)
+    inv = 1.0 / math.sqrt(m)
+    for i in range(m):
+        phi[0, i] = inv
+    val0[0] = inv
+    der0[0] = 0.0
+    u = np.empty(m)
+    for k in range(order):
+        for i in range(m):
+            u[i] = s[i] * phi[k, i]
+        u0 = 0.0  # (s·φ_k)(0)
+        u1 = val0[k]  # (s·φ_k)'(0) = φ_k(0)
+        for _ in range(2):  # classical Gram–Schmidt, twice: orthogonal to rounding
+            for j in range(k + 1):
+                c = 0.0
+                for i in range(m):
+                    c += u[i] * phi[j, i]
+                for i in range(m):
+                    u[i] -= c * phi[j, i]
+                u0 -= c * val0[j]
+                u1 -= c * der0[j]
+        norm = 0.0
+        for i in range(m):
+            norm += u[i] * u[i]
+        norm = math.sqrt(norm)
+        for i in range(m):
+            phi[k + 1, i] = u[i] / norm
+        val0[k + 1] = u0 / norm
+        der0[k + 1] = u1 / norm
+    weights = np.zeros(m)
+    for k in range(1, order + 1):
+        d = der0[k]
+        for i in range(m):
+            weights[i] += d * phi[k, i]
+    inv_scale_s = 1e9 / scale
+    for i in range(m):
+        weights[i] *= inv_scale_s
+    return weights
+
+
+@njit(cache=True, nogil=True)
+def _savgol_apply(stamps_ns: np.ndarray, vel: np.ndarray, half: int, order: int) -> np.ndarray:
+    """``weights(stamps) @ vel``: the derivative (rad/s²) of each column of ``vel`` at the middle stamp."""
+    weights = _savgol_weights(stamps_ns, half, order)
+    m, n = vel.shape
+    out = np.zeros(n)
+    for i in range(m):
+        w = weights[i]
+        for j in range(n):
+            out[j] += w * vel[i, j]
+    return out
+
+
+def savgol_weights_reference(stamps_ns: np.ndarray, half: int, order: int) -> np.ndarray:
+    """Pure-numpy reference of the compiled weights: minimum-norm least squares on the Vandermonde matrix.
+
+    Args:
+        stamps_ns: The window's stamps (ns), strictly increasing, shape ``(m,)`` with ``m > order``.
+        half: Index of the sample the derivative refers to.
+        order: Polynomial degree.
+
+    Returns:
+        Weights ``w`` (1/s) with ``q̈(t_half) ≈ w · q̇_window``, shape ``(m,)``.
+    """
+    offsets = np.asarray(stamps_ns, dtype=np.int64) - int(stamps_ns[half])
+    tau = offsets * 1e-9
+    scale = max(abs(tau[0]), abs(tau[-1]))
+    V = np.vander(tau / scale, order + 1, increasing=True)  # columns 1, s, s², …
+    return np.linalg.lstsq(V, np.eye(len(tau)), rcond=None)[0][1] / scale
+
+
 class AccelerationEstimator:
     """Common interface and stamp/gap handling of the estimators.
 
     Subclasses implement :meth:`_estimate`. Use :func:`make_estimator` to build one from a config.
+    Stamps and velocities of the window are kept in doubled ring buffers, so the last ``m`` samples
+    are always one contiguous view and an update allocates nothing but its result.
 
     Args:
         n_joints: Number of joints (length of each velocity vector).
@@ -108,10 +201,13 @@ class AccelerationEstimator:
             raise ValueError(f"n_joints must be >= 1, got {n_joints}")
         self.n_joints = int(n_joints)
         self.config = config
-        self._stamps: deque[int] = deque(maxlen=config.window)
-        # velocities in a doubled ring buffer: the last m samples are always one contiguous view
-        self._ring = np.zeros((2 * config.window, self.n_joints))
-        self._count = 0
+        self._w = int(config.window)
+        self._max_gap_s = config.max_gap_s
+        self._tring = np.zeros(2 * self._w, dtype=np.int64)
+        self._ring = np.zeros((2 * self._w, self.n_joints))
+        self._count = 0  # samples written since the last (re)start (ring position)
+        self._m = 0  # samples in the window (≤ window)
+        self._last_stamp: int | None = None
         self._mean_dt_s = math.nan  # running mean of the sample interval, for the stated delay/lag
         self._n_dt = 0
 
@@ -147,8 +243,9 @@ class AccelerationEstimator:
             ``(stamp, None)`` for each received stamp that had not been decided yet.
         """
         pending = self._pending_stamps()
-        self._stamps.clear()
+        self._m = 0
         self._count = 0
+        self._last_stamp = None
         self._reset_filter()
         return [(s, None) for s in pending]
 
@@ -170,36 +267,65 @@ class AccelerationEstimator:
         dq = np.asarray(dq, dtype=np.float64)
         if dq.shape != (self.n_joints,):
             raise ValueError(f"dq must have shape ({self.n_joints},), got {dq.shape}")
-        if not np.all(np.isfinite(dq)):
+        if not np.isfinite(dq).all():
             raise ValueError("dq contains NaN or inf")
-        if self._stamps and stamp_ns <= self._stamps[-1]:
-            raise ValueError(f"stamps must increase: {stamp_ns} after {self._stamps[-1]}")
-        decisions: list[Decision] = []
-        if self._stamps:
-            dt_s = (stamp_ns - self._stamps[-1]) * 1e-9
-            gap = self.config.max_gap_s
+        if self._last_stamp is not None and stamp_ns <= self._last_stamp:
+            raise ValueError(f"stamps must increase: {stamp_ns} after {self._last_stamp}")
+        return self.update_trusted(stamp_ns, dq)
+
+    def update_trusted(self, stamp_ns: int, dq: np.ndarray) -> list[Decision]:
+        """:meth:`update` without its input checks, for callers that screened the sample already.
+
+        Args:
+            stamp_ns: Stamp in ns (a Python int), strictly after the previous one.
+            dq: Joint velocities (rad/s), float64, shape ``(n_joints,)``, finite (copied).
+
+        Returns:
+            As :meth:`update`. Invalid input here corrupts the estimator: use :meth:`update` unless the
+            caller guarantees the preconditions (as :class:`~semiparam_ros.core.pipeline.SamplePipeline`
+            does).
+        """
+        decisions: list[Decision] | None = None
+        last = self._last_stamp
+        if last is not None:
+            dt_s = (stamp_ns - last) * 1e-9
+            gap = self._max_gap_s
             if gap is not None and dt_s > gap:
-                decisions.extend(self.reset())
+                decisions = self.reset()
             else:
                 self._n_dt += 1
                 if self._n_dt == 1:
                     self._mean_dt_s = dt_s
                 else:
                     self._mean_dt_s += (dt_s - self._mean_dt_s) / min(self._n_dt, 1000)
-        self._stamps.append(stamp_ns)
-        w = self.config.window
+        self._last_stamp = stamp_ns
+        w = self._w
         k = self._count % w
+        self._tring[k] = stamp_ns
+        self._tring[k + w] = stamp_ns
         self._ring[k] = dq
         self._ring[k + w] = dq
         self._count += 1
-        decisions.extend(self._estimate())
-        return decisions
+        if self._m < w:
+            self._m += 1
+        if decisions:
+            decisions.extend(self._estimate())
+            return decisions
+        return self._estimate()
+
+    def _start(self) -> int:
+        """Ring index of the oldest buffered sample."""
+        return (self._count - self._m) % self._w
 
     def _window(self) -> np.ndarray:
-        """Return the buffered velocities, oldest first, shape ``(len(stamps), n_joints)`` (a view)."""
-        m = len(self._stamps)
-        start = (self._count - m) % self.config.window
-        return self._ring[start : start + m]
+        """Return the buffered velocities, oldest first, shape ``(m, n_joints)`` (a view)."""
+        start = self._start()
+        return self._ring[start : start + self._m]
+
+    def _stamp_window(self) -> np.ndarray:
+        """Return the buffered stamps (ns), oldest first, shape ``(m,)`` (a view)."""
+        start = self._start()
+        return self._tring[start : start + self._m]
 
     # -- subclass hooks --------------------------------------------------------------------------
     def _estimate(self) -> list[Decision]:  # pragma: no cover - abstract
@@ -218,6 +344,11 @@ class SavitzkyGolayEstimator(AccelerationEstimator):
     The first ``window // 2`` samples after a (re)start are decided ``None`` at once; the sample in the
     middle of each full window gets its estimate when the window's last sample arrives.
 
+    The weights are recomputed for every window from its own stamps (exact for irregular stamps) by a
+    compiled orthogonal-polynomial construction (:func:`_savgol_weights`, O(window · polyorder²); ≈1 µs
+    for window 9, polyorder 2), equal to the least-squares weights of
+    :func:`savgol_weights_reference` to rounding.
+
     Noise: for uniform stamps with white velocity noise σ (rad/s), the estimate's noise is
     ``σ · ‖c‖ / Δt`` with ``c`` the derivative coefficients (``scipy.signal.savgol_coeffs(window,
     polyorder, deriv=1)``), e.g. ≈ 0.13 σ/Δt for window 9, polyorder 2.
@@ -227,8 +358,6 @@ class SavitzkyGolayEstimator(AccelerationEstimator):
         super().__init__(n_joints, config)
         self._half = config.window // 2
         self._order = int(config.polyorder)
-        self._cache_key: bytes | None = None
-        self._cache_weights: np.ndarray | None = None
         self._n_seen = 0  # samples since the last (re)start
 
     @property
@@ -243,33 +372,18 @@ class SavitzkyGolayEstimator(AccelerationEstimator):
         # sample i (0-based since the restart) is decided None if i < half, else when sample i + half
         # arrives; so the newest min(n_seen - half, half) samples are still undecided
         n_pending = max(0, min(self._n_seen - self._half, self._half))
-        return list(self._stamps)[len(self._stamps) - n_pending :] if n_pending else []
-
-    def _weights(self, stamps: np.ndarray) -> np.ndarray:
-        """Least-squares derivative weights at the middle sample for these stamps (cached when regular)."""
-        offsets = stamps - stamps[self._half]
-        key = offsets.tobytes()
-        if key == self._cache_key and self._cache_weights is not None:
-            return self._cache_weights
-        tau = offsets * 1e-9
-        scale = max(abs(tau[0]), abs(tau[-1]))
-        s = tau / scale
-        V = np.vander(s, self._order + 1, increasing=True)  # columns 1, s, s², …
-        # minimum-norm least squares: derivative at s = 0 is the coefficient of s, divided by scale
-        pinv_row = np.linalg.lstsq(V, np.eye(len(s)), rcond=None)[0][1]
-        weights = pinv_row / scale
-        self._cache_key, self._cache_weights = key, weights
-        return weights
+        return self._stamp_window()[self._m - n_pending :].tolist() if n_pending else []
 
     def _estimate(self) -> list[Decision]:
         self._n_seen += 1
         if self._n_seen <= self._half:
-            return [(self._stamps[-1], None)]
-        if len(self._stamps) < self.config.window:
+            return [(self._last_stamp, None)]
+        w = self._w
+        if self._m < w:
             return []
-        stamps = np.fromiter(self._stamps, dtype=np.int64, count=len(self._stamps))
-        weights = self._weights(stamps)
-        ddq = weights @ self._window()
+        start = self._count % w  # the window is full: oldest sample right after the newest
+        stamps = self._tring[start : start + w]
+        ddq = _savgol_apply(stamps, self._ring[start : start + w], self._half, self._order)
         return [(int(stamps[self._half]), ddq)]
 
 
@@ -305,16 +419,17 @@ class FiniteDifferenceEstimator(AccelerationEstimator):
         self._state = None
 
     def _estimate(self) -> list[Decision]:
-        stamp = self._stamps[-1]
-        if len(self._stamps) < self.config.window:
+        stamp = self._last_stamp
+        if self._m < self._w:
             return [(stamp, None)]
-        span_s = (stamp - self._stamps[0]) * 1e-9
+        stamps = self._stamp_window()
+        span_s = (stamp - int(stamps[0])) * 1e-9
         window = self._window()
         raw = (window[-1] - window[0]) / span_s
         if self._state is None or self._tau_s == 0.0:
             self._state = raw
         else:
-            dt_s = (stamp - self._stamps[-2]) * 1e-9
+            dt_s = (stamp - int(stamps[-2])) * 1e-9
             alpha = -math.expm1(-dt_s / self._tau_s)
             self._state = self._state + alpha * (raw - self._state)
         return [(stamp, self._state.copy())]

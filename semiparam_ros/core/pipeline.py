@@ -6,9 +6,12 @@ and returns the :class:`~semiparam_ros.core.messages.Sample` objects they comple
 1. **Screening.** Every message is checked before it touches any state; a bad one is dropped and
    counted once, under the first failing reason in this order: stamp (zero/negative, backwards,
    repeated — per stream), structure (array lengths vs names, duplicate names, missing configured
-   joints, wrong frame id), values (NaN/inf in the fields that are used). Only the configured joints
-   are checked and used: extra joints, in any order, are ignored, so a NaN effort of an unused joint
-   (or any effort when learning a wrench) does not drop a message.
+   joints, wrong frame id), values (NaN/inf in the fields that are used), plausibility (a finite value
+   beyond the configured bound: ``max_abs_position`` rad, ``max_abs_velocity`` rad/s,
+   ``max_abs_output`` N / N·m for the wrench or the learned efforts — e.g. a 1e10 rad/s velocity that
+   would poison the q̈ window). Only the configured joints are checked and used: extra joints, in any
+   order, are ignored, so a NaN effort of an unused joint (or any effort when learning a wrench) does
+   not drop a message.
 2. **Acceleration.** Accepted joint velocities feed the estimator of
    :mod:`semiparam_ros.core.acceleration`, which decides each joint-state stamp once: q̈ (rad/s²) or
    none (warm-up). With the default Savitzky–Golay estimator the decision comes ``window // 2`` joint
@@ -33,10 +36,12 @@ pipeline recovers instead of dropping everything until the old stamps are passed
 from __future__ import annotations
 
 import math
+import sys
 from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 
 from semiparam_ros.core.acceleration import AccelerationConfig, AccelerationEstimator, make_estimator
 from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
@@ -45,6 +50,7 @@ __all__ = [
     "DROP_ACCELERATION_WARMUP",
     "DROP_BUFFER_OVERFLOW",
     "DROP_DUPLICATE_JOINT",
+    "DROP_IMPLAUSIBLE_VALUE",
     "DROP_JOINT_STATE_BACKWARDS_STAMP",
     "DROP_JOINT_STATE_REPEATED_STAMP",
     "DROP_JOINT_STATE_ZERO_STAMP",
@@ -91,6 +97,10 @@ DROP_WRONG_FRAME_ID = "wrong_frame_id"
 """WrenchStamped whose frame id is not the configured sensor frame."""
 DROP_NONFINITE_WRENCH = "nonfinite_wrench"
 """NaN/inf in force or torque."""
+DROP_IMPLAUSIBLE_VALUE = "implausible_value"
+"""A finite but physically impossible value in a used field: |q| > ``max_abs_position`` (rad),
+|q̇| > ``max_abs_velocity`` (rad/s) of a configured joint, a wrench component (or a learned effort)
+beyond ``max_abs_output`` (N, N·m). Either stream."""
 DROP_UNPAIRED_WRENCH = "unpaired_wrench"
 """Accepted wrench with no accepted joint state within ``sync_tolerance``."""
 DROP_ACCELERATION_WARMUP = "acceleration_warmup"
@@ -114,6 +124,7 @@ DROP_REASONS = (
     DROP_WRENCH_REPEATED_STAMP,
     DROP_WRONG_FRAME_ID,
     DROP_NONFINITE_WRENCH,
+    DROP_IMPLAUSIBLE_VALUE,
     DROP_UNPAIRED_WRENCH,
     DROP_ACCELERATION_WARMUP,
     DROP_BUFFER_OVERFLOW,
@@ -122,6 +133,25 @@ DROP_REASONS = (
 """Every key of :attr:`SamplePipeline.drops`, in screening order."""
 
 _NAME_CACHE_SIZE = 16
+_NO_BOUND = sys.float_info.max  # "no bound": still rejects inf (and NaN) in the one-pass check
+
+
+@njit(cache=True, nogil=True)
+def _within(values: np.ndarray, bound: float) -> bool:
+    """Return whether every ``|v| ≤ bound`` (NaN fails, inf fails a finite bound), in one pass."""
+    for v in values:
+        if not abs(v) <= bound:
+            return False
+    return True
+
+
+def _bound(name: str, value: float | None) -> float:
+    """Validate a plausibility bound (> 0; ``None`` or ``inf`` = none) and return it as a float."""
+    if value is None or value == math.inf:
+        return _NO_BOUND
+    if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+        raise ValueError(f"{name} must be a number > 0 or None (no bound), got {value!r}")
+    return float(value)
 
 
 class _JointEntry:
@@ -151,6 +181,11 @@ class SamplePipeline:
         buffer_s: How long accepted joint states are kept for pairing with late wrenches (s, > 0).
         max_buffer: Hard cap on buffered joint states and on pending wrenches (≥ 1).
         restart_after: Consecutive backwards stamps on one stream taken as a clock restart (≥ 1).
+        max_abs_position: Largest plausible |q| of a configured joint (rad, > 0); ``None`` = no bound
+            (e.g. for unwrapped continuous joints).
+        max_abs_velocity: Largest plausible |q̇| of a configured joint (rad/s, > 0); ``None`` = no bound.
+        max_abs_output: Largest plausible |component| of the wrench (N, N·m), or of a configured joint's
+            effort when learning ``joint_torques`` (N·m); ``None`` = no bound.
 
     Attributes:
         drops: Reason → count, every reason of :data:`DROP_REASONS` present (zeros included).
@@ -172,6 +207,9 @@ class SamplePipeline:
         buffer_s: float = 1.0,
         max_buffer: int = 4096,
         restart_after: int = 50,
+        max_abs_position: float | None = 100.0,
+        max_abs_velocity: float | None = 100.0,
+        max_abs_output: float | None = 1e4,
     ) -> None:
         if isinstance(joints, str):
             raise ValueError("joints must be a sequence of joint names, not a single string")
@@ -200,6 +238,10 @@ class SamplePipeline:
         self.buffer_s = float(buffer_s)
         self.max_buffer = int(max_buffer)
         self.restart_after = int(restart_after)
+        self._max_q = _bound("max_abs_position", max_abs_position)
+        self._max_dq = _bound("max_abs_velocity", max_abs_velocity)
+        self._max_out = _bound("max_abs_output", max_abs_output)
+        self._torques = output == "joint_torques"
         self._tol_ns = round(self.sync_tolerance * 1e9)
         self._buffer_ns = round(self.buffer_s * 1e9)
         self._name_cache: dict[tuple[str, ...], np.ndarray | str] = {}
@@ -308,7 +350,7 @@ class SamplePipeline:
         if last is not None and stamp == last:
             return self._drop(DROP_JOINT_STATE_REPEATED_STAMP)
         n_names = len(msg.names)
-        torques = self.output == "joint_torques"
+        torques = self._torques
         if (
             msg.position.shape[0] != n_names
             or msg.velocity.shape[0] != n_names
@@ -321,18 +363,25 @@ class SamplePipeline:
         q = msg.position[index]
         dq = msg.velocity[index]
         effort = msg.effort[index] if torques else None
+        # one pass per array: NaN, inf and implausible values all fail the bound; sort out which on failure
         if not (
-            np.isfinite(q).all() and np.isfinite(dq).all() and (effort is None or np.isfinite(effort).all())
+            _within(q, self._max_q)
+            and _within(dq, self._max_dq)
+            and (effort is None or _within(effort, self._max_out))
         ):
-            return self._drop(DROP_NONFINITE_JOINT_STATE)
+            finite = np.isfinite(q).all() and np.isfinite(dq).all()
+            finite = finite and (effort is None or np.isfinite(effort).all())
+            return self._drop(DROP_NONFINITE_JOINT_STATE if not finite else DROP_IMPLAUSIBLE_VALUE)
 
         # accepted: from here on the message changes the state
         self._last_js_stamp = stamp
+        q.flags.writeable = False  # fresh arrays shared by the samples of this joint state
+        dq.flags.writeable = False
         entry = _JointEntry(stamp, q, dq, effort)
         self._entries.append(entry)
         self._undecided.append(entry)
         samples: list[Sample] = []
-        for ref_stamp, ddq in self._estimator.update(stamp, dq):
+        for ref_stamp, ddq in self._estimator.update_trusted(stamp, dq):
             decided = self._undecided.popleft()
             if decided.stamp != ref_stamp:  # pragma: no cover - estimator contract violated
                 raise RuntimeError(f"acceleration estimator decided {ref_stamp}, expected {decided.stamp}")
@@ -393,8 +442,10 @@ class SamplePipeline:
             return self._drop(DROP_WRONG_FRAME_ID)
         if msg.force.shape != (3,) or msg.torque.shape != (3,):
             return self._drop(DROP_LENGTH_MISMATCH)
-        if not (np.isfinite(msg.force).all() and np.isfinite(msg.torque).all()):
-            return self._drop(DROP_NONFINITE_WRENCH)
+        bound = self._max_out
+        if not (_within(msg.force, bound) and _within(msg.torque, bound)):
+            finite = np.isfinite(msg.force).all() and np.isfinite(msg.torque).all()
+            return self._drop(DROP_IMPLAUSIBLE_VALUE if finite else DROP_NONFINITE_WRENCH)
         self._last_wrench_stamp = stamp
         if len(self._wrenches) >= self.max_buffer:
             self._wrenches.popleft()
