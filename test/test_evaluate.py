@@ -366,3 +366,24 @@ def test_frozen_parametric_sp_diagnostic() -> None:
     assert clone.model.nonparametric.n_samples_seen > frozen.model.nonparametric.n_samples_seen
     with pytest.raises(ValueError, match="needs"):
         build_models(config, [FROZEN_P])
+
+
+def test_payload_cli_and_pickup_time(tmp_path: Path, capsys) -> None:
+    from semiparam_ros.cli.evaluate import main
+    from semiparam_ros.eval.replay import read_change_time
+
+    assert read_change_time(BAGS / "icub_payload") == (20.0, 1_700_000_020_000_000_000)
+    with pytest.raises(ValueError, match="pickup"):
+        read_change_time(tmp_path)
+    out = tmp_path / "payload.json"
+    # explicit --pickup-time on a bag without a payload: the CLI path runs and reports finite numbers
+    argv = ["--payload", str(BAGS / "icub_xy"), "--pickup-time", "15", "--set", "nonparametric.n_features=50",
+            "--forgetting", "0.99", "--json", str(out), "--plot", str(tmp_path / "p.png"), "--no-progress"]
+    assert main(argv) == 0
+    assert "| SP adaptive (β=0.99) | force [N] |" in capsys.readouterr().out
+    report = json.loads(out.read_text())
+    assert report["protocol"]["pickup_time_s"] == 15.0 and _finite_tree(report["summary"])
+    assert (tmp_path / "p.png").read_bytes()[:8] == PNG_MAGIC
+    # no scenario.yaml and no --pickup-time: a clear error
+    assert main(["--payload", str(BAGS / "icub_xy"), "--no-progress"]) == 2
+    assert "pickup" in capsys.readouterr().err
