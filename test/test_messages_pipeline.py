@@ -282,7 +282,7 @@ def dirty_events(seed=0):
             last_js = msg
             if i < 5 or i % 7:
                 continue
-            kind = (i // 7) % 8
+            kind = (i // 7) % 10
             between = msg.stamp_ns + 5 * MS  # a fresh stamp between two clean joint states
             good = joint_state(between, rng)
             names, pos, vel = list(good.names), good.position.copy(), good.velocity.copy()
@@ -306,6 +306,12 @@ def dirty_events(seed=0):
                 inject(pl.DROP_DUPLICATE_JOINT, JointStateData(between, names, pos, vel))
             elif kind == 5:
                 inject(pl.DROP_JOINT_STATE_ZERO_STAMP, JointStateData(0, names, pos, vel))
+            elif kind == 8:  # finite but impossible: 1e10 rad/s would poison the q̈ window
+                vel[j] = 1e10
+                inject(pl.DROP_IMPLAUSIBLE_VALUE, JointStateData(between, names, pos, vel))
+            elif kind == 9:
+                pos[j] = -1e6
+                inject(pl.DROP_IMPLAUSIBLE_VALUE, JointStateData(between, names, pos, vel))
             elif kind == 6:  # same stamp again, other values
                 inject(pl.DROP_JOINT_STATE_REPEATED_STAMP, JointStateData(msg.stamp_ns, names, pos, vel))
             else:
@@ -315,7 +321,7 @@ def dirty_events(seed=0):
                 )
         else:
             if last_w is not None:
-                kind = n_wrenches % 6
+                kind = n_wrenches % 7
                 between = msg.stamp_ns + 40 * MS
                 y = wrench_of(secs(between))
                 if kind == 0:
@@ -328,8 +334,10 @@ def dirty_events(seed=0):
                     inject(pl.DROP_WRENCH_REPEATED_STAMP, WrenchData(msg.stamp_ns, FRAME, y[:3], y[3:]))
                 elif kind == 4:
                     inject(pl.DROP_WRENCH_BACKWARDS_STAMP, WrenchData(last_w.stamp_ns, FRAME, y[:3], y[3:]))
-                else:
+                elif kind == 5:
                     inject(pl.DROP_NONFINITE_WRENCH, WrenchData(between, FRAME, y[:3], [0, np.inf, 0]))
+                else:
+                    inject(pl.DROP_IMPLAUSIBLE_VALUE, WrenchData(between, FRAME, [0, 0, 3e7], y[3:]))
             last_w = msg
             n_wrenches += 1
     assert last_js is not None
@@ -362,6 +370,7 @@ def test_dirty_stream_yields_exactly_the_clean_samples_and_counts(method):
             pl.DROP_WRENCH_ZERO_STAMP,
             pl.DROP_WRENCH_REPEATED_STAMP,
             pl.DROP_WRENCH_BACKWARDS_STAMP,
+            pl.DROP_IMPLAUSIBLE_VALUE,
         )
     )
     cfg = AccelerationConfig(method=method, window=5)
@@ -493,8 +502,93 @@ def test_memory_is_bounded():
         ((JOINTS,), {"buffer_s": 0.0}),
         ((JOINTS,), {"max_buffer": 0}),
         ((JOINTS,), {"acceleration": {"method": "savgol"}}),
+        ((JOINTS,), {"max_abs_velocity": 0.0}),
+        ((JOINTS,), {"max_abs_position": -1.0}),
+        ((JOINTS,), {"max_abs_output": float("nan")}),
+        ((JOINTS,), {"max_abs_output": "1e4"}),
     ],
 )
 def test_invalid_pipeline_settings_raise(args, kwargs):
     with pytest.raises((ValueError, TypeError)):
         SamplePipeline(*args, **kwargs)
+
+
+def test_implausible_values_are_dropped_by_reason_and_bounds_are_configurable():
+    """Each bound separately, both streams, both outputs; NaN still counts as non-finite (screening order);
+    a dropped message leaves the state untouched; ``None`` lifts a bound."""
+    events = clean_events(duration_s=1.0)
+    ref = SamplePipeline(JOINTS, frame_id=FRAME)
+    ref_samples = feed(ref, events)
+    assert len(ref_samples) > 5
+
+    def js_with(msg, field, name, value):
+        arrays = {f: getattr(msg, f).copy() for f in ("position", "velocity", "effort")}
+        arrays[field][msg.names.index(name)] = value
+        return JointStateData(msg.stamp_ns + MS, msg.names, arrays["position"], arrays["velocity"],
+                              arrays["effort"])
+
+    limits = {"max_abs_position": 4.0, "max_abs_velocity": 20.0, "max_abs_output": 50.0}
+    p = SamplePipeline(JOINTS, frame_id=FRAME, **limits)
+    got, expected = [], {}
+    for k, (_, msg) in enumerate(events):
+        if isinstance(msg, JointStateData) and k % 5 == 2:
+            cases = [
+                (js_with(msg, "velocity", "r_elbow", 20.5), pl.DROP_IMPLAUSIBLE_VALUE),
+                (js_with(msg, "velocity", "r_shoulder_pitch", -1e10), pl.DROP_IMPLAUSIBLE_VALUE),
+                (js_with(msg, "position", "r_shoulder_yaw", 4.01), pl.DROP_IMPLAUSIBLE_VALUE),
+                (js_with(js_with(msg, "velocity", "r_elbow", np.nan), "position", "r_elbow", 1e9),
+                 pl.DROP_NONFINITE_JOINT_STATE),
+            ]
+            for bad, reason in cases:
+                assert p.add_joint_state(bad) == []
+                expected[reason] = expected.get(reason, 0) + 1
+        if isinstance(msg, WrenchData) and k % 3 == 0:
+            y = wrench_of(secs(msg.stamp_ns))
+            bad_force = WrenchData(msg.stamp_ns + MS, FRAME, [0.0, -50.1, 0.0], y[3:])
+            bad_torque = WrenchData(msg.stamp_ns + MS, FRAME, y[:3], [0.0, 0.0, 1e12])
+            for bad in (bad_force, bad_torque):
+                assert p.add_wrench(bad) == []
+                expected[pl.DROP_IMPLAUSIBLE_VALUE] = expected.get(pl.DROP_IMPLAUSIBLE_VALUE, 0) + 1
+        got.extend(p.add_joint_state(msg) if isinstance(msg, JointStateData) else p.add_wrench(msg))
+    assert_same_samples(got, ref_samples)  # values at the bound or below pass, state untouched
+    for reason, count in expected.items():
+        assert p.drops[reason] == count > 0
+    assert sum(p.drops.values()) == sum(expected.values()) + sum(ref.drops.values())
+
+    # the extra (unconfigured) joints are never screened; the learned efforts are (joint_torques only)
+    msg = next(m for _, m in events if isinstance(m, JointStateData))
+    huge_extra = js_with(msg, "velocity", EXTRA[0], 1e12)
+    for output in ("wrench", "joint_torques"):
+        q = SamplePipeline(JOINTS, output=output, **limits)
+        q.add_joint_state(huge_extra)
+        assert q.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 0
+    torque_pipe = SamplePipeline(JOINTS, output="joint_torques", **limits)
+    assert torque_pipe.add_joint_state(js_with(msg, "effort", "r_elbow", 60.0)) == []
+    assert torque_pipe.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 1
+    assert SamplePipeline(JOINTS, **limits).add_joint_state(js_with(msg, "effort", "r_elbow", 60.0)) == []
+
+    # None lifts a bound (inf and NaN are still non-finite)
+    free = SamplePipeline(JOINTS, frame_id=FRAME, max_abs_position=None, max_abs_velocity=None,
+                          max_abs_output=None)
+    free.add_joint_state(js_with(msg, "velocity", "r_elbow", 1e300))  # stamp + 1 ms
+    free.add_wrench(WrenchData(msg.stamp_ns, FRAME, [1e300, 0, 0], [0, 0, 0]))
+    assert sum(free.drops.values()) == 0
+    free.add_joint_state(js_with(js_with(msg, "velocity", "r_elbow", np.inf), "position", "r_elbow", 0.0))
+    free.add_wrench(WrenchData(msg.stamp_ns + MS, FRAME, [np.inf, 0, 0], [0, 0, 0]))
+    assert free.drops[pl.DROP_NONFINITE_JOINT_STATE] == 1
+    assert free.drops[pl.DROP_NONFINITE_WRENCH] == 1
+    assert free.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 0
+
+
+def test_default_bounds_pass_every_plausible_robot_value():
+    """Defaults: 100 rad, 100 rad/s, 1e4 N / N·m — generous for any arm, tight enough for garbage."""
+    p = SamplePipeline(JOINTS)
+    names = JOINTS
+    stamps = T0 + np.arange(1, 4) * 10 * MS
+    for k, stamp in enumerate(stamps):
+        p.add_joint_state(JointStateData(int(stamp), names, [99.0, -6.3, 0.0, 3.0], [-99.9, 10.0, 0.0, k]))
+    p.add_wrench(WrenchData(int(stamps[1]), FRAME, [9999.0, -1e4, 0.0], [1e4, 0.0, -5.0]))
+    assert p.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 0
+    p.add_joint_state(JointStateData(int(stamps[-1]) + MS, names, np.zeros(4), [0.0, 0.0, 100.001, 0.0]))
+    p.add_wrench(WrenchData(int(stamps[1]) + MS, FRAME, [0.0, 0.0, 0.0], [0.0, -10000.5, 0.0]))
+    assert p.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 2

@@ -115,9 +115,25 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   choices=("savgol", "finite_difference")),
     ParameterSpec("acceleration.window", "integer", 9,
                   "samples in the acceleration estimator window (odd for savgol)", min=3, max=201),
+    ParameterSpec("acceleration.polyorder", "integer", 2,
+                  "polynomial degree of the savgol estimator (< acceleration.window); 2 is exact for "
+                  "constant jerk over the window", min=1, max=10),
     ParameterSpec("acceleration.cutoff_hz", "double", 20.0,
                   "low-pass cut-off of the finite-difference estimator [Hz]", min=0.0, max=10000.0,
                   min_exclusive=True),
+    ParameterSpec("acceleration.max_gap_s", "double", 0.1,
+                  "restart the acceleration estimator when consecutive joint states are further apart than "
+                  "this, instead of fitting across the dropout [s]; 0 = never restart", min=0.0, max=3600.0),
+    # plausibility bounds (finite but impossible values are dropped as 'implausible_value')
+    ParameterSpec("limits.max_abs_position", "double", 100.0,
+                  "largest plausible |joint position| of a learned joint [rad]; 0 = no bound (unwrapped "
+                  "continuous joints)", min=0.0, max=1e12),
+    ParameterSpec("limits.max_abs_velocity", "double", 100.0,
+                  "largest plausible |joint velocity| of a learned joint [rad/s]; 0 = no bound",
+                  min=0.0, max=1e12),
+    ParameterSpec("limits.max_abs_output", "double", 1e4,
+                  "largest plausible |component| of the learned output: wrench force [N] and torque [N m], "
+                  "or joint effort [N m]; 0 = no bound", min=0.0, max=1e12),
     # parametric stage
     ParameterSpec("parametric.lam", "double", 1e-2,
                   "ridge regularization of the rigid-body (base inertial parameter) stage", min=0.0,
@@ -272,6 +288,12 @@ class EstimatorConfig:
                              "robot.output is 'wrench'")
         if checked["acceleration.method"] == "savgol" and checked["acceleration.window"] % 2 == 0:
             raise ValueError("parameter 'acceleration.window' must be odd for the savgol method, got "
+                             f"{checked['acceleration.window']}")
+        if checked["acceleration.method"] == "savgol" and (
+            checked["acceleration.polyorder"] >= checked["acceleration.window"]
+        ):
+            raise ValueError("parameter 'acceleration.polyorder' must be below 'acceleration.window' for the "
+                             f"savgol method, got {checked['acceleration.polyorder']} >= "
                              f"{checked['acceleration.window']}")
         object.__setattr__(self, "values", MappingProxyType(checked))
 

@@ -119,11 +119,16 @@ def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
     """Build the message-to-sample pipeline described by a configuration.
 
     Args:
-        config: Estimator configuration (``robot.*``, ``sync.*``, ``acceleration.*``).
+        config: Estimator configuration (``robot.*``, ``sync.*``, ``acceleration.*``, ``limits.*``); a
+            zero ``acceleration.max_gap_s`` or ``limits.*`` means "never restart" / "no bound".
 
     Returns:
         A fresh pipeline.
     """
+
+    def bound(name: str) -> float | None:
+        return config[name] or None
+
     return SamplePipeline(
         config["robot.joints"],
         output=config["robot.output"],
@@ -132,8 +137,13 @@ def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
         acceleration=AccelerationConfig(
             method=config["acceleration.method"],
             window=config["acceleration.window"],
+            polyorder=config["acceleration.polyorder"],
             cutoff_hz=config["acceleration.cutoff_hz"],
+            max_gap_s=bound("acceleration.max_gap_s"),
         ),
+        max_abs_position=bound("limits.max_abs_position"),
+        max_abs_velocity=bound("limits.max_abs_velocity"),
+        max_abs_output=bound("limits.max_abs_output"),
     )
 
 
