@@ -362,6 +362,8 @@ class SavitzkyGolayEstimator(AccelerationEstimator):
         self._half = config.window // 2
         self._order = int(config.polyorder)
         self._n_seen = 0  # samples since the last (re)start
+        # compile (or load from numba's cache) now, not at the first full window inside a 1 kHz loop
+        _savgol_apply(np.arange(self._w, dtype=np.int64) + 1, self._ring[: self._w], self._half, self._order)
 
     @property
     def delay_samples(self) -> int:

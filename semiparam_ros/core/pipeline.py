@@ -246,6 +246,10 @@ class SamplePipeline:
         self._max_dq = _bound("max_abs_velocity", max_abs_velocity)
         self._max_out = _bound("max_abs_output", max_abs_output)
         self._torques = output == "joint_torques"
+        frozen = np.zeros(3)
+        frozen.flags.writeable = False
+        _within(frozen, 1.0)  # compile/load both signatures (messages hold read-only arrays) up front
+        _within(np.zeros(3), 1.0)
         self._tol_ns = round(self.sync_tolerance * 1e9)
         self._buffer_ns = round(self.buffer_s * 1e9)
         self._name_cache: dict[tuple[str, ...], np.ndarray | str] = {}
