@@ -655,15 +655,22 @@ def test_unused_joint_garbage_is_ignored(config, regressor):
 
 
 def test_absurd_finite_values_are_counted_not_raised(config, regressor):
-    """A finite but absurd velocity (1e200 rad/s) passes the pipeline's NaN/inf screen and poisons the q̈
-    window: the learner must reject exactly the samples it touches, counted as drops, without raising,
-    and learn every other sample exactly as if the bad joint state had been absent."""
+    """A finite but absurd velocity (1e200 rad/s) is dropped by the pipeline's plausibility limits; with
+    them switched off it passes the NaN/inf screen and poisons the q̈ window: the learner must reject
+    exactly the samples it touches, counted as drops, without raising, and learn every other sample
+    exactly as if the bad joint state had been absent."""
     msgs = rich_stream().messages
     window = config["acceleration.window"]
     idx = next(i for i in range(300, len(msgs)) if isinstance(msgs[i], JointStateData))
     js = msgs[idx]
     bad = _set_joint(js, "velocity", "r_elbow", 1e200)
     dirty = (*msgs[:idx], bad, *msgs[idx + 1:])
+    # with the shipped plausibility limits the pipeline drops the joint state first
+    screened = OnlineEstimator(config, regressor=regressor)
+    feed(screened, dirty)
+    assert screened.drops["implausible_value"] == 1 and screened.drops["rejected_sample"] == 0
+    # without them, the learner's own check is the last line of defence
+    config = config.with_overrides({"limits.max_abs_velocity": 0.0})
     est = OnlineEstimator(config, regressor=regressor)
     results = feed(est, dirty)  # must not raise
 
