@@ -338,11 +338,22 @@ class OnlineEstimator:
         Args:
             path: Destination file.
         """
-        state = dict(self.model.state_dict("model."))
+        atomic_save_npz(Path(path).expanduser(), self.checkpoint_state())
+
+    def checkpoint_state(self) -> dict[str, np.ndarray]:
+        """Return what :meth:`save` writes, as arrays that share no memory with the live learner.
+
+        The node takes this snapshot under its model lock (a memory copy) and writes it from another
+        thread with :func:`~semiparam_ros.core.checkpoint.atomic_save_npz`, so learning never waits for disk.
+
+        Returns:
+            Checkpoint arrays by key (``model.*`` learned state, ``meta.*`` version and structure).
+        """
+        state = {key: np.array(value, copy=True) for key, value in self.model.state_dict("model.").items()}
         state["meta.version"] = np.array(_CHECKPOINT_VERSION)
         state["meta.fingerprint"] = np.array(self._fingerprint())
         state["meta.n_samples_learned"] = np.array(self.n_samples_learned)
-        atomic_save_npz(Path(path).expanduser(), state)
+        return state
 
     def load(self, path: str | Path) -> None:
         """Restore the learned state written by :meth:`save`.

@@ -52,7 +52,6 @@ the node or reaches the model.
 from __future__ import annotations
 
 import collections
-import copy
 import sys
 import threading
 import time
@@ -83,6 +82,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from threadpoolctl import threadpool_limits
 
+from semiparam_ros.core.checkpoint import atomic_save_npz
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult
 from semiparam_ros.core.messages import JointStateData, WrenchData
@@ -504,12 +504,11 @@ class EstimatorNode(Node):
     def _write_checkpoint(self) -> tuple[bool, str]:
         assert self._ckpt_path is not None
         with self._model_lock:  # copy under the lock, write outside it: the learner never waits for disk
-            shadow = copy.copy(self._estimator)
-            shadow.model = self._estimator.model.copy()
+            state = self._estimator.checkpoint_state()
             version = self._version
             n_learned = self._estimator.n_samples_learned
         try:
-            shadow.save(self._ckpt_path)
+            atomic_save_npz(self._ckpt_path, state)
         except (OSError, ValueError) as err:
             self._stats.mark_checkpoint(False)
             self.get_logger().error(f"checkpoint to {self._ckpt_path} failed: {err}",
