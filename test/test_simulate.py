@@ -4,6 +4,7 @@ limits, effect magnitudes, acceleration estimate, determinism, CLI."""
 from __future__ import annotations
 
 import hashlib
+import zlib
 from pathlib import Path
 
 import mcap_ros2.decoder
@@ -19,6 +20,7 @@ from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.pipeline import SamplePipeline
 from semiparam_ros.core.semiparametric import ParametricModel
 from semiparam_ros.io.bags import iter_samples, read_messages, read_topic_arrays
+from semiparam_ros.sim import scenario as scenario_module
 from semiparam_ros.sim.effects import DEFAULT_EFFECTS, NOMINAL_RMS, SENSOR_FRAME
 from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics
 from semiparam_ros.sim.scenario import (
@@ -118,7 +120,11 @@ def test_multisine_respects_limits_velocity_and_acceleration():
 
 @pytest.mark.parametrize("plane", ["xy", "xz"])
 def test_circle_is_tracked_within_joint_limits(plane):
-    rec = simulate(ScenarioConfig(name=f"c_{plane}", trajectory=plane, duration=2.0, effects=CLEAN))
+    """Without variability the hand retraces the nominal circle exactly, at 0.6 m/s."""
+    config = ScenarioConfig(
+        name=f"c_{plane}", trajectory=plane, duration=2.0, effects=CLEAN, variability=None
+    )
+    rec = simulate(config)
     setup = CIRCLES[plane]
     kin = ArmKinematics(icub_urdf_path(), locked={"torso_yaw": setup.torso_yaw})
     circle = CartesianCircle(np.array(setup.centre), 0.10, 0.6, plane)
@@ -138,6 +144,55 @@ def test_circle_is_tracked_within_joint_limits(plane):
     assert np.abs(rec.ddq).max() < 20.0  # rad/s², no near-singular spikes
 
 
+@pytest.mark.parametrize("plane", ["xy", "xz"])
+def test_circle_variability_is_slow_bounded_and_exactly_differentiated(plane):
+    """Default variability: speed within ±15 % (+ the radius change) of 0.6 m/s, the hand within the
+    centre/radius wander (+ the blend's few mm) of the nominal circle, no exact repetition, joint limits kept,
+    and q̇, q̈ the derivatives of q (central differences on the trajectory itself)."""
+    config = ScenarioConfig(
+        name=f"v_{plane}", trajectory=plane, duration=60.0, wrench_rate=5.0, effects=CLEAN
+    )
+    var = config.variability
+    assert var is not None and var.active
+    rec = simulate(config)
+    setup = CIRCLES[plane]
+    kin = ArmKinematics(icub_urdf_path(), locked={"torso_yaw": setup.torso_yaw})
+    qs, dqs = rec.q[::7], rec.dq[::7]
+    hand = np.array([kin.position(q) for q in qs])
+    speeds = np.array(
+        [np.linalg.norm(kin.position_jacobian(q)[1] @ dq) for q, dq in zip(qs, dqs, strict=True)]
+    )
+    assert speeds.min() >= 0.6 * (1 - var.speed) * 0.85 and speeds.max() <= 0.6 * (1 + var.speed) * 1.15
+    assert np.ptp(speeds) > 0.6 * var.speed  # the speed does vary
+    e2 = 1 if plane == "xy" else 2
+    normal = 2 if plane == "xy" else 1
+    rel = hand - np.array(setup.centre)
+    dist = np.hypot(rel[:, 0], rel[:, e2])
+    wander = np.sqrt(3) * var.centre + var.radius + 0.005  # m
+    assert np.all(np.abs(dist - 0.10) <= wander) and np.all(np.abs(rel[:, normal]) <= wander)
+    # not an exactly repeating motion: one nominal period later the joints are elsewhere
+    period = 2 * np.pi * 0.10 / 0.6
+    k = round(period * 100)
+    assert np.abs(rec.q[k:] - rec.q[:-k]).max() > 0.02
+    lower, upper = RigidBodyRegressor.from_urdf(
+        icub_urdf_path(), ARM_JOINTS, ft_sensor=SENSOR_FRAME
+    ).position_limits()
+    assert np.all(rec.q >= lower + 0.08) and np.all(rec.q <= upper - 0.08)
+    assert rec.info["trajectory"]["variability"]["speed_relative"] == var.speed
+    # analytic derivatives of the modulated, blended orbit
+    seq = np.random.SeedSequence([int(config.seed), zlib.crc32(config.name.encode())])
+    traj, _, _ = scenario_module._trajectory(config, np.random.default_rng(seq.spawn(3)[0]))
+    t = np.linspace(0.0, 60.0, 301)
+    h = 1e-5
+    _, dq, ddq = traj.evaluate(t)
+    t_joint = (rec.joint_stamps[:200] - rec.joint_stamps[0]) * 1e-9
+    np.testing.assert_allclose(traj.evaluate(t_joint)[0], rec.q[:200], atol=1e-12)  # the bag's trajectory
+    qp, dqp, _ = traj.evaluate(t + h)
+    qm, dqm, _ = traj.evaluate(t - h)
+    np.testing.assert_allclose((qp - qm) / (2 * h), dq, atol=1e-6 * np.abs(dq).max())
+    np.testing.assert_allclose((dqp - dqm) / (2 * h), ddq, atol=1e-6 * np.abs(ddq).max())
+
+
 def test_unreachable_circle_raises():
     with pytest.raises(ValueError, match=r"limit|converge|diverged"):
         simulate(ScenarioConfig(name="too_big", trajectory="xz", radius=0.25, duration=1.0, effects=CLEAN))
@@ -154,12 +209,13 @@ def test_bag_reads_back_with_rosbags_and_mcap_ros2(bags):
     for topic, msgtype in TOPIC_TYPES.items():
         msgs = decoded[topic]
         assert {schema for schema, _, _ in msgs} == {msgtype}
-        assert len(msgs) == 800  # 8 s at 100 Hz
+        count = 800 if "wrench" in topic else 840  # 8 s at 100 Hz; joint states 0.2 s before and after
+        assert len(msgs) == count
         stamps = np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, _, m in msgs])
         assert np.all(np.diff(stamps) > 0)
         np.testing.assert_array_equal(stamps, [log for _, log, _ in msgs])  # log time = header stamp
         np.testing.assert_allclose(1e9 / np.diff(stamps), 100.0, rtol=1e-6)  # Hz, from stamps
-        assert info["topics"][topic]["count"] == 800
+        assert info["topics"][topic]["count"] == count
 
     js = [m for _, _, m in decoded["/joint_states"]]
     assert all(tuple(m.name) == PUBLISHED_JOINT_ORDER for m in js)
@@ -171,7 +227,7 @@ def test_bag_reads_back_with_rosbags_and_mcap_ros2(bags):
     ours = list(read_messages(bag))
     js_ours = [m for m in ours if isinstance(m, JointStateData)]
     w_ours = [m for m in ours if isinstance(m, WrenchData)]
-    assert len(js_ours) == 800 and len(w_ours) == 800
+    assert len(js_ours) == 840 and len(w_ours) == 800
     np.testing.assert_array_equal(np.stack([m.position for m in js_ours]), np.stack([m.position for m in js]))
     w_mcap = np.array(
         [
@@ -203,10 +259,12 @@ def test_paper_rates_and_delay(bags):
     bag = bags["paper_rates"]
     w = read_topic_arrays(bag, "/wrench")
     js = read_topic_arrays(bag, "/joint_states", joints=ARM_JOINTS)
-    assert len(w) == 50 and len(js) == 500
+    assert len(w) == 50 and len(js) == 540  # joint states from 0.2 s before the first wrench to 0.2 s after
     np.testing.assert_allclose(1e9 / np.diff(w.stamp_ns), 10.0, rtol=1e-9)
     # each wrench is sampled 3 ms after a joint state
-    np.testing.assert_array_equal(w.stamp_ns - js.stamp_ns[::10], 3_000_000)
+    np.testing.assert_array_equal(w.stamp_ns - js.stamp_ns[20:520:10], 3_000_000)
+    # the acceleration warm-up costs no wrench: every wrench becomes a learning sample
+    assert len(list(iter_samples(bag, SamplePipeline(ARM_JOINTS, acceleration=AccelerationConfig())))) == 50
     configs = preset_configs("paper")
     assert [c.name for c in configs] == ["icub_xy", "icub_xz", "icub_payload"]
     assert all(round(c.duration * c.wrench_rate) == 10_000 and c.joint_rate == 100.0 for c in configs)
@@ -218,10 +276,17 @@ def test_deterministic_for_a_seed(bags, tmp_path):
     digest = [hashlib.sha256(next(b.glob("*.mcap")).read_bytes()).hexdigest() for b in (bags["noisy"], again)]
     assert digest[0] == digest[1]
     assert (bags["noisy"] / "scenario.yaml").read_text() == (again / "scenario.yaml").read_text()
+    # the seed draws the noise and the circle's variability; without variability only the noise
     other = simulate(ScenarioConfig(name="noisy_xy", trajectory="xy", duration=8.0, seed=1))
     first = simulate(config)
     assert not np.allclose(other.measured_wrench, first.measured_wrench)
-    np.testing.assert_array_equal(other.true_wrench, first.true_wrench)  # only the noise depends on the seed
+    assert not np.allclose(other.q, first.q)
+    fixed = [
+        simulate(ScenarioConfig(name="noisy_xy", trajectory="xy", duration=2.0, seed=s, variability=None))
+        for s in (0, 1)
+    ]
+    assert not np.allclose(fixed[0].measured_wrench, fixed[1].measured_wrench)
+    np.testing.assert_array_equal(fixed[0].true_wrench, fixed[1].true_wrench)
 
 
 # ------------------------------------------------------------------ physics
@@ -303,7 +368,7 @@ def test_payload_adds_the_point_mass_after_pickup(bags):
     q, dq, ddq = X[:, :4], X[:, 4:8], X[:, 8:]
     delta = rigid.fields["wrench"] - reg.wrench(q, dq, ddq)
     after = rigid.stamp_ns >= payload["stamp_ns"]
-    assert after.sum() == 200 and np.abs(delta[~after]).max() < 1e-9
+    assert after.sum() == 220 and np.abs(delta[~after]).max() < 1e-9  # wrenches 0.2–4.2 s, pickup at 2 s
 
     # independent: Newton for a point mass at the palm, m (g − a_p), from Pinocchio's frame kinematics
     kin = ArmKinematics(icub_urdf_path(), locked=info["locked_joints_rad"])
@@ -378,7 +443,7 @@ def test_cli_writes_bags_and_rejects_bad_input(tmp_path, capsys):
     for name in ("icub_xz", "icub_payload"):
         assert (tmp_path / name / "metadata.yaml").is_file()
         info = yaml.safe_load((tmp_path / name / "scenario.yaml").read_text())
-        assert info["topics"]["/wrench"]["count"] == 25 and info["topics"]["/joint_states"]["count"] == 50
+        assert info["topics"]["/wrench"]["count"] == 25 and info["topics"]["/joint_states"]["count"] == 70
     assert (
         yaml.safe_load((tmp_path / "icub_payload" / "scenario.yaml").read_text())["payload"]["time_s"] == 0.5
     )

@@ -54,7 +54,30 @@ def build_parser() -> argparse.ArgumentParser:
         default="xy",
         help="trajectory of the payload scenario (default %(default)s)",
     )
-    p.add_argument("--effects-scale", type=float, default=1.0, help="factor on all non-rigid effects")
+    p.add_argument(
+        "--speed-variation",
+        type=float,
+        default=None,
+        help="relative amplitude of the slow hand-speed modulation on the circles (default 0.15)",
+    )
+    p.add_argument(
+        "--centre-wander",
+        type=float,
+        default=None,
+        help="slow wander of the circle centre per axis (m, default 0.01)",
+    )
+    p.add_argument(
+        "--radius-wander", type=float, default=None, help="slow wander of the circle radius (m, default 0.01)"
+    )
+    p.add_argument(
+        "--no-variability", action="store_true", help="circles repeat exactly (no speed/centre/radius wander)"
+    )
+    p.add_argument(
+        "--effects-scale",
+        type=float,
+        default=1.0,
+        help="factor on all non-rigid effects (on top of the calibrated defaults)",
+    )
     p.add_argument("--noise-scale", type=float, default=1.0, help="factor on all noise levels")
     p.add_argument("--no-effects", action="store_true", help="no non-rigid effects (rigid-body wrench only)")
     p.add_argument("--no-noise", action="store_true", help="no noise on joints and wrench")
@@ -77,12 +100,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from semiparam_ros.sim.effects import DEFAULT_EFFECTS
     from semiparam_ros.sim.generate import generate
-    from semiparam_ros.sim.scenario import PRESETS, preset_configs
+    from semiparam_ros.sim.scenario import DEFAULT_VARIABILITY, PRESETS, TrajectoryVariability, preset_configs
 
     try:
         effects = DEFAULT_EFFECTS.scaled(
             0.0 if args.no_effects else args.effects_scale, 0.0 if args.no_noise else args.noise_scale
         )
+        if args.no_variability:
+            variability = TrajectoryVariability(speed=0.0, centre=0.0, radius=0.0)
+        else:
+            variability = TrajectoryVariability(
+                speed=DEFAULT_VARIABILITY.speed if args.speed_variation is None else args.speed_variation,
+                centre=DEFAULT_VARIABILITY.centre if args.centre_wander is None else args.centre_wander,
+                radius=DEFAULT_VARIABILITY.radius if args.radius_wander is None else args.radius_wander,
+                min_period=DEFAULT_VARIABILITY.min_period,
+                max_period=DEFAULT_VARIABILITY.max_period,
+                components=DEFAULT_VARIABILITY.components,
+            )
         duration = args.duration
         if args.samples is not None:
             if args.samples <= 0:
@@ -103,6 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             speed=args.speed,
             seed=args.seed,
             payload_time=args.payload_time,
+            variability=variability,
         )
         paths = generate(
             args.out,

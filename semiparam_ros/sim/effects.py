@@ -24,6 +24,16 @@ The measurement model, applied at every wrench stamp t (s from the start of the 
 4. **Gaussian noise** ε with standard deviations ``force_noise_std`` (N) and ``torque_noise_std`` (N·m),
    independent per component and sample.
 
+**Calibration of the magnitudes.** :data:`REFERENCE_EFFECTS` lists plausible reference magnitudes (cable
+tensions of 2.1 and 1.7 N, sheath friction 0.65 and 0.4 N, bending stiffness 0.35 N·m/rad, 2 % calibration
+error, offsets ≤ 0.9 N). The paper's own measure of "how much the rigid-body model cannot explain" is its
+P model in the XY→XZ protocol (trained on all XY samples, tested with updates on 10 parts of XZ): ≈2 N and
+≈0.4 N·m at regime. With the reference magnitudes our P stayed at 3.2 N and 0.65 N·m, because the harness
+acts differently in the two planes and the parameters fitted on XY absorb XY-specific effects. All
+non-rigid effects are therefore scaled by :data:`CALIBRATED_EFFECTS_SCALE` = 0.65 in
+:data:`DEFAULT_EFFECTS`, which gives P 2.09 N and 0.415 N·m in that protocol (noise unchanged). The scale
+was chosen on P alone — the learners being compared (NP, SP) played no part in it.
+
 Default magnitudes (:data:`DEFAULT_EFFECTS`; component-averaged RMS — the mean over fx, fy, fz (tx, ty,
 tz) of each component's RMS, as the paper's error metric — over a 60 s bag at 0.6 m/s; also in
 :data:`NOMINAL_RMS` and ``bags/README.md``, checked by ``test/test_simulate.py``):
@@ -31,9 +41,9 @@ tz) of each component's RMS, as the paper's error metric — over a 60 s bag at 
 =========== ================================ ===================================================
 trajectory  non-rigid part (all effects)     left by a rigid-body least-squares fit of that bag
 =========== ================================ ===================================================
-xy circle   3.6 N, 0.56 N·m                  2.6 N, 0.23 N·m
-xz circle   2.1 N, 0.49 N·m                  1.85 N, 0.38 N·m
-multi-sine  4.8 N, 0.21 N·m                  3.9 N, 0.09 N·m
+xy circle   2.3 N, 0.36 N·m                  1.7 N, 0.15 N·m
+xz circle   1.35 N, 0.32 N·m                 1.2 N, 0.25 N·m
+multi-sine  3.1 N, 0.13 N·m                  2.5 N, 0.06 N·m
 =========== ================================ ===================================================
 
 Noise: 0.3 N and 0.03 N·m on the wrench; 1e-4 rad (position) and 2e-3 rad/s (velocity) on the joints.
@@ -52,8 +62,10 @@ import pinocchio as pin
 from semiparam_ros.sim.ik import ArmKinematics
 
 __all__ = [
+    "CALIBRATED_EFFECTS_SCALE",
     "DEFAULT_EFFECTS",
     "NOMINAL_RMS",
+    "REFERENCE_EFFECTS",
     "SENSOR_FRAME",
     "BendingParameters",
     "CableParameters",
@@ -274,17 +286,18 @@ class EffectParameters:
         }
 
 
-#: Component-averaged RMS (force N, torque N·m) of the default effects on 60 s bags at 0.6 m/s:
-#: ``non_rigid`` = true reading − rigid-body wrench; ``unexplained`` = what a least-squares fit of the
-#: base parameters to the noiseless reading leaves.
+#: Component-averaged RMS (force N, torque N·m) of the default effects on 60 s bags at 0.6 m/s (with the
+#: default trajectory variability): ``non_rigid`` = true reading − rigid-body wrench; ``unexplained`` =
+#: what a least-squares fit of the base parameters to the noiseless reading leaves.
 NOMINAL_RMS: dict[str, dict[str, tuple[float, float]]] = {
-    "xy": {"non_rigid": (3.59, 0.555), "unexplained": (2.60, 0.232)},
-    "xz": {"non_rigid": (2.08, 0.494), "unexplained": (1.85, 0.384)},
-    "multisine": {"non_rigid": (4.84, 0.205), "unexplained": (3.90, 0.089)},
+    "xy": {"non_rigid": (2.32, 0.359), "unexplained": (1.68, 0.154)},
+    "xz": {"non_rigid": (1.35, 0.319), "unexplained": (1.20, 0.253)},
+    "multisine": {"non_rigid": (3.13, 0.132), "unexplained": (2.52, 0.058)},
 }
 
-#: Default sensor and harness of the simulated iCub right arm (magnitudes in the module docstring).
-DEFAULT_EFFECTS = EffectParameters(
+#: Reference magnitudes of the harness and sensor errors (before the calibration below): tensions, friction
+#: and bending stiffness as listed, 2 % calibration error, the offset and drift of :class:`EffectParameters`.
+REFERENCE_EFFECTS = EffectParameters(
     cables=(
         CableParameters(
             name="upper_arm_harness",
@@ -311,6 +324,15 @@ DEFAULT_EFFECTS = EffectParameters(
     ),
     bending=BendingParameters(stiffness=0.35, stiffening_angle=1.0, rest_posture=(-0.85, 1.4, 0.45, 1.4)),
 )
+
+#: Factor on every non-rigid effect of :data:`REFERENCE_EFFECTS` (noise unchanged) that gives the paper's
+#: parametric error in its protocol: a rigid-body model trained on the XY circles and tested (with updates)
+#: on the XZ circles stays at ≈2.1 N and ≈0.41 N·m at regime (paper: ≈2 N, ≈0.4 N·m). With the reference
+#: magnitudes it stayed at 3.2 N and 0.65 N·m.
+CALIBRATED_EFFECTS_SCALE = 0.65
+
+#: Default sensor and harness of the simulated iCub right arm (magnitudes in the module docstring).
+DEFAULT_EFFECTS = REFERENCE_EFFECTS.scaled(CALIBRATED_EFFECTS_SCALE, 1.0)
 
 
 def _anchor_positions(

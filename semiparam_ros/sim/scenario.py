@@ -44,17 +44,25 @@ from semiparam_ros.sim.effects import (
     sensor_reading,
 )
 from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics, ClikResult, clik_periodic_orbit
-from semiparam_ros.sim.trajectories import CartesianCircle, FourierTrajectory, multisine
+from semiparam_ros.sim.trajectories import (
+    CartesianCircle,
+    FourierTrajectory,
+    ModulatedOrbit,
+    SlowSignal,
+    multisine,
+)
 
 __all__ = [
     "CIRCLES",
     "DEFAULT_START_NS",
+    "DEFAULT_VARIABILITY",
     "OTHER_JOINTS",
     "PRESETS",
     "PUBLISHED_JOINT_ORDER",
     "CircleSetup",
     "ScenarioConfig",
     "SimulatedRecording",
+    "TrajectoryVariability",
     "preset_configs",
     "simulate",
 ]
@@ -124,6 +132,72 @@ CIRCLES: dict[str, CircleSetup] = {
 
 
 @dataclass(frozen=True)
+class TrajectoryVariability:
+    """Seeded, slow cycle-to-cycle variability of the circle scenarios (a real arm never repeats exactly).
+
+    The iCub's Cartesian controller does not retrace its circle: the hand speed drifts around the commanded
+    0.6 m/s and the drawn circle wanders by a few centimetres. The simulator reproduces this with slow
+    random signals (:class:`~semiparam_ros.sim.trajectories.SlowSignal`, a sum of ``components`` sines with
+    periods log-uniform in ``[min_period, max_period]``): the hand speed is ``v·(1 + speed·s(t))`` and the
+    joint path is blended with the orbits of circles whose centre is shifted by ``centre`` (m) along each
+    root-frame axis and whose radius is changed by ``radius`` (m), with weights in [−1, 1]
+    (:class:`~semiparam_ros.sim.trajectories.ModulatedOrbit`; q, q̇, q̈ stay exactly consistent).
+
+    Attributes:
+        speed: Relative amplitude A of the speed modulation (0 ≤ A < 1).
+        centre: Maximum displacement of the circle centre along each axis (m).
+        radius: Maximum change of the radius (m).
+        min_period: Shortest period of the slow signals (s).
+        max_period: Longest period of the slow signals (s).
+        components: Sines per slow signal.
+    """
+
+    speed: float = 0.15
+    centre: float = 0.01
+    radius: float = 0.01
+    min_period: float = 4.0
+    max_period: float = 40.0
+    components: int = 4
+
+    def __post_init__(self) -> None:
+        for name in ("speed", "centre", "radius", "min_period", "max_period"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+                raise ValueError(f"variability {name} must be a number, got {value!r}")
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"variability {name} must be finite and >= 0, got {value!r}")
+        if not self.speed < 0.5:
+            raise ValueError(f"variability speed must be below 0.5, got {self.speed!r}")
+        if not (0 < self.min_period <= self.max_period) or int(self.components) < 1:
+            raise ValueError("variability needs 0 < min_period <= max_period and components >= 1")
+
+    @property
+    def active(self) -> bool:
+        """Whether any variability is switched on."""
+        return self.speed > 0 or self.centre > 0 or self.radius > 0
+
+    def as_dict(self) -> dict[str, float]:
+        """Plain-Python description with units in the keys (for ``scenario.yaml``)."""
+        return {
+            "speed_relative": float(self.speed),
+            "centre_m": float(self.centre),
+            "radius_m": float(self.radius),
+            "min_period_s": float(self.min_period),
+            "max_period_s": float(self.max_period),
+            "components": int(self.components),
+        }
+
+
+#: Default variability of the circle scenarios (magnitudes and reasons in ``bags/README.md``).
+DEFAULT_VARIABILITY = TrajectoryVariability()
+
+#: Joint states start this long before the first wrench and end this long after the last (s), so that
+#: the acceleration estimator's warm-up never costs a wrench sample (exactly ``duration·wrench_rate``
+#: samples come out of the pipeline for estimator windows up to 2·LEAD_IN·joint_rate + 1 samples).
+LEAD_IN_S = 0.2
+
+
+@dataclass(frozen=True)
 class ScenarioConfig:
     """One synthetic recording.
 
@@ -141,7 +215,9 @@ class ScenarioConfig:
         payload_mass: Mass picked up by the hand (kg); 0 for none.
         payload_time: Pickup time (s from the start); None for the middle of the recording.
         effects: Non-rigid effects and noise levels (already scaled).
-        start_ns: First joint-state stamp (ns).
+        variability: Cycle-to-cycle variability of the circles (None or inactive: exact repetition).
+        start_ns: First joint-state stamp (ns); the first wrench is ``LEAD_IN_S + delay`` later and the
+            joint states continue ``LEAD_IN_S`` after the last wrench.
     """
 
     name: str
@@ -156,6 +232,7 @@ class ScenarioConfig:
     payload_mass: float = 0.0
     payload_time: float | None = None
     effects: EffectParameters = field(default=DEFAULT_EFFECTS)
+    variability: TrajectoryVariability | None = field(default=DEFAULT_VARIABILITY)
     start_ns: int = DEFAULT_START_NS
 
     def __post_init__(self) -> None:
@@ -181,6 +258,8 @@ class ScenarioConfig:
             raise ValueError(f"seed must be >= 0, got {self.seed!r}")
         if int(self.start_ns) + min(0, round(self.delay * 1e9)) < 0:
             raise ValueError("start_ns + delay must be >= 0")
+        if self.variability is not None and not isinstance(self.variability, TrajectoryVariability):
+            raise ValueError("variability must be a TrajectoryVariability or None")
 
     @property
     def pickup_time(self) -> float | None:
@@ -274,9 +353,52 @@ def _circle_orbit(plane: str, radius: float, speed: float) -> tuple[ClikResult, 
     return result, circle
 
 
+def _variant_orbits(
+    plane: str, radius: float, speed: float, var: TrajectoryVariability
+) -> tuple[tuple[FourierTrajectory, ...], list[dict[str, Any]]]:
+    """Orbits of the displaced circles (centre along x, y, z; radius) and their description."""
+    setup = CIRCLES[plane]
+    centre = np.array(setup.centre)
+    displaced: list[tuple[str, np.ndarray, float]] = []
+    if var.centre > 0:
+        for axis, name in enumerate("xyz"):
+            shifted = centre.copy()
+            shifted[axis] += var.centre
+            displaced.append((f"centre_{name}", shifted, radius))
+    if var.radius > 0:
+        displaced.append(("radius", centre, radius + var.radius))
+    orbits, info = [], []
+    for name, c, r in displaced:
+        result = _displaced_orbit(plane, tuple(float(v) for v in c), float(r), float(speed))
+        orbits.append(result.trajectory)
+        info.append(
+            {
+                "variant": name,
+                "centre_m": [float(v) for v in c],
+                "radius_m": float(r),
+                "min_joint_limit_margin_rad": result.min_limit_margin,
+            }
+        )
+    return tuple(orbits), info
+
+
+@lru_cache(maxsize=32)
+def _displaced_orbit(
+    plane: str, centre: tuple[float, float, float], radius: float, speed: float
+) -> ClikResult:
+    setup = CIRCLES[plane]
+    return clik_periodic_orbit(
+        _kinematics(setup.torso_yaw),
+        CartesianCircle(np.array(centre), radius, speed, plane),
+        np.array(setup.q_rest),
+        posture_gain=setup.posture_gain,
+        limit_gain=setup.limit_gain,
+    )
+
+
 def _trajectory(
     config: ScenarioConfig, rng: np.random.Generator
-) -> tuple[FourierTrajectory, float, dict[str, Any]]:
+) -> tuple[FourierTrajectory | ModulatedOrbit, float, dict[str, Any]]:
     """Return the joint trajectory, the locked torso yaw and its description."""
     if config.trajectory == "multisine":
         kin = _kinematics(0.0)
@@ -292,8 +414,31 @@ def _trajectory(
         )
     setup = CIRCLES[config.trajectory]
     result, circle = _circle_orbit(config.trajectory, float(config.radius), float(config.speed))
+    traj: FourierTrajectory | ModulatedOrbit = result.trajectory
+    var = config.variability
+    var_info: dict[str, Any] | None = None
+    if var is not None and var.active:
+        variants, variants_info = _variant_orbits(
+            config.trajectory, float(config.radius), float(config.speed), var
+        )
+
+        def draw() -> SlowSignal:
+            return SlowSignal.random(
+                rng, components=int(var.components), min_period=var.min_period, max_period=var.max_period
+            )
+
+        speed_signal = draw()
+        weights = tuple(draw() for _ in variants)
+        traj = ModulatedOrbit(result.trajectory, variants, weights, speed_signal, float(var.speed))
+        var_info = {
+            **var.as_dict(),
+            "speed_signal": speed_signal.as_dict(),
+            "variants": [
+                {**v, "weight_signal": w.as_dict()} for v, w in zip(variants_info, weights, strict=True)
+            ],
+        }
     return (
-        result.trajectory,
+        traj,
         setup.torso_yaw,
         {
             "type": "circle",
@@ -314,6 +459,7 @@ def _trajectory(
                 "hand_tracking_error_m": result.tracking_error,
                 "min_joint_limit_margin_rad": result.min_limit_margin,
             },
+            "variability": var_info,
         },
     )
 
@@ -345,15 +491,21 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
     reg = _regressor(torso_yaw)
     fx = config.effects
 
-    n_joint = round(config.duration * config.joint_rate)
+    n_joint = round((config.duration + 2.0 * LEAD_IN_S) * config.joint_rate)
     n_wrench = round(config.duration * config.wrench_rate)
-    delay_ns = round(config.delay * 1e9)
+    delay_ns = round((LEAD_IN_S + config.delay) * 1e9)
     joint_stamps = _stamps(config.start_ns, n_joint, config.joint_rate)
     wrench_stamps = _stamps(config.start_ns, n_wrench, config.wrench_rate, delay_ns)
     t_joint = (joint_stamps - config.start_ns) * 1e-9
     t_wrench = (wrench_stamps - config.start_ns) * 1e-9
 
     q, dq, ddq = traj.evaluate(t_joint)
+    margin = min(float(np.min(q - kin.lower)), float(np.min(kin.upper - q)))
+    if margin < 0.02:
+        raise ValueError(
+            f"the trajectory comes within {margin:.3f} rad of a joint limit (need 0.02): reduce the radius, "
+            "speed or variability"
+        )
     q_meas = q + fx.position_noise_std * rng_joint.standard_normal(q.shape)
     dq_meas = dq + fx.velocity_noise_std * rng_joint.standard_normal(dq.shape)
 
@@ -402,7 +554,12 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
         "duration_s": float(config.duration),
         "start_stamp_ns": int(config.start_ns),
         "joint_states": {"rate_hz": float(config.joint_rate), "count": n_joint},
-        "wrench": {"rate_hz": float(config.wrench_rate), "count": n_wrench, "delay_s": float(config.delay)},
+        "wrench": {
+            "rate_hz": float(config.wrench_rate),
+            "count": n_wrench,
+            "delay_s": float(config.delay),
+            "lead_in_s": LEAD_IN_S,
+        },
         "joints": list(ARM_JOINTS),
         "locked_joints_rad": {k: float(v) for k, v in other.items()},
         "trajectory": traj_info,
@@ -421,6 +578,7 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
             "joint_upper_rad": [float(v) for v in kin.upper],
             "max_abs_dq_rad_per_s": [float(v) for v in np.abs(dq).max(axis=0)],
             "max_abs_ddq_rad_per_s2": [float(v) for v in np.abs(ddq).max(axis=0)],
+            "min_joint_limit_margin_rad": margin,
         },
     }
     return SimulatedRecording(

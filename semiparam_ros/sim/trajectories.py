@@ -22,6 +22,8 @@ import numpy as np
 __all__ = [
     "CartesianCircle",
     "FourierTrajectory",
+    "ModulatedOrbit",
+    "SlowSignal",
     "multisine",
 ]
 
@@ -262,3 +264,174 @@ class CartesianCircle:
         th = self.omega * np.atleast_1d(np.asarray(t, dtype=np.float64))
         e1, e2 = self._axes()
         return self.speed * (np.outer(-np.sin(th), e1) + np.outer(np.cos(th), e2))
+
+
+@dataclass(frozen=True)
+class SlowSignal:
+    """A smooth, slowly varying random signal bounded by 1, with analytic derivatives and integral.
+
+    ``c(t) = Σₘ aₘ sin(νₘ t + pₘ)`` with ``aₘ ≥ 0`` and ``Σₘ aₘ ≤ 1``, so ``|c(t)| ≤ 1`` for all t.
+
+    Attributes:
+        amplitudes: aₘ (dimensionless), shape ``(M,)``.
+        frequencies: νₘ (rad/s), shape ``(M,)``.
+        phases: pₘ (rad), shape ``(M,)``.
+    """
+
+    amplitudes: np.ndarray
+    frequencies: np.ndarray
+    phases: np.ndarray
+
+    def __post_init__(self) -> None:
+        a = np.atleast_1d(np.asarray(self.amplitudes, dtype=np.float64))
+        nu = np.atleast_1d(np.asarray(self.frequencies, dtype=np.float64))
+        p = np.atleast_1d(np.asarray(self.phases, dtype=np.float64))
+        if not (a.shape == nu.shape == p.shape) or a.ndim != 1:
+            raise ValueError("amplitudes, frequencies and phases must be 1-D arrays of the same length")
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(nu)) and np.all(np.isfinite(p))):
+            raise ValueError("SlowSignal coefficients must be finite")
+        if np.any(a < 0) or a.sum() > 1.0 + 1e-12 or np.any(nu <= 0):
+            raise ValueError("amplitudes must be >= 0 with sum <= 1 and frequencies > 0")
+        object.__setattr__(self, "amplitudes", a)
+        object.__setattr__(self, "frequencies", nu)
+        object.__setattr__(self, "phases", p)
+
+    @classmethod
+    def random(
+        cls,
+        rng: np.random.Generator,
+        *,
+        components: int = 4,
+        min_period: float = 5.0,
+        max_period: float = 40.0,
+    ) -> SlowSignal:
+        """Draw a signal with ``components`` sines.
+
+        Periods are log-uniform in ``[min_period, max_period]`` (s), phases uniform, amplitudes uniform in
+        [0.5, 1] normalised to sum to 1 (so the signal comes close to ±1).
+
+        Args:
+            rng: Random generator (seeded by the caller).
+            components: Number of sines M.
+            min_period: Shortest period (s).
+            max_period: Longest period (s).
+
+        Returns:
+            The signal.
+
+        Raises:
+            ValueError: On non-positive or inverted periods or no components.
+        """
+        if components < 1 or not (0 < min_period <= max_period):
+            raise ValueError("need components >= 1 and 0 < min_period <= max_period")
+        periods = np.exp(rng.uniform(np.log(min_period), np.log(max_period), components))
+        amp = rng.uniform(0.5, 1.0, components)
+        phases = rng.uniform(0.0, 2.0 * np.pi, components)
+        return cls(amp / amp.sum(), 2.0 * np.pi / periods, phases)
+
+    def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return ``(c, ċ, c̈)`` at the times ``t`` (s), each of shape ``(m,)`` (1, 1/s, 1/s²)."""
+        arg = np.outer(np.asarray(t, dtype=np.float64), self.frequencies) + self.phases
+        s, c = np.sin(arg), np.cos(arg)
+        a, nu = self.amplitudes, self.frequencies
+        return s @ a, c @ (a * nu), -(s @ (a * nu * nu))
+
+    def integral(self, t: np.ndarray) -> np.ndarray:
+        """Return ``∫₀ᵗ c(τ) dτ`` (s) at the times ``t`` (s)."""
+        t = np.asarray(t, dtype=np.float64)
+        arg = np.outer(t, self.frequencies) + self.phases
+        return (np.cos(self.phases) - np.cos(arg)) @ (self.amplitudes / self.frequencies)
+
+    def as_dict(self) -> dict[str, list[float]]:
+        """Plain-Python description (for ``scenario.yaml``)."""
+        return {
+            "amplitudes": [float(v) for v in self.amplitudes],
+            "periods_s": [float(v) for v in 2.0 * np.pi / self.frequencies],
+            "phases_rad": [float(v) for v in self.phases],
+        }
+
+
+@dataclass(frozen=True)
+class ModulatedOrbit:
+    """A periodic joint orbit travelled at a slowly varying rate and slowly blended with nearby orbits.
+
+    The orbits are functions of the circle angle φ (rad): ``Qₖ(φ) = Fₖ(φ/ωₖ)`` with ``Fₖ`` a
+    :class:`FourierTrajectory` of angular frequency ωₖ (the circle's v/r). The phase advances at the
+    modulated rate ``φ̇ = ω₀ (1 + A·s(t))`` with ``s`` a :class:`SlowSignal` (so the hand speed varies by at
+    most ±A around the nominal), and the joint path is the first-order blend
+
+        q(t) = Q₀(φ) + Σₖ cₖ(t) (Qₖ(φ) − Q₀(φ)),
+
+    where Qₖ are the orbits of slightly displaced circles (centre shifted, radius changed) and cₖ slow
+    signals in [−1, 1]: the hand follows a circle whose centre and radius wander by up to the displacements
+    (to second order in the displacement). q̇ and q̈ follow by the chain and product rules in closed form,
+    so q, q̇, q̈ stay exactly consistent.
+
+    Attributes:
+        base: The nominal orbit F₀.
+        variants: Orbits Fₖ of the displaced circles.
+        weights: One slow signal cₖ per variant.
+        speed: The slow signal s of the rate modulation.
+        speed_amplitude: A (dimensionless, 0 ≤ A < 1).
+    """
+
+    base: FourierTrajectory
+    variants: tuple[FourierTrajectory, ...]
+    weights: tuple[SlowSignal, ...]
+    speed: SlowSignal
+    speed_amplitude: float
+
+    def __post_init__(self) -> None:
+        if len(self.variants) != len(self.weights):
+            raise ValueError("one weight signal per variant orbit is required")
+        if any(v.n_joints != self.base.n_joints for v in self.variants):
+            raise ValueError("variant orbits must have the base orbit's joints")
+        if not (np.isfinite(self.speed_amplitude) and 0.0 <= self.speed_amplitude < 1.0):
+            raise ValueError(f"speed_amplitude must be in [0, 1), got {self.speed_amplitude!r}")
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints n."""
+        return self.base.n_joints
+
+    def phase(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Circle angle φ (rad), φ̇ (rad/s), φ̈ (rad/s²) at the times ``t`` (s)."""
+        t = np.asarray(t, dtype=np.float64)
+        w0, amp = self.base.omega, self.speed_amplitude
+        s, ds, _ = self.speed.evaluate(t)
+        return w0 * (t + amp * self.speed.integral(t)), w0 * (1.0 + amp * s), w0 * amp * ds
+
+    @staticmethod
+    def _in_phase(traj: FourierTrajectory, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        q, dq, ddq = traj.evaluate(phi / traj.omega)
+        return q, dq / traj.omega, ddq / traj.omega**2
+
+    def evaluate(self, t: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities and accelerations at the times ``t``.
+
+        Args:
+            t: Times (s), scalar or 1-D array of length m.
+
+        Returns:
+            ``(q, dq, ddq)``, each of shape ``(m, n)`` (rad, rad/s, rad/s²).
+
+        Raises:
+            ValueError: If a time is not finite.
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        if t.ndim != 1 or not np.all(np.isfinite(t)):
+            raise ValueError("t must be a finite scalar or 1-D array of times (s)")
+        phi, dphi, ddphi = self.phase(t)
+        dphi_, ddphi_ = dphi[:, None], ddphi[:, None]
+        Q0, Q0p, Q0pp = self._in_phase(self.base, phi)
+        q = Q0.copy()
+        dq = Q0p * dphi_
+        ddq = Q0pp * dphi_**2 + Q0p * ddphi_
+        for variant, weight in zip(self.variants, self.weights, strict=True):
+            Qk, Qkp, Qkpp = self._in_phase(variant, phi)
+            D, Dp, Dpp = Qk - Q0, Qkp - Q0p, Qkpp - Q0pp
+            c, dc, ddc = (v[:, None] for v in weight.evaluate(t))
+            q += c * D
+            dq += dc * D + c * Dp * dphi_
+            ddq += ddc * D + 2.0 * dc * Dp * dphi_ + c * (Dpp * dphi_**2 + Dp * ddphi_)
+        return q, dq, ddq
