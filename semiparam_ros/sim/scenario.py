@@ -21,8 +21,15 @@ joint accelerations (≤ ≈17 rad/s²): with the wrist locked, the iCub arm's l
 in the chest nor the sensor's dynamics) orients the arm towards the plane. The circle's position in the
 root frame and the torso posture are part of each bag's ``scenario.yaml``.
 
-Time t is measured in seconds from the first joint-state stamp; every signal is evaluated at its own
-stamps, so ``q``, ``q̇``, ``q̈`` and the wrench are exactly consistent at every stamp.
+Real circle tracking never repeats exactly; by default (:data:`DEFAULT_VARIABILITY`) the hand speed is
+modulated slowly by ±15 % and the circle's centre and radius wander by ±1 cm (seeded slow signals with
+periods of 4–40 s, see :class:`TrajectoryVariability`), which keeps ≥ 0.10 rad of clearance to every joint
+limit. ``variability=None`` gives the exactly repeating nominal circle.
+
+Time t is measured in seconds from the first joint-state stamp; the wrench stream starts
+:data:`LEAD_IN_S` later and the joint states end :data:`LEAD_IN_S` after it, so the acceleration
+estimator's warm-up costs no wrench. Every signal is evaluated at its own stamps, so ``q``, ``q̇``, ``q̈``
+and the wrench are exactly consistent at every stamp.
 """
 
 from __future__ import annotations
@@ -56,6 +63,7 @@ __all__ = [
     "CIRCLES",
     "DEFAULT_START_NS",
     "DEFAULT_VARIABILITY",
+    "LEAD_IN_S",
     "OTHER_JOINTS",
     "PRESETS",
     "PUBLISHED_JOINT_ORDER",
