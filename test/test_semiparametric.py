@@ -116,6 +116,45 @@ def test_semiparametric_composition_matches_closed_form():
         np.testing.assert_allclose(p.total, p.parametric + p.residual)
 
 
+def test_sp_warmup_standardizes_yhat_with_measured_y_statistics():
+    """SP's online warm-up: x block from the x statistics, ŷ block from the measured y (default) or from
+    the a-priori ŷ (``yhat_statistics="predicted"``), each against numpy on the warm-up samples; the
+    closed-form ridge gives the a-priori ŷ independently."""
+    rng = np.random.default_rng(7)
+    X, Y = toy_data(rng, 60)
+    n_warm, lam_p = 40, 1e-2
+    yhat = []
+    A, b = lam_p * np.eye(4), np.zeros(4)
+    for x, y in zip(X[:n_warm], Y[:n_warm], strict=True):
+        Phi = regressor(x)
+        yhat.append(Phi @ np.linalg.solve(A, b))
+        A += Phi.T @ Phi
+        b += Phi.T @ y
+    yhat = np.array(yhat)
+    for mode, ystats in (("measured", Y[:n_warm]), ("predicted", yhat)):
+        sp = SemiparametricModel(regressor, 4, 6, 2, lam_parametric=lam_p, lam_nonparametric=0.1,
+                                 n_features=30, sigma=2.0, seed=1, standardizer_warmup=n_warm,
+                                 yhat_statistics=mode)
+        for i, (x, y) in enumerate(zip(X, Y, strict=True)):
+            pred = sp.predict_learn_one(x, y)
+            if i < n_warm:
+                assert np.array_equal(pred.residual, np.zeros(2))
+        std = sp.nonparametric.standardizer
+        assert std.ready and sp.nonparametric.rls.n_samples_seen == len(X) - n_warm
+        expect = np.hstack([X[:n_warm], ystats])
+        np.testing.assert_allclose(std.mean_, expect.mean(0), rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(std.scale_, expect.std(0), rtol=1e-9)
+        # the residual stage's input after the warm-up is [x, ŷ] (not y): predictions use ŷ
+        x = X[-1]
+        yp = sp.parametric.predict_one(x).total
+        feat = sp.nonparametric.rff.transform(std.transform(np.concatenate([x, yp])))
+        np.testing.assert_allclose(sp.predict_one(x).residual, (feat @ sp.nonparametric.rls.weights).ravel(),
+                                   rtol=1e-10, atol=1e-12)
+    assert not np.allclose(Y[:n_warm].std(0), yhat.std(0), rtol=1e-3)  # the two modes really differ
+    with pytest.raises(ValueError, match="yhat_statistics"):
+        SemiparametricModel(regressor, 4, 6, 2, yhat_statistics="ŷ")
+
+
 @pytest.mark.parametrize("kind", ["P", "NP", "SP"])
 def test_predict_learn_one_equals_predict_then_learn(kind):
     rng = np.random.default_rng(3)

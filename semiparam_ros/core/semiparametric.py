@@ -6,7 +6,8 @@
   input: ``ỹ = φ(s(x)) W``.
 * :class:`SemiparametricModel` (SP) — the parametric model runs first and alone; the nonparametric stage
   learns the residual ``y − ŷ`` from random features of the standardized ``[x, ŷ]``, where ``ŷ`` is the
-  parametric stage's *a-priori* prediction for the sample (the same ``ŷ`` used at prediction time).
+  parametric stage's *a-priori* prediction for the sample (the same ``ŷ`` used at prediction time); the
+  online warm-up standardizes the ``ŷ`` block with the measured y's statistics (reason in the class).
   Prediction: ``ŷ + Δŷ``.
 
 Common interface (river-style online learning): ``predict_one(x) -> Prediction``, ``learn_one(x, y)``,
@@ -402,18 +403,42 @@ class SemiparametricModel(_Model):
         seed: Seed of the random features.
         standardizer: Optional :class:`Standardizer` for ``[x, ŷ]`` (n_inputs + n_outputs values).
         standardizer_warmup: Online warm-up length of the standardizer if none is given (0 = identity).
+        yhat_statistics: What the online warm-up standardizes the ŷ block with: ``"measured"`` (default)
+            the statistics of the measured y over the warm-up samples, ``"predicted"`` those of the
+            a-priori ŷ itself (the behaviour before this option existed).
 
     Raises:
         ValueError: Invalid sizes or hyperparameters.
+
+    **Why ŷ is standardized with the measured y's statistics.** ŷ enters the residual stage as an estimate
+    of y, so y's own mean and spread are its natural units, and they do not depend on the rigid-body
+    stage's state. ŷ's own statistics over the warm-up do: the parametric stage starts from zero parameters
+    (as in the paper) and is still converging while the warm-up runs, so its early a-priori predictions
+    (zeros, then overshoots) bias the mean and inflate the spread of the ŷ block — on the synthetic iCub
+    XY circles by up to a factor 2.6 on the torque components — and that mis-scaling is frozen into the
+    kernel metric for the rest of the model's life, weighting the ŷ coordinates arbitrarily against x.
+    Once the parametric stage has converged ŷ ≈ y, so the measured statistics are what ŷ's would then be.
+    The warm-up sees y anyway (the residual target needs it), so this costs nothing. Ablation on the
+    paper's protocol (synthetic XY→XZ bags, D = 500, grid λ_NP ∈ {0.001, 0.01, 0.1} × σ ∈ {3, 4, 6, 8}):
+    SP's torque RMSE at regime relative to NP's is lower at 10 of the 12 points (e.g. 1.029 → 1.019,
+    1.102 → 1.069), its force RMSE at regime changes by less than 0.6 %, and its error over the first 3 s
+    is lower at 8 of 12 points for force and for torque. With an explicit ``standardizer`` this does not
+    apply.
     """
 
     _kind = "semiparametric"
+    _YHAT_STATISTICS = ("measured", "predicted")
 
     def __init__(self, regressor: Regressor, n_params: int, n_inputs: int, n_outputs: int, *,
                  lam_parametric: float = 1.0, lam_nonparametric: float = 1.0, n_features: int = 500,
                  sigma: float = 1.0, forgetting_parametric: float = 1.0,
                  forgetting_nonparametric: float = 1.0, seed: int = 0,
-                 standardizer: Standardizer | None = None, standardizer_warmup: int = 0) -> None:
+                 standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
+                 yhat_statistics: str = "measured") -> None:
+        if yhat_statistics not in self._YHAT_STATISTICS:
+            raise ValueError(f"yhat_statistics must be one of {self._YHAT_STATISTICS}, "
+                             f"got {yhat_statistics!r}")
+        self.yhat_statistics = yhat_statistics
         self.parametric = ParametricModel(regressor, n_params, n_outputs, lam=lam_parametric,
                                           forgetting=forgetting_parametric)
         self.nonparametric = NonparametricModel(int(n_inputs) + int(n_outputs), n_outputs,
@@ -454,7 +479,13 @@ class SemiparametricModel(_Model):
         assert yv is not None
         yp = self.parametric.rls._predict_update_valid(Phi, yv.reshape(-1, 1))[:, 0]
         self.parametric.n_samples_seen += 1
-        r = self.nonparametric._learn(np.concatenate([xv, yp]), yv - yp, want_prediction)
+        npm = self.nonparametric
+        if not npm.standardizer.ready and self.yhat_statistics == "measured":
+            # warm-up: the ŷ block takes the statistics of the measured y (see the class docstring)
+            npm.standardizer.partial_fit(np.concatenate([xv, yv]))
+            r = np.zeros(self.n_outputs)
+        else:
+            r = npm._learn(np.concatenate([xv, yp]), yv - yp, want_prediction)
         self.nonparametric.n_samples_seen += 1
         self.n_samples_seen += 1
         return Prediction(yp, r, yp + r) if want_prediction else None
