@@ -71,6 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--window", type=float, default=3.0, help="sliding RMSE window [s] (default 3)")
     p.add_argument("--train-limit", type=int, default=None, help="use only the first N training samples")
     p.add_argument("--test-limit", type=int, default=None, help="use only the first N test samples")
+    p.add_argument("--test-skip", type=int, default=0,
+                   help="drop the first N test samples (with --train-limit N on the same bag: the protocol "
+                        "within one bag, e.g. for hyperparameter selection on training data)")
     p.add_argument("--pickup-time", type=float, default=None,
                    help="payload pickup [s from the bag's first joint state]; default from the bag's "
                         "scenario.yaml")
@@ -111,6 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             wrench_topic=args.wrench_topic, models=args.models, splits=args.splits,
             split_size=args.split_size,
             window_s=args.window, train_limit=args.train_limit, test_limit=args.test_limit,
+            test_skip=args.test_skip,
             pickup_time_s=args.pickup_time, forgetting=args.forgetting,
             forgetting_nonparametric=args.forgetting_np, json_path=args.json,
             plot_path=args.plot, plot_truth_path=args.plot_truth, markdown_path=args.markdown,

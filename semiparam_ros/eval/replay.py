@@ -149,7 +149,7 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
 def evaluate_bags(train_path: str | Path, test_path: str | Path, config: EstimatorConfig, *,
                   topics: Topics | None = None, kinds: Sequence[str] = KINDS, splits: int = 10,
                   split_size: int | None = None, window_s: float = 3.0, first_s: float = 3.0,
-                  train_limit: int | None = None, test_limit: int | None = None,
+                  train_limit: int | None = None, test_limit: int | None = None, test_skip: int = 0,
                   progress: bool = False) -> tuple[ProtocolResult, dict[str, Any]]:
     """Run the paper's protocol on two bags.
 
@@ -164,7 +164,9 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         window_s: Sliding window [s].
         first_s: Initial segment reported separately [s].
         train_limit: Use only the first samples of the training bag.
-        test_limit: Use only the first samples of the test bag.
+        test_limit: Use only the first samples of the test bag (counted before ``test_skip``).
+        test_skip: Drop this many samples at the start of the test bag (e.g. to run the protocol within one
+            bag: ``train_limit = test_skip = n`` trains on its first n samples and tests on the rest).
         progress: Show a tqdm progress bar.
 
     Returns:
@@ -176,6 +178,12 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
     topics = topics or Topics.from_config(config)
     train_data, train_drops = load_samples(train_path, config, topics, limit=train_limit)
     test_data, test_drops = load_samples(test_path, config, topics, limit=test_limit)
+    if isinstance(test_skip, bool) or not isinstance(test_skip, int) or test_skip < 0:
+        raise ValueError(f"test_skip must be an integer >= 0, got {test_skip!r}")
+    if test_skip:
+        if test_skip >= len(test_data):
+            raise ValueError(f"test_skip = {test_skip} leaves no test sample (the bag has {len(test_data)})")
+        test_data = test_data.slice(test_skip, len(test_data))
     models = build_models(config, kinds, n_train=len(train_data))
     result = run_protocol(models, train_data, test_data, splits=splits, split_size=split_size,
                           window_s=window_s, first_s=first_s, progress=progress)
@@ -183,7 +191,7 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         "train_bag": str(train_path), "test_bag": str(test_path),
         "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench,
         "ground_truth_topic": topics.ground_truth if test_data.Y_true is not None else None,
-        "train_limit": train_limit, "test_limit": test_limit,
+        "train_limit": train_limit, "test_limit": test_limit, "test_skip": test_skip,
         "drops_train": train_drops, "drops_test": test_drops,
         "test_samples_available": len(test_data),
     }

@@ -74,7 +74,8 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
                  overrides: Mapping[str, Any] | None = None, joint_states_topic: str | None = None,
                  wrench_topic: str | None = None, models: Sequence[str] | None = None, splits: int = 10,
                  split_size: int | None = None, window_s: float = 3.0, train_limit: int | None = None,
-                 test_limit: int | None = None, pickup_time_s: float | None = None, forgetting: float = 0.995,
+                 test_limit: int | None = None, test_skip: int = 0, pickup_time_s: float | None = None,
+                 forgetting: float = 0.995,
                  forgetting_nonparametric: float | None = None,
                  json_path: Path | None = None, plot_path: Path | None = None,
                  plot_truth_path: Path | None = None, markdown_path: Path | None = None,
@@ -95,6 +96,7 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
         window_s: Sliding window [s].
         train_limit: Use only the first training samples.
         test_limit: Use only the first test samples.
+        test_skip: Drop this many samples at the start of the test bag.
         pickup_time_s: Payload pickup time [s]; default from the bag's ``scenario.yaml``.
         forgetting: β of the adaptive learners (parametric stage; residual stage too by default).
         forgetting_nonparametric: β of the adaptive learners' residual stage (default: ``forgetting``).
@@ -128,7 +130,7 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
             raise ValueError("the paper protocol needs --train and --test")
         result, info = evaluate_bags(train, test, cfg, topics=topics, kinds=models or KINDS, splits=splits,
                                      split_size=split_size, window_s=window_s, train_limit=train_limit,
-                                     test_limit=test_limit, progress=progress)
+                                     test_limit=test_limit, test_skip=test_skip, progress=progress)
         report = protocol_report(result, config=cfg.to_flat(), protocol=info)
         text = protocol_markdown(report)
         if "ground_truth" in next(iter(report["models"].values())):
