@@ -239,6 +239,25 @@ def test_evaluate_cli_rejects_bad_input(tmp_path: Path, capsys) -> None:
         main(["--train", str(BAGS / "icub_xy")])
 
 
+def test_test_skip_runs_the_protocol_within_one_bag() -> None:
+    """train_limit = test_skip = n on one bag: trained on its first n samples, tested on the following ones
+    (targets equal the bag's samples n, n+1, ...; the pipeline read independently)."""
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.eval.replay import evaluate_bags, load_samples
+
+    config = load_config(CONFIG).with_overrides({"nonparametric.n_features": 20})
+    bag = BAGS / "icub_xy"
+    result, info = evaluate_bags(bag, bag, config, kinds=("P",), splits=2, split_size=100, train_limit=300,
+                                 test_limit=600, test_skip=300)
+    whole, _ = load_samples(bag, config, limit=600)
+    assert info["test_skip"] == 300 and result.samples_train == 300
+    np.testing.assert_array_equal(result.targets.reshape(-1, 6), whole.Y[300:500])
+    with pytest.raises(ValueError, match="test_skip"):
+        evaluate_bags(bag, bag, config, kinds=("P",), splits=1, train_limit=10, test_limit=20, test_skip=20)
+    with pytest.raises(ValueError, match="test_skip"):
+        evaluate_bags(bag, bag, config, kinds=("P",), splits=1, train_limit=10, test_limit=20, test_skip=-1)
+
+
 def test_results_page_renders_from_reports(tmp_path: Path) -> None:
     from semiparam_ros.eval.report import adaptation_report
     from semiparam_ros.eval.results import write_results
