@@ -346,8 +346,11 @@ class EstimatorNode(Node):
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self._model_lock:
-            self._estimator.reset()
+            self._estimator.reset()  # also zeroes the pipeline's drop counts
             self._version += 1
+            # the baseline of _process's drop delta: without this the next message sees the counts fall
+            # and subtracts the pre-reset drops from the period's (WARN level), logging a bogus drop
+            self._last_drop_total = 0
         self._stats.clear_errors()
         self._publish_parameters(force=True)
         if self._ckpt_path is not None:
