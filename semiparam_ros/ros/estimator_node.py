@@ -506,13 +506,13 @@ class EstimatorNode(Node):
 
     def _write_checkpoint(self) -> tuple[bool, str]:
         assert self._ckpt_path is not None
-        with self._model_lock:  # copy under the lock, write outside it: the learner never waits for disk
-            state = self._estimator.checkpoint_state()
-            version = self._version
-            n_learned = self._estimator.n_samples_learned
         try:
+            with self._model_lock:  # copy under the lock, write outside it: the learner never waits for disk
+                state = self._estimator.checkpoint_state()
+                version = self._version
+                n_learned = self._estimator.n_samples_learned
             atomic_save_npz(self._ckpt_path, state)
-        except (OSError, ValueError) as err:
+        except Exception as err:  # any failure: this thread must live on and answer every ~/save request
             self._stats.mark_checkpoint(False)
             self.get_logger().error(f"checkpoint to {self._ckpt_path} failed: {err}",
                                     throttle_duration_sec=_LOG_THROTTLE_S)
