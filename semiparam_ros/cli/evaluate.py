@@ -97,7 +97,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         argv: Arguments (default: ``sys.argv[1:]``).
 
     Returns:
-        Exit status: 0 on success, 2 on invalid input.
+        Exit status: 0 on success, 2 on invalid input, 1 if a file cannot be read or written.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -122,6 +122,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         print(f"evaluate: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # e.g. an output folder that cannot be created: a message, not a traceback
+        print(f"evaluate: error: {err}", file=sys.stderr)
+        return 1
     print(text, end="")
     return 0
 

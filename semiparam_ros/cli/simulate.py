@@ -94,7 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         argv: Arguments (default: ``sys.argv[1:]``).
 
     Returns:
-        0 on success, 2 on invalid arguments.
+        0 on success, 2 on invalid arguments, 1 if a bag cannot be written.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -149,6 +149,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         print(f"simulate: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # e.g. an output folder that cannot be created: a message, not a traceback
+        print(f"simulate: error: {err}", file=sys.stderr)
+        return 1
     for path in paths:
         print(path)
     return 0

@@ -51,7 +51,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         argv: Arguments (default: ``sys.argv[1:]``).
 
     Returns:
-        Exit status: 0 on success, 2 on invalid input.
+        Exit status: 0 on success, 2 on invalid input, 1 if a file cannot be read or written.
     """
     args = build_parser().parse_args(argv)
     from semiparam_ros.eval.run import run_tune  # heavy imports after argument parsing
@@ -66,6 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         print(f"tune: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # e.g. an output folder that cannot be created: a message, not a traceback
+        print(f"tune: error: {err}", file=sys.stderr)
+        return 1
     print(text, end="")
     return 0
 
