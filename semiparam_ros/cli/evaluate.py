@@ -22,7 +22,7 @@ from pathlib import Path
 
 import yaml
 
-__all__ = ["build_parser", "main", "parse_overrides"]
+__all__ = ["add_config_arguments", "build_parser", "main", "parse_overrides"]
 
 
 def parse_overrides(items: Sequence[str]) -> dict[str, object]:
@@ -46,6 +46,20 @@ def parse_overrides(items: Sequence[str]) -> dict[str, object]:
     return out
 
 
+def add_config_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the options every bag-replaying command shares: ``--config``, ``--set`` and the input topics.
+
+    Args:
+        p: The parser to extend (``evaluate``'s or ``tune``'s).
+    """
+    p.add_argument("--config", type=Path, default=None,
+                   help="ROS 2 parameter file (default: the shipped config/icub_right_arm.yaml)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a parameter, e.g. --set nonparametric.n_features=200 (repeatable)")
+    p.add_argument("--joint-states-topic", help="JointState topic (default: /<topics.joint_states>)")
+    p.add_argument("--wrench-topic", help="WrenchStamped topic (default: /<topics.wrench>)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``evaluate``."""
     p = argparse.ArgumentParser(
@@ -56,12 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "optional bag every learner is trained on first")
     p.add_argument("--test", type=Path, help="test bag (paper: the XZ circles)")
     p.add_argument("--payload", type=Path, help="bag with a payload pickup (adaptation scenario)")
-    p.add_argument("--config", type=Path, default=None,
-                   help="ROS 2 parameter file (default: the shipped config/icub_right_arm.yaml)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
-                   help="override a parameter, e.g. --set nonparametric.n_features=200 (repeatable)")
-    p.add_argument("--joint-states-topic", help="JointState topic (default: /<topics.joint_states>)")
-    p.add_argument("--wrench-topic", help="WrenchStamped topic (default: /<topics.wrench>)")
+    add_config_arguments(p)
     p.add_argument("--models", nargs="+", choices=("P", "NP", "SP", "SPfrozenP"), default=None,
                    help="learners (default: P NP SP; with --payload: SP); SPfrozenP = diagnostic SP whose "
                         "rigid-body stage stops learning after the training bag")

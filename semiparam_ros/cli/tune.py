@@ -16,7 +16,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from semiparam_ros.cli.evaluate import parse_overrides
+from semiparam_ros.cli.evaluate import add_config_arguments, parse_overrides
 
 __all__ = ["build_parser", "main"]
 
@@ -26,12 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="tune", description="Hold-out grid search of parametric.lam, "
                                 "nonparametric.lam and nonparametric.sigma for a given D.")
     p.add_argument("--train", type=Path, required=True, help="training bag (its last part is held out)")
-    p.add_argument("--config", type=Path, default=None,
-                   help="ROS 2 parameter file (default: the shipped config/icub_right_arm.yaml)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
-                   help="override a parameter before tuning (repeatable)")
-    p.add_argument("--joint-states-topic", help="JointState topic (default: /<topics.joint_states>)")
-    p.add_argument("--wrench-topic", help="WrenchStamped topic (default: /<topics.wrench>)")
+    add_config_arguments(p)  # --config, --set (applied before tuning), topics
     p.add_argument("--n-features", type=int, default=None, help="D (default: nonparametric.n_features)")
     p.add_argument("--holdout", type=float, default=0.2, help="held-out fraction at the end (default 0.2)")
     p.add_argument("--lam-p", type=float, nargs="+", default=None, help="grid of parametric.lam")
