@@ -7,7 +7,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from semiparam_ros.sim.scenario import ScenarioConfig, simulate
+from semiparam_ros.sim.scenario import LEAD_IN_S, ScenarioConfig, simulate
 from semiparam_ros.sim.writer import write_recording
 
 __all__ = ["generate"]
@@ -49,7 +49,7 @@ def generate(
     paths = []
     for config in configs:
         # Work units: wrench samples simulated + messages written (5 topics).
-        n_joint = round(config.duration * config.joint_rate)
+        n_joint = round((config.duration + 2.0 * LEAD_IN_S) * config.joint_rate)  # lead-in and lead-out
         n_wrench = round(config.duration * config.wrench_rate)
         total = n_wrench + 2 * n_joint + 3 * n_wrench
         with tqdm(total=total, desc=config.name, unit="msg", disable=not progress, leave=True) as bar:
