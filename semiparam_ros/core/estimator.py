@@ -298,6 +298,11 @@ class OnlineEstimator:
         return drops
 
     @property
+    def n_dropped(self) -> int:
+        """Total of :attr:`drops` (every reason, ``rejected_sample`` included), without building the dict."""
+        return self.pipeline.n_dropped + self._rejected
+
+    @property
     def parameters(self) -> np.ndarray | None:
         """Current estimate of the base inertial parameters (None for the NP learner)."""
         return self.model.parameters

@@ -437,7 +437,7 @@ class EstimatorNode(Node):
                     results = est.process_joint_state(data)  # type: ignore[arg-type]
                 if any(r.learned for r in results):
                     self._version += 1
-                drop_total = sum(est.pipeline.drops.values())
+                drop_total = est.n_dropped  # refused samples too: they must raise the level to WARN
         except Exception as err:  # the core rejected something unexpected: count it, keep running
             self._stats.count_drop("estimator_error")
             self.get_logger().error(f"estimator failed on a {kind} message: {err!r}",
