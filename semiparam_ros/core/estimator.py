@@ -256,10 +256,10 @@ class OnlineEstimator:
         return self._step_all(self.pipeline.add_wrench(msg))
 
     def _step_all(self, samples: list[Sample]) -> list[StepResult]:
-        # The pipeline only screens for NaN/inf: a finite but absurd value (e.g. a velocity of 1e200 rad/s)
-        # is accepted and poisons the q̈ window, and the learners then refuse those samples with a
-        # ValueError (state untouched). Streaming must count that as a drop, not abort the message and
-        # lose the other samples it completed.
+        # The pipeline drops NaN/inf and values beyond limits.*, but those bounds can be switched off (0)
+        # or be loose: a finite but absurd value (e.g. a velocity of 1e200 rad/s) then poisons the q̈
+        # window, and the learners refuse those samples with a ValueError (state untouched). Streaming
+        # must count that as a drop, not abort the message and lose the other samples it completed.
         results: list[StepResult] = []
         for sample in samples:
             try:
