@@ -140,3 +140,28 @@ def test_standardizer_bad_input_and_state():
         Standardizer(2).fit(np.zeros((0, 2)))
     ident = Standardizer.identity(2)
     np.testing.assert_array_equal(ident.transform([3.0, -4.0]), [3.0, -4.0])
+
+
+def test_standardizer_scale_floor_for_a_warmup_at_rest():
+    rng = np.random.default_rng(3)
+    floor = np.array([0.05, 0.1, 1.0])
+    at_rest = np.array([0.3, 0.0, 0.0]) + rng.normal(0.0, 1e-4, (200, 3))  # encoder noise only
+    s = Standardizer(3, warmup=200, min_scale=floor)
+    assert s.partial_fit(at_rest)
+    np.testing.assert_array_equal(s.scale_, floor)  # noise std (1e-4) floored to the operating range
+    moving = np.array([1.3, 2.0, 10.0])
+    assert np.all(np.abs(s.transform(moving)) <= 20.0)
+    # without the floor the same warm-up blows motion up to ~1e4 standardized units
+    bare = Standardizer(3, warmup=200)
+    bare.partial_fit(at_rest)
+    assert np.abs(bare.transform(moving)).max() > 1e3
+    # the floor never lowers a measured scale, and survives copies and state round trips
+    wide = Standardizer(3, min_scale=floor).fit(rng.normal(0.0, 5.0, (500, 3)))
+    assert np.all(wide.scale_ > 4.0)
+    restored = Standardizer.from_state_dict(s.state_dict("x."), "x.")
+    np.testing.assert_array_equal(restored.min_scale_, floor)
+    np.testing.assert_array_equal(s.copy().scale_, s.scale_)
+    with pytest.raises(ValueError, match="min_scale"):
+        Standardizer(3, warmup=10, min_scale=[-1.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="min_scale"):
+        Standardizer(3, warmup=10, min_scale=np.nan)

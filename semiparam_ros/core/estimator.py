@@ -41,6 +41,7 @@ __all__ = [
     "build_pipeline",
     "build_regressor",
     "regressor_function",
+    "standardizer_min_scale",
 ]
 
 ModelKind = Literal["P", "NP", "SP"]
@@ -71,6 +72,11 @@ _STRUCTURAL = (
     "nonparametric.lam",
     "nonparametric.forgetting",
     "nonparametric.standardizer_warmup",
+    "nonparametric.min_scale.position",
+    "nonparametric.min_scale.velocity",
+    "nonparametric.min_scale.acceleration",
+    "nonparametric.min_scale.force",
+    "nonparametric.min_scale.torque",
 )
 
 
@@ -147,6 +153,29 @@ def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
     )
 
 
+def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np.ndarray:
+    """Floors of the residual stage's standardization scales, in the units of its inputs.
+
+    Args:
+        config: Estimator configuration (``nonparametric.min_scale.*``, ``robot.*``).
+        with_outputs: Append the ŷ block (SP's residual input ``[x, ŷ]``) to the x block.
+
+    Returns:
+        One floor per input: q [rad], q̇ [rad/s], q̈ [rad/s²] per joint, then forces [N] and torques
+        [N·m] of a wrench, or torques [N·m] per joint.
+    """
+    n = len(config["robot.joints"])
+    floors = [np.full(n, config[f"nonparametric.min_scale.{name}"])
+              for name in ("position", "velocity", "acceleration")]
+    if with_outputs:
+        if config["robot.output"] == "wrench":
+            floors += [np.full(3, config["nonparametric.min_scale.force"]),
+                       np.full(3, config["nonparametric.min_scale.torque"])]
+        else:
+            floors.append(np.full(n, config["nonparametric.min_scale.torque"]))
+    return np.concatenate(floors)
+
+
 def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
                 regressor: RigidBodyRegressor | None = None) -> Model:
     """Build one of the paper's three learners, with zero initial parameters.
@@ -177,6 +206,7 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
             forgetting=config["nonparametric.forgetting"],
             seed=config["nonparametric.seed"],
             standardizer_warmup=config["nonparametric.standardizer_warmup"],
+            standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
         )
     regressor = regressor if regressor is not None else build_regressor(config)
     phi = regressor_function(regressor)
@@ -201,6 +231,7 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
         forgetting_nonparametric=config["nonparametric.forgetting"],
         seed=config["nonparametric.seed"],
         standardizer_warmup=config["nonparametric.standardizer_warmup"],
+        standardizer_min_scale=standardizer_min_scale(config, with_outputs=True),
     )
 
 

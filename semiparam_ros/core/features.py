@@ -163,6 +163,10 @@ class Standardizer:
         warmup: Number of samples of the online warm-up (0 = no online warm-up).
         mean: Optional fixed mean (n_inputs,); requires ``scale`` too.
         scale: Optional fixed scale (n_inputs,), entries > 0.
+        min_scale: Floor of the estimated scale, a scalar or one value per input (≥ 0, in the inputs'
+            units). An online warm-up that happens while the robot is at rest measures only sensor noise
+            (≈1e-4 rad) and would blow later motion up to thousands of standardized units, where the
+            random features carry no information; the floor keeps the scale at a physical operating range.
 
     Raises:
         ValueError: Bad sizes, or inconsistent / non-finite / non-positive mean and scale.
@@ -171,9 +175,14 @@ class Standardizer:
     #: Relative standard deviation below which an input counts as constant (scale 1).
     ZERO_VARIANCE_RTOL = 1e-12
 
-    def __init__(self, n_inputs: int, warmup: int = 0, *, mean: Any = None, scale: Any = None) -> None:
+    def __init__(self, n_inputs: int, warmup: int = 0, *, mean: Any = None, scale: Any = None,
+                 min_scale: Any = 0.0) -> None:
         self.n_inputs = _check_positive_int("n_inputs", n_inputs)
         self.warmup = _check_positive_int("warmup", warmup, minimum=0)
+        floor = np.broadcast_to(np.asarray(min_scale, dtype=np.float64), (self.n_inputs,)).copy()
+        if not (np.isfinite(floor).all() and (floor >= 0).all()):
+            raise ValueError(f"min_scale must be finite and >= 0, got {min_scale!r}")
+        self.min_scale_ = floor
         self.count_ = 0
         self._m2 = np.zeros(self.n_inputs)
         self.mean_ = np.zeros(self.n_inputs)
@@ -204,7 +213,7 @@ class Standardizer:
         std = np.sqrt(np.maximum(var, 0.0))
         constant = std <= self.ZERO_VARIANCE_RTOL * (1.0 + np.abs(mean))
         self.mean_ = mean.copy()
-        self.scale_ = np.where(constant, 1.0, std)
+        self.scale_ = np.maximum(np.where(constant, 1.0, std), self.min_scale_)
         self._ready = True
 
     def fit(self, X: Any) -> Standardizer:
@@ -279,6 +288,7 @@ class Standardizer:
             f"{prefix}mean": self.mean_.copy(),
             f"{prefix}m2": self._m2.copy(),
             f"{prefix}scale": self.scale_.copy(),
+            f"{prefix}min_scale": self.min_scale_.copy(),
             f"{prefix}ready": np.array(self._ready),
         }
 
@@ -298,6 +308,7 @@ class Standardizer:
             warmup = int(state[f"{prefix}warmup"])
             count = int(state[f"{prefix}count"])
             ready = bool(state[f"{prefix}ready"])
+            min_scale = np.asarray(state.get(f"{prefix}min_scale", 0.0), dtype=np.float64)
         except KeyError as err:
             raise ValueError(f"Standardizer state is missing key {err}") from err
         if mean.ndim != 1 or m2.shape != mean.shape or scale.shape != mean.shape or mean.size == 0:
@@ -305,7 +316,7 @@ class Standardizer:
         if not (np.isfinite(mean).all() and np.isfinite(m2).all() and np.isfinite(scale).all()
                 and (scale > 0).all() and count >= 0 and warmup >= 0):
             raise ValueError("invalid Standardizer state values")
-        obj = cls(mean.size, warmup)
+        obj = cls(mean.size, warmup, min_scale=min_scale)
         obj.mean_, obj._m2, obj.scale_ = mean.copy(), m2.copy(), scale.copy()
         obj.count_, obj._ready = count, ready
         return obj

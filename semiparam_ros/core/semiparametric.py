@@ -245,6 +245,8 @@ class NonparametricModel(_Model):
             ``standardizer_warmup > 0``. An unfitted standardizer must have a warm-up.
         standardizer_warmup: If > 0 and no standardizer is given, estimate the statistics online from the
             first N samples; the model predicts a zero residual and does not learn until then.
+        standardizer_min_scale: Floor of the warm-up's scales (scalar or one value per input, units of x);
+            see :class:`Standardizer`.
 
     Raises:
         ValueError: Invalid sizes or hyperparameters, or a standardizer of the wrong size.
@@ -254,12 +256,14 @@ class NonparametricModel(_Model):
 
     def __init__(self, n_inputs: int, n_outputs: int, *, n_features: int = 500, sigma: float = 1.0,
                  lam: float = 1.0, forgetting: float = 1.0, seed: int = 0,
-                 standardizer: Standardizer | None = None, standardizer_warmup: int = 0) -> None:
+                 standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
+                 standardizer_min_scale: Any = 0.0) -> None:
         self.n_inputs = int(n_inputs)
         self.n_outputs = int(n_outputs)
         self.rff = RandomFourierFeatures(n_inputs, n_features, sigma, seed)
         self.rls = RecursiveRLS(self.rff.n_features, n_outputs, lam, forgetting=forgetting)
-        self.standardizer = _make_standardizer(self.n_inputs, standardizer, standardizer_warmup)
+        self.standardizer = _make_standardizer(self.n_inputs, standardizer, standardizer_warmup,
+                                               standardizer_min_scale)
         self._initial_standardizer = self.standardizer.copy()
         self.n_samples_seen = 0
 
@@ -363,7 +367,8 @@ class NonparametricModel(_Model):
         self._initial_standardizer = std0
 
 
-def _make_standardizer(n_inputs: int, standardizer: Standardizer | None, warmup: int) -> Standardizer:
+def _make_standardizer(n_inputs: int, standardizer: Standardizer | None, warmup: int,
+                       min_scale: Any = 0.0) -> Standardizer:
     if standardizer is not None:
         if not isinstance(standardizer, Standardizer):
             raise ValueError("standardizer must be a Standardizer")
@@ -379,7 +384,7 @@ def _make_standardizer(n_inputs: int, standardizer: Standardizer | None, warmup:
         raise ValueError(f"standardizer_warmup must be an integer >= 0, got {warmup!r}")
     if warmup == 0:
         return Standardizer.identity(n_inputs)
-    return Standardizer(n_inputs, int(warmup))
+    return Standardizer(n_inputs, int(warmup), min_scale=min_scale)
 
 
 class SemiparametricModel(_Model):
@@ -403,6 +408,8 @@ class SemiparametricModel(_Model):
         seed: Seed of the random features.
         standardizer: Optional :class:`Standardizer` for ``[x, ŷ]`` (n_inputs + n_outputs values).
         standardizer_warmup: Online warm-up length of the standardizer if none is given (0 = identity).
+        standardizer_min_scale: Floor of the warm-up's scales for ``[x, ŷ]`` (scalar or n_inputs +
+            n_outputs values, units of x and y); see :class:`Standardizer`.
         yhat_statistics: What the online warm-up standardizes the ŷ block with: ``"measured"`` (default)
             the statistics of the measured y over the warm-up samples, ``"predicted"`` those of the
             a-priori ŷ itself (the behaviour before this option existed).
@@ -434,7 +441,7 @@ class SemiparametricModel(_Model):
                  sigma: float = 1.0, forgetting_parametric: float = 1.0,
                  forgetting_nonparametric: float = 1.0, seed: int = 0,
                  standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
-                 yhat_statistics: str = "measured") -> None:
+                 standardizer_min_scale: Any = 0.0, yhat_statistics: str = "measured") -> None:
         if yhat_statistics not in self._YHAT_STATISTICS:
             raise ValueError(f"yhat_statistics must be one of {self._YHAT_STATISTICS}, "
                              f"got {yhat_statistics!r}")
@@ -445,7 +452,8 @@ class SemiparametricModel(_Model):
                                                 n_features=n_features, sigma=sigma, lam=lam_nonparametric,
                                                 forgetting=forgetting_nonparametric, seed=seed,
                                                 standardizer=standardizer,
-                                                standardizer_warmup=standardizer_warmup)
+                                                standardizer_warmup=standardizer_warmup,
+                                                standardizer_min_scale=standardizer_min_scale)
         self.n_inputs = int(n_inputs)
         self.n_outputs = int(n_outputs)
         self.n_samples_seen = 0
