@@ -235,6 +235,10 @@ def test_save_load_round_trip_bit_for_bit(tmp_path):
     assert loaded.n_samples_seen == rls.n_samples_seen == 200
     state = rls.state_dict("p.")
     assert np.array_equal(RecursiveRLS.from_state_dict(state, "p.").predict(Zq), rls.predict(Zq))
+    # a damaged state with a zero pivot is refused (with the prior kept, A is bounded away from singular)
+    state["p.M"][3, 3] = 0.0
+    with pytest.raises(ValueError, match="singular"):
+        RecursiveRLS.from_state_dict(state, "p.")
 
 
 def test_copy_is_independent_and_reset_restores_prior():

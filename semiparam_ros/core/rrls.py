@@ -349,6 +349,10 @@ class RecursiveRLS:
         R = M[:, : obj.n_features]
         if np.any(np.tril(R, -1) != 0.0) or np.any(np.diag(R) < 0.0):
             raise ValueError("RecursiveRLS state R is not upper triangular with a non-negative diagonal")
+        if obj.keep_prior and np.any(np.diag(R) == 0.0):
+            # with the prior kept A ⪰ (min over the cycle of the regularizer)·I > 0, so a zero pivot can only
+            # come from a damaged file, and every later solve would fail
+            raise ValueError("RecursiveRLS state R is singular (zero on the diagonal)")
         if not (0 <= j < obj.n_features) or n_samples_seen < 0 or n_steps < 0:
             raise ValueError("RecursiveRLS state counters are out of range")
         obj._M[:] = M
