@@ -24,9 +24,11 @@ learning_cpu_percent            CPU time spent in the estimator over the last pe
 processed_in_period             queued messages run through the estimator in the last period
 acceleration_delay_ms           inherent lag of the acceleration estimate (centred window)
 queue_length / queue_size       input queue occupancy and bound
-queue_drops                     messages dropped because the queue was full (oldest first)
-drops.<reason>                  input messages dropped by the pipeline or the node, by reason
-drops_total                     sum of all drops, queue drops included
+queue_drops                     messages dropped because the queue was full (oldest first), since start
+drops.<reason>                  input messages dropped by the pipeline or the node, by reason; the
+                                pipeline's reasons count since start or the last ~/reset (which
+                                restarts the pipeline), the node's own (queue_full, ...) since start
+drops_total                     sum of the drops.* values above, queue drops included
 rmse_window                     samples in the RMSE window (≤ diagnostics.rmse_window)
 rmse_force_N, rmse_torque_Nm    a-priori RMSE of the semiparametric prediction (wrench output)
 rmse_parametric_force_N, ...    same for the rigid-body part alone
