@@ -28,6 +28,14 @@ __all__ = [
 ]
 
 
+def _times(t: np.ndarray | float) -> np.ndarray:
+    """Return times (s) as a finite 1-D float array, or raise ValueError."""
+    times = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    if times.ndim != 1 or not np.all(np.isfinite(times)):
+        raise ValueError("t must be a finite scalar or 1-D array of times (s)")
+    return times
+
+
 @dataclass(frozen=True)
 class FourierTrajectory:
     """A periodic joint trajectory as a truncated Fourier series with analytic derivatives.
@@ -88,9 +96,7 @@ class FourierTrajectory:
         Raises:
             ValueError: If a time is not finite.
         """
-        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-        if t.ndim != 1 or not np.all(np.isfinite(t)):
-            raise ValueError("t must be a finite scalar or 1-D array of times (s)")
+        t = _times(t)
         k = np.arange(1, self.n_harmonics + 1, dtype=np.float64)
         kw = k * self.omega
         # Reduce the phase modulo 2π per harmonic in exact integer-period steps: for long bags
@@ -418,9 +424,7 @@ class ModulatedOrbit:
         Raises:
             ValueError: If a time is not finite.
         """
-        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-        if t.ndim != 1 or not np.all(np.isfinite(t)):
-            raise ValueError("t must be a finite scalar or 1-D array of times (s)")
+        t = _times(t)
         phi, dphi, ddphi = self.phase(t)
         dphi_, ddphi_ = dphi[:, None], ddphi[:, None]
         Q0, Q0p, Q0pp = self._in_phase(self.base, phi)
