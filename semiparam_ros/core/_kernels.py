@@ -213,6 +213,7 @@ def qr_rls_steps(
     j0: int,
     P: np.ndarray,
     max_abs: float,
+    L: np.ndarray,
 ) -> int:
     """Apply ``len(Z) // rows_per_step`` consecutive time steps to ``M = [R | d]`` in place.
 
@@ -234,6 +235,11 @@ def qr_rls_steps(
         P: ``(n, t)`` output for the a-priori predictions ``Z W_old`` of every row (W before its step),
             or a ``(0, t)`` array to skip them.
         max_abs: Largest accepted magnitude of an entry of Z and U.
+        L: ``(n_steps·kk, t)`` output for the rotated-out rows ``E`` of every step (``kk`` = k, plus one
+            when ``reg > 0``: the regularizer row's comes last), or a ``(0, t)`` array to skip them. Since
+            the rotations are orthogonal, ``EᵀE`` is the step's increment of the weighted residual matrix
+            ``S = Σ β^{n−m} U_mᵀU_m − dᵀd`` (the minimum of the ridge cost, per pair of output columns):
+            ``S ← β·S + EᵀE``.
 
     Returns:
         The coordinate of the regularizer row of the next step, or −1 if the input was rejected.
@@ -250,6 +256,7 @@ def qr_rls_steps(
     k = rows_per_step
     n_steps = Z.shape[0] // k
     track = P.shape[0] > 0
+    keep = L.shape[0] > 0
     kk = k + 1 if reg > 0.0 else k
     ext = kk if track else 0
     W = np.empty((kk, bt + ext))
@@ -290,6 +297,10 @@ def qr_rls_steps(
                     e[q] = acc / W[r, bt + r]
                 for q in range(bt - b):
                     P[base + r, q] = U[base + r, q] - e[q]
+        if keep:
+            for r in range(kk):
+                for q in range(bt - b):
+                    L[step * kk + r, q] = W[r, b + q]
         j += 1
         if j == b:
             j = 0

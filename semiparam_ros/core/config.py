@@ -172,6 +172,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("nonparametric.min_scale.torque", "double", 0.05,
                   "floor of the standardization scale of predicted torques [N·m] (SP; also joint torques)",
                   min=0.0, max=1e5),
+    # how the two stages are combined
+    ParameterSpec("semiparametric.combination", "string", "cascade",
+                  "SP model: 'cascade' = the paper's (rigid-body stage alone first, residual stage on "
+                  "[x, y_hat]); 'joint' = rigid-body parameters and kernel residual (on x) fitted as one "
+                  "ridge problem, which needs parametric.forgetting == nonparametric.forgetting",
+                  choices=("cascade", "joint")),
     # run time
     ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)", read_only=False),
     ParameterSpec("queue_size", "integer", 1000,
@@ -309,6 +315,13 @@ class EstimatorConfig:
             raise ValueError("parameter 'acceleration.polyorder' must be below 'acceleration.window' for the "
                              f"savgol method, got {checked['acceleration.polyorder']} >= "
                              f"{checked['acceleration.window']}")
+        if checked["semiparametric.combination"] == "joint" and (
+            checked["parametric.forgetting"] != checked["nonparametric.forgetting"]
+        ):
+            fp, fn = checked["parametric.forgetting"], checked["nonparametric.forgetting"]
+            raise ValueError("parameters 'parametric.forgetting' and 'nonparametric.forgetting' must be "
+                             "equal with semiparametric.combination 'joint' (one data weighting for both "
+                             f"terms), got {fp} and {fn}")
         object.__setattr__(self, "values", MappingProxyType(checked))
 
     @classmethod

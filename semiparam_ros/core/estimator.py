@@ -31,6 +31,7 @@ from semiparam_ros.core.semiparametric import (
     Prediction,
     SemiparametricModel,
 )
+from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
 
 __all__ = [
     "DROP_REJECTED_SAMPLE",
@@ -45,7 +46,7 @@ __all__ = [
 ]
 
 ModelKind = Literal["P", "NP", "SP"]
-Model = ParametricModel | NonparametricModel | SemiparametricModel
+Model = ParametricModel | NonparametricModel | SemiparametricModel | JointSemiparametricModel
 
 DROP_REJECTED_SAMPLE = "rejected_sample"
 """Key of :attr:`OnlineEstimator.drops`: a paired sample the learner refused (values beyond its input
@@ -182,7 +183,8 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
 
     Args:
         config: Estimator configuration (``parametric.*``, ``nonparametric.*``).
-        kind: ``"P"`` (rigid-body RRLS), ``"NP"`` (random features RRLS) or ``"SP"`` (both).
+        kind: ``"P"`` (rigid-body RRLS), ``"NP"`` (random features RRLS) or ``"SP"`` (both; the paper's
+            cascade or the joint fit, by ``semiparametric.combination``).
         regressor: Rigid-body regressor to use; built from the configuration when omitted.
 
     Returns:
@@ -217,6 +219,21 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
             regressor.n_outputs,
             lam=config["parametric.lam"],
             forgetting=config["parametric.forgetting"],
+        )
+    if config["semiparametric.combination"] == "joint":
+        return JointSemiparametricModel(
+            phi,
+            regressor.n_base,
+            n_inputs,
+            regressor.n_outputs,
+            lam_parametric=config["parametric.lam"],
+            lam_nonparametric=config["nonparametric.lam"],
+            n_features=config["nonparametric.n_features"],
+            sigma=config["nonparametric.sigma"],
+            forgetting=config["parametric.forgetting"],
+            seed=config["nonparametric.seed"],
+            standardizer_warmup=config["nonparametric.standardizer_warmup"],
+            standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
         )
     return SemiparametricModel(
         phi,

@@ -224,9 +224,37 @@ class RecursiveRLS:
         self._step(Z2, U2, rows_per_step, P)
         return P if predict else None
 
-    def _step(self, Z: np.ndarray, U: np.ndarray, rows_per_step: int, P: np.ndarray) -> None:
+    @property
+    def rows_out_per_step(self) -> int:
+        """Rows rotated out per time step besides the data rows: 1 with the prior-keeping row, else 0."""
+        return 1 if self._reg > 0.0 else 0
+
+    def _predict_update_rows_out(self, Z2: np.ndarray, U2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One time step that also returns the rows the rotations leave below ``[R | d]``.
+
+        For validated C-contiguous float64 (k, b) / (k, t) arrays with k ≤ 32. The returned ``E``
+        ((k + :attr:`rows_out_per_step`), t) satisfies ``S_new = β·S_old + EᵀE`` where
+        ``S = Σ β^{n−m} U_mᵀU_m − dᵀd`` is the minimum of the (weighted, regularized) least-squares
+        cost per pair of output columns: it is what the outputs keep unexplained by ``Z W``, the
+        quantity a second learner needs to fit a joint model on top of this one (profiling W out).
+
+        Returns:
+            ``(P, E)``: the a-priori prediction ``Z W_old`` (k, t) and the rotated-out rows.
+        """
+        k = Z2.shape[0]
+        if k > _MAX_TRACKED_ROWS:
+            raise ValueError(f"at most {_MAX_TRACKED_ROWS} rows per step")
+        P = np.empty((k, self.n_outputs))
+        E = np.empty((k + self.rows_out_per_step, self.n_outputs))
+        self._step(Z2, U2, k, P, E)
+        return P, E
+
+    def _step(self, Z: np.ndarray, U: np.ndarray, rows_per_step: int, P: np.ndarray,
+              E: np.ndarray | None = None) -> None:
         # the kernel checks every value (NaN, inf, > MAX_ABS_INPUT) before it touches the state
-        j = int(qr_rls_steps(self._M, Z, U, rows_per_step, self._scale, self._reg, self._j, P, MAX_ABS_INPUT))
+        E = self._no_pred if E is None else E
+        j = int(qr_rls_steps(self._M, Z, U, rows_per_step, self._scale, self._reg, self._j, P, MAX_ABS_INPUT,
+                             E))
         if j < 0:
             raise ValueError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in "
                              "magnitude")
