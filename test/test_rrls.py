@@ -381,3 +381,25 @@ def test_tiny_problems(b, k):
     A, _, W = closed_form(steps, b, 2, 0.3, 0.9)
     assert rel(rls.weights, W) < 1e-9
     assert rel(rls.R.T @ rls.R, A) < 1e-12
+
+
+@pytest.mark.parametrize("k", [1, 6])
+@pytest.mark.parametrize("beta", [1.0, 0.98])
+def test_rows_out_update_the_residual_matrix(k, beta):
+    """EᵀE = S_new − β·S_old, S = Σ β^{n−m} UᵀU − BᵀA⁻¹B (the minimum of the ridge cost), summed directly."""
+    rng = np.random.default_rng(11)
+    b, t = 7, 4
+    steps = random_steps(rng, 40, k, b, t)
+    rls = RecursiveRLS(b, t, 0.3, forgetting=beta)
+    C = np.zeros((t, t))
+    S_old = np.zeros((t, t))
+    for n, (Z, U) in enumerate(steps):
+        P, E = rls._predict_update_rows_out(np.ascontiguousarray(Z), np.ascontiguousarray(U))
+        assert E.shape == (k + (1 if beta < 1 else 0), t)
+        C = beta * C + U.T @ U
+        _, B, W = closed_form(steps[: n + 1], b, t, 0.3, beta)
+        S_new = C - B.T @ W
+        np.testing.assert_allclose(E.T @ E, S_new - beta * S_old, rtol=1e-8, atol=1e-10)
+        _, _, W_old = closed_form(steps[:n], b, t, 0.3, beta) if n else (None, None, np.zeros((b, t)))
+        np.testing.assert_allclose(P, Z @ W_old, rtol=1e-8, atol=1e-10)
+        S_old = S_new
