@@ -403,3 +403,16 @@ def test_rows_out_update_the_residual_matrix(k, beta):
         _, _, W_old = closed_form(steps[:n], b, t, 0.3, beta) if n else (None, None, np.zeros((b, t)))
         np.testing.assert_allclose(P, Z @ W_old, rtol=1e-8, atol=1e-10)
         S_old = S_new
+
+
+@pytest.mark.parametrize(("b", "t"), [(1, 1), (17, 1), (64, 6), (65, 3)])
+def test_weights_equal_a_lapack_triangular_solve(b, t):
+    """Small factors use the compiled back-substitution, larger ones LAPACK: both equal scipy's solve."""
+    from scipy.linalg import solve_triangular
+
+    rng = np.random.default_rng(b)
+    rls = RecursiveRLS(b, t, 0.5)
+    for Z, U in random_steps(rng, 3 * b, 2, b, t):
+        rls.update(Z, U)
+    expect = solve_triangular(np.array(rls.R), np.array(rls.d), lower=False)
+    np.testing.assert_allclose(rls.weights, expect, rtol=1e-12, atol=1e-14)

@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from semiparam_ros.core._kernels import qr_rls_steps
+from semiparam_ros.core._kernels import back_substitute, qr_rls_steps
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 
 __all__ = ["RecursiveRLS"]
@@ -57,6 +57,8 @@ MAX_ABS_INPUT = 1e150
 #: Blocks with more rows than this are predicted by a triangular solve (the in-rotation prediction
 #: tracks a k×k block and costs O(b·k²)).
 _MAX_TRACKED_ROWS = 32
+#: Factors up to this size are solved by the compiled back-substitution (no scipy call overhead).
+_SMALL_SOLVE = 64
 _STATE_VERSION = 1
 
 
@@ -132,8 +134,11 @@ class RecursiveRLS:
     def weights(self) -> np.ndarray:
         """The ridge solution ``W = R⁻¹d = A⁻¹B`` (b, t), cached until the next update (read-only)."""
         if self._W is None:
-            W = solve_triangular(self._M[:, : self.n_features], self._M[:, self.n_features :], lower=False,
-                                 check_finite=False)
+            if self.n_features <= _SMALL_SOLVE:
+                W = back_substitute(self._M)
+            else:
+                b = self.n_features
+                W = solve_triangular(self._M[:, :b], self._M[:, b:], lower=False, check_finite=False)
             W.flags.writeable = False
             self._W = W
         return self._W
