@@ -818,3 +818,70 @@ def test_warmup_at_rest_does_not_break_the_residual_stage():
     no_floor = cfg.with_overrides({f"nonparametric.min_scale.{k}": 0.0
                                    for k in ("position", "velocity", "acceleration", "force", "torque")})
     assert tail_force_rmse(no_floor, True) > 2.0 * moving
+
+
+# ----------------------------------------------------------------------------- 5. joint semiparametric fit
+BAG_XY = CONFIG_PATH.parents[1] / "bags" / "icub_xy"
+
+
+def test_joint_combination_online_equals_offline_model_and_checkpoint_round_trips(config, tmp_path):
+    """``semiparametric.combination: joint``: the estimator fed a committed bag's messages predicts exactly
+    what a ``build_model(config, "SP")`` joint model driven offline (a second pipeline, predict before
+    learn) predicts; its checkpoint restores bit-identical predictions; a cascade estimator refuses it."""
+    from itertools import islice
+
+    from semiparam_ros.core.semiparametric import SemiparametricModel
+    from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
+    from semiparam_ros.io.bags import read_messages
+
+    cfg = config.with_overrides({"semiparametric.combination": "joint"})
+    msgs = list(islice(read_messages(BAG_XY), 1000))  # the first ≈5 s: joint states and wrenches at 100 Hz
+    est = OnlineEstimator(cfg)
+    assert isinstance(est.model, JointSemiparametricModel)
+    split = 600
+    first = feed(est, msgs[:split])
+    path = tmp_path / "joint.npz"
+    est.save(path)
+    rest = feed(est, msgs[split:])
+    results = first + rest
+
+    samples = pipeline_samples(cfg, msgs)
+    model = build_model(cfg, "SP")
+    assert isinstance(model, JointSemiparametricModel)
+    assert len(results) == len(samples) > 400 and len(first) > WARMUP and len(rest) > 100
+    for r, s in zip(results, samples, strict=True):
+        assert r.learned and r.sample.stamp_ns == s.stamp_ns
+        assert np.array_equal(r.sample.x, s.x) and np.array_equal(r.sample.y, s.y)
+        p = model.predict_one(s.x)
+        model.learn_one(s.x, s.y)
+        for part in ("parametric", "residual", "total"):
+            np.testing.assert_allclose(getattr(r.prediction, part), getattr(p, part), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(est.parameters, model.parameters, rtol=0, atol=1e-10)
+    assert est.n_samples_learned == model.n_samples_seen == len(samples)
+    # both terms contribute: the kernel term after the standardizer warm-up, the rigid-body term throughout
+    residuals = np.array([r.prediction.residual for r in results])
+    assert np.abs(residuals[WARMUP + 1:]).max() > 0 and np.abs(est.parameters).max() > 0
+
+    loaded = OnlineEstimator(cfg)
+    loaded.load(path)
+    assert loaded.n_samples_learned == len(first)
+    for r in rest:
+        assert_same_prediction(loaded.step(r.sample).prediction, r.prediction)
+    assert_same_state(snapshot(loaded), snapshot(est))
+
+    cascade = OnlineEstimator(config)
+    assert isinstance(cascade.model, SemiparametricModel)
+    before = snapshot(cascade)
+    with pytest.raises(ValueError, match=r"semiparametric_joint|combination|another model structure"):
+        cascade.load(path)
+    assert_same_state(snapshot(cascade), before)
+
+
+def test_joint_combination_with_unequal_forgetting_is_refused(config):
+    for overrides in ({"parametric.forgetting": 0.99}, {"nonparametric.forgetting": 0.995}):
+        with pytest.raises(ValueError, match=r"'parametric\.forgetting' and 'nonparametric\.forgetting'"):
+            config.with_overrides({"semiparametric.combination": "joint", **overrides})
+    # equal factors below 1 are fine: one data weighting for both terms
+    joint = config.with_overrides({"semiparametric.combination": "joint", "parametric.forgetting": 0.99,
+                                   "nonparametric.forgetting": 0.99})
+    assert OnlineEstimator(joint).model.forgetting == 0.99

@@ -176,6 +176,54 @@ def test_report_json_and_checks(tmp_path: Path) -> None:
     assert not list(tmp_path.glob("*.tmp"))
 
 
+def test_paper_checks_judge_sp_and_spj_separately() -> None:
+    train, test = toy_stream(100, 6), toy_stream(200, 7)
+    models = {"P": ToyRidge(3, 6, lam=1e6), "NP": ToyRidge(3, 6), "SP": ToyRidge(3, 6, lam=0.5),
+              "SPJ": ToyRidge(3, 6, lam=2.0)}
+    report = protocol_report(run_protocol(models, train, test, splits=2))
+    m = report["models"]
+    checks = paper_checks(report)
+    assert len(checks) == 14
+    # SP's eight come first under their old names; SPJ's six follow, computed from SPJ's own errors
+    without = paper_checks({**report, "models": {k: v for k, v in m.items() if k != "SPJ"}})
+    assert checks[:8] == without
+    spj = {c["check"]: c for c in checks[8:]}
+    assert all(c["model"] == "SPJ" for c in spj.values())
+    assert spj["SPJ torque RMSE at regime / P's"]["value"] == pytest.approx(
+        m["SPJ"]["torque_rmse"] / m["P"]["torque_rmse"])
+    first = spj["SPJ force RMSE over the first 3 s / NP's"]
+    assert first["value"] == pytest.approx(m["SPJ"]["force_rmse_first_3s"] / m["NP"]["force_rmse_first_3s"])
+    assert first["passed"] == (first["value"] < 1.0) and first["limit"] == 1.0
+    regime = spj["SPJ force RMSE at regime / NP's"]
+    assert regime["passed"] == (m["SPJ"]["force_rmse"] <= m["NP"]["force_rmse"])
+    # SPJ alone (no SP) is judged too; without any semiparametric model there is nothing to judge
+    only = paper_checks({**report, "models": {k: v for k, v in m.items() if k != "SP"}})
+    assert {c["model"] for c in only} == {"SPJ", "NP"} and len(only) == 8
+    with pytest.raises(ValueError, match="SPJ"):
+        paper_checks({**report, "models": {k: m[k] for k in ("P", "NP")}})
+
+
+def test_build_models_spj_is_the_joint_fit_whatever_the_configuration_says() -> None:
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.core.semiparametric import SemiparametricModel
+    from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
+    from semiparam_ros.eval.replay import JOINT_SP, build_models
+
+    small = {"nonparametric.n_features": 20, "nonparametric.standardizer_warmup": 5}
+    cascade = load_config(CONFIG).with_overrides(small)
+    assert cascade["semiparametric.combination"] == "cascade"
+    models = build_models(cascade, ["SP", JOINT_SP])
+    assert type(models["SP"]) is SemiparametricModel and type(models[JOINT_SP]) is JointSemiparametricModel
+    assert models[JOINT_SP].nonparametric.rls.lam == cascade["nonparametric.lam"]
+    joint = cascade.with_overrides({"semiparametric.combination": "joint"})
+    assert all(type(m) is JointSemiparametricModel for m in build_models(joint, ["SP", JOINT_SP]).values())
+    # the joint fit has one data weighting: a configuration with two different factors is refused by name
+    unequal = cascade.with_overrides({"parametric.forgetting": 0.99})
+    assert type(build_models(unequal, ["SP"])["SP"]) is SemiparametricModel
+    with pytest.raises(ValueError, match=r"SPJ.*'parametric\.forgetting' and 'nonparametric\.forgetting'"):
+        build_models(unequal, [JOINT_SP])
+
+
 # ------------------------------------------------------------------------------ committed bags, CLI
 BAGS = ROOT / "bags"
 CONFIG = ROOT / "config" / "icub_right_arm.yaml"
@@ -201,17 +249,26 @@ def test_evaluate_cli_report_and_figure_on_committed_bag(tmp_path: Path, capsys)
     # a prefix of the committed bags and a small D: the fields, not the accuracy, are under test here
     argv = ["--train", str(BAGS / "icub_xy"), "--test", str(BAGS / "icub_xz"), "--config", str(CONFIG),
             "--set", "nonparametric.n_features=50", "--set", "nonparametric.standardizer_warmup=50",
-            "--train-limit", "300", "--test-limit", "400", "--splits", "2", "--json", str(out_json),
-            "--plot", str(out_png), "--no-progress"]
+            "--train-limit", "300", "--test-limit", "400", "--splits", "2", "--models", "P", "NP", "SP",
+            "SPJ", "--json", str(out_json), "--plot", str(out_png), "--no-progress"]
     assert main(argv) == 0
-    assert "| SP |" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "| SP |" in printed and "| SPJ |" in printed
+    assert "| SPJ force RMSE at regime / NP's |" in printed
+    assert "| SP force RMSE at regime / NP's |" in printed
     report = json.loads(out_json.read_text())
-    for kind in ("P", "NP", "SP"):
+    assert list(report["models"]) == ["P", "NP", "SP", "SPJ"]
+    # the criteria are evaluated for SP and for SPJ separately: 8 for P/NP/SP, 6 more for SPJ
+    assert len(report["checks"]) == 14 and sum(c["model"] == "SPJ" for c in report["checks"]) == 6
+    for kind in ("P", "NP", "SP", "SPJ"):
         stats = report["models"][kind]
         for key in ("force_rmse", "torque_rmse", "force_rmse_first_3s", "torque_rmse_first_3s"):
             assert isinstance(stats[key], float) and math.isfinite(stats[key]) and stats[key] > 0
         assert math.isfinite(report["update_us"][kind]) and report["update_us"][kind] > 0
         assert len(report["curves"][kind]["force_mean"]) == len(report["curves"]["time_s"]) == 200
+        assert math.isfinite(report["models"][kind]["ground_truth"]["torque_rmse"])
+    # SPJ is its own learner, not a copy of SP's predictions
+    assert report["models"]["SPJ"]["force_rmse_splits"] != report["models"]["SP"]["force_rmse_splits"]
     assert report["splits"] == 2 and report["samples_train"] == 300 and report["samples_test"] == 400
     assert report["config"]["nonparametric.n_features"] == 50
     assert report["config"]["robot.joints"] == ["r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw",
@@ -278,6 +335,60 @@ def test_results_page_renders_from_reports(tmp_path: Path) -> None:
     assert f"{paper['models']['SP']['force_rmse']:.3g}" in text
     assert "| P adaptive | force [N] |" in text and "| P no adaptation | force [N] |" in text
     assert text.count("| pass |") + text.count("| pass, but a tie") + text.count("| FAIL |") == 8
+
+
+def test_results_page_with_the_joint_model(tmp_path: Path) -> None:
+    """With SPJ in the reports the page gets its rows, its own criteria table and the SPJ section, whose
+    numbers come from the reports (incl. the within-XY comparison when ``within_xy.json`` is there)."""
+    from semiparam_ros.eval.report import adaptation_report
+    from semiparam_ros.eval.results import write_results
+
+    def kinds():
+        return {"P": ToyRidge(3, 6, lam=1e6), "NP": ToyRidge(3, 6), "SP": ToyRidge(3, 6, lam=0.5),
+                "SPJ": ToyRidge(3, 6, lam=2.0)}
+
+    paper = protocol_report(run_protocol(kinds(), toy_stream(100, 8), toy_stream(200, 9), splits=2),
+                            protocol={"train_bag": "xy", "test_bag": "xz"})
+    paper["checks"] = paper_checks(paper)
+    within = protocol_report(run_protocol(kinds(), toy_stream(100, 12), toy_stream(300, 13), splits=3))
+    stream = toy_stream(4000, 5, shift_at=2000)
+    adapt = run_adaptation({"SP adaptive": ToyRidge(3, 6, forgetting=0.99), "SPJ adaptive": ToyRidge(3, 6,
+                            forgetting=0.99), "SPJ no adaptation": ToyRidge(3, 6)}, stream, change_s=20.0,
+                           window_s=1.0)
+    payload = adaptation_report(adapt, protocol={"bag": "payload", "pickup_time_s": 20.0, "forgetting": 0.99})
+    figs = tmp_path / "figures"
+    write_json(paper, figs / "paper.json")
+    write_json(payload, figs / "payload.json")
+    text = write_results(figs / "paper.json", figs / "payload.json", tmp_path / "results.md").read_text()
+    assert "P, NP, SP and SPJ start from zero" in text and "| SPJ |" in text
+    assert "### The joint semiparametric model (SPJ" in text and "semiparametric_joint.py" in text
+    assert "not selected separately" in text and "Within the training bag" not in text
+    m = paper["models"]
+    assert f"SPJ/NP = {m['SPJ']['force_rmse_first_3s'] / m['NP']['force_rmse_first_3s']:.2f} (force)" in text
+    assert f"SPJ/NP = {m['SPJ']['force_rmse'] / m['NP']['force_rmse']:.4f} force" in text
+    # two criteria tables: SP's 8 rows (6 on SP, 2 on NP) and SPJ's 6
+    verdicts = [line for line in text.splitlines() if line.startswith("| S") and "RMSE" in line
+                and line.rstrip().endswith(("| pass |", "| FAIL |", "(within 1 % of the limit) |"))]
+    assert sum(line.startswith("| SPJ ") for line in verdicts) == 6
+    assert sum(line.startswith("| SP ") for line in verdicts) == 6
+    assert sum(line.startswith("| NP ") for line in text.splitlines() if "RMSE at regime / P's" in line) == 2
+    assert "| SPJ adaptive | force [N] |" in text and "| SPJ no adaptation | torque [N·m] |" in text
+    write_json(within, figs / "within_xy.json")
+    text = write_results(figs / "paper.json", figs / "payload.json", tmp_path / "results.md").read_text()
+    w = within["models"]
+    assert "Within the training bag" in text and f"SP {w['SP']['force_rmse']:.4g} N" in text
+    assert f"SPJ {w['SPJ']['force_rmse']:.4g} N" in text
+
+
+def test_figures_draw_spj_in_its_own_colour_and_name() -> None:
+    from semiparam_ros.eval.figures import COLORS, _color, _label
+
+    assert _color("SPJ", 0) == "tab:purple" == _color("SPJ adaptive (β=0.995)", 3)
+    assert len(set(COLORS.values())) == len(COLORS)  # no two learners share a colour
+    assert _color("SPfrozenP", 0) not in COLORS.values()
+    assert _label("SPJ") == "SP joint" and _label("SPJ no adaptation") == "SP joint no adaptation"
+    assert _label("SP adaptive (β=0.995)") == "SP adaptive (β=0.995)"
+    assert _color("SP adaptive", 0) == "tab:blue"
 
 
 def test_adaptation_figure_is_a_valid_png(tmp_path: Path) -> None:
@@ -404,11 +515,15 @@ def test_payload_cli_and_pickup_time(tmp_path: Path, capsys) -> None:
     out = tmp_path / "payload.json"
     # explicit --pickup-time on a bag without a payload: the CLI path runs and reports finite numbers
     argv = ["--payload", str(BAGS / "icub_xy"), "--pickup-time", "15", "--set", "nonparametric.n_features=50",
-            "--forgetting", "0.99", "--json", str(out), "--plot", str(tmp_path / "p.png"), "--no-progress"]
+            "--forgetting", "0.99", "--models", "SP", "SPJ", "--json", str(out), "--plot",
+            str(tmp_path / "p.png"), "--no-progress"]
     assert main(argv) == 0
-    assert "| SP adaptive (β=0.99) | force [N] |" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "| SP adaptive (β=0.99) | force [N] |" in printed
+    assert "| SPJ adaptive (β=0.99) | force [N] |" in printed and "| SPJ no adaptation | torque" in printed
     report = json.loads(out.read_text())
     assert report["protocol"]["pickup_time_s"] == 15.0 and _finite_tree(report["summary"])
+    assert len(report["summary"]) == 4 and report["summary"]["SPJ adaptive (β=0.99)"]["force"]["pre_rmse"] > 0
     assert (tmp_path / "p.png").read_bytes()[:8] == PNG_MAGIC
     # no scenario.yaml and no --pickup-time: a clear error
     assert main(["--payload", str(BAGS / "icub_xy"), "--no-progress"]) == 2

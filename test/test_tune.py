@@ -75,6 +75,26 @@ def test_tune_cli_writes_a_parameter_file_evaluate_accepts(tmp_path: Path, capsy
                           "--test-limit", "200", "--splits", "2", "--no-progress"]) == 0
 
 
+def test_tune_spj_scores_the_joint_fit_and_selects_it(data, tmp_path: Path, capsys) -> None:
+    """kind="SPJ": each grid point is scored with the joint semiparametric fit (the independent loop on a
+    joint model gives the same hold-out error) and the tuned configuration selects it."""
+    config, samples = data
+    samples = samples.head(500)
+    joint = config.with_overrides({"semiparametric.combination": "joint"})
+    grid = {key: [config[key]] for key in ("parametric.lam", "nonparametric.lam", "nonparametric.sigma")}
+    result = tune(config, samples, holdout=0.2, grid=grid, kind="SPJ")
+    assert len(result.grid) == 1 and result.config["semiparametric.combination"] == "joint"
+    assert result.default["score"] == pytest.approx(direct_holdout_nrmse(joint, samples), rel=1e-9)
+    assert result.default["score"] != pytest.approx(direct_holdout_nrmse(config, samples), rel=1e-6)
+    out = tmp_path / "tuned_joint.yaml"
+    argv = ["--train", str(XY), "--config", str(CONFIG), "--limit", "300", "--n-features", "30",
+            "--set", "nonparametric.standardizer_warmup=50", "--lam-p", "0.01", "--lam-np", "1",
+            "--sigma", "4", "--model", "SPJ", "--out", str(out), "--no-progress"]
+    assert tune_main(argv) == 0
+    assert "grid search of SPJ" in capsys.readouterr().out
+    assert load_config(out)["semiparametric.combination"] == "joint"
+
+
 def test_tune_rejects_bad_input(data) -> None:
     config, samples = data
     with pytest.raises(ValueError, match="holdout"):

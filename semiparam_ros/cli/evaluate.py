@@ -5,6 +5,8 @@ Paper protocol (P, NP, SP from zero; train on all of --train; test-then-train on
     evaluate --train bags/generated/icub_xy --test bags/generated/icub_xz --split-size 1000 \
         --json results/report.json --plot results/fig3.png
 
+Add ``--models P NP SP SPJ`` to compare the joint semiparametric fit (``SPJ``) with the paper's cascade.
+
 Payload scenario (one bag with a pickup; SP with and without forgetting)::
 
     evaluate --payload bags/icub_payload --forgetting 0.995 --json results/payload.json \
@@ -71,9 +73,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--test", type=Path, help="test bag (paper: the XZ circles)")
     p.add_argument("--payload", type=Path, help="bag with a payload pickup (adaptation scenario)")
     add_config_arguments(p)
-    p.add_argument("--models", nargs="+", choices=("P", "NP", "SP", "SPfrozenP"), default=None,
-                   help="learners (default: P NP SP; with --payload: SP); SPfrozenP = diagnostic SP whose "
-                        "rigid-body stage stops learning after the training bag")
+    p.add_argument("--models", nargs="+", choices=("P", "NP", "SP", "SPJ", "SPfrozenP"), default=None,
+                   help="learners (default: P NP SP; with --payload: SP); SPJ = the joint semiparametric fit "
+                        "(semiparametric.combination=joint whatever the configuration says; needs equal "
+                        "forgetting factors); SPfrozenP = diagnostic SP whose rigid-body stage stops "
+                        "learning after the training bag")
     p.add_argument("--splits", type=int, default=10, help="number of sequential test parts (default 10)")
     p.add_argument("--split-size", type=int, default=None,
                    help="samples per part (paper: 1000); omitted: the test bag in --splits equal parts")

@@ -32,6 +32,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lam-p", type=float, nargs="+", default=None, help="grid of parametric.lam")
     p.add_argument("--lam-np", type=float, nargs="+", default=None, help="grid of nonparametric.lam")
     p.add_argument("--sigma", type=float, nargs="+", default=None, help="grid of nonparametric.sigma")
+    p.add_argument("--model", choices=("SP", "SPJ"), default="SP",
+                   help="learner to tune: SP as configured (default) or SPJ, the joint semiparametric fit "
+                        "(the written file then sets semiparametric.combination: joint)")
     p.add_argument("--limit", type=int, default=None, help="use only the first N samples of the bag")
     p.add_argument("--out", type=Path, default=None, help="write the tuned parameter file here")
     p.add_argument("--json", type=Path, default=None, help="write the grid as JSON here")
@@ -57,7 +60,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         text = run_tune(train=args.train, config=args.config, overrides=parse_overrides(args.overrides),
                         joint_states_topic=args.joint_states_topic, wrench_topic=args.wrench_topic,
                         n_features=args.n_features, holdout=args.holdout, grid=grid, limit=args.limit,
-                        out=args.out, json_path=args.json, progress=not args.no_progress)
+                        out=args.out, json_path=args.json, progress=not args.no_progress, kind=args.model)
     except ValueError as err:
         print(f"tune: error: {err}", file=sys.stderr)
         return 2

@@ -2,7 +2,8 @@
 
 :func:`plot_protocol` draws the paper's Fig. 3: force (top) and torque (bottom) windowed RMSE against the
 time from the start of each test split on a log axis, mean over splits as a line and ± one standard
-deviation shaded, P green, NP red, SP blue. :func:`plot_adaptation` draws the payload scenario: windowed
+deviation shaded, P green, NP red, SP blue (and SPJ, the joint semiparametric fit, purple, labelled
+"SP joint"). :func:`plot_adaptation` draws the payload scenario: windowed
 force and torque RMSE against the time from the pickup, one line per model (with and without adaptation),
 the pre-pickup level and the recovery tolerance band.
 """
@@ -21,19 +22,34 @@ matplotlib.use("Agg")  # before pyplot: headless, deterministic PNGs
 import matplotlib.pyplot as plt
 import numpy as np
 
-__all__ = ["COLORS", "plot_adaptation", "plot_protocol"]
+__all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_protocol"]
 
-#: The paper's colours: parametric green, nonparametric red, semiparametric blue.
-COLORS: dict[str, str] = {"P": "tab:green", "NP": "tab:red", "SP": "tab:blue"}
+#: The paper's colours: parametric green, nonparametric red, semiparametric blue; the joint semiparametric
+#: fit (not in the paper) purple.
+COLORS: dict[str, str] = {"P": "tab:green", "NP": "tab:red", "SP": "tab:blue", "SPJ": "tab:purple"}
+#: Legend names of model kinds that differ from the kind (a kind is also the prefix of adaptation names,
+#: e.g. ``"SPJ adaptive (β=0.995)"``).
+LABELS: dict[str, str] = {"SPJ": "SP joint"}
 _UNITS = {"force": "N", "torque": "N·m"}
-_EXTRA = ("tab:purple", "tab:orange", "tab:brown", "tab:gray", "tab:olive", "tab:cyan")
+_EXTRA = ("tab:orange", "tab:brown", "tab:gray", "tab:olive", "tab:cyan", "tab:pink")
+
+
+def _prefix(kind: str, names: Mapping[str, str]) -> str | None:
+    """Return the longest key of ``names`` that is ``kind`` or its first word (``None`` if none)."""
+    for key in sorted(names, key=len, reverse=True):
+        if kind == key or kind.startswith(key + " "):
+            return key
+    return None
 
 
 def _color(kind: str, index: int) -> str:
-    for key in sorted(COLORS, key=len, reverse=True):
-        if kind == key or kind.startswith(key + " "):
-            return COLORS[key]
-    return _EXTRA[index % len(_EXTRA)]
+    key = _prefix(kind, COLORS)
+    return COLORS[key] if key is not None else _EXTRA[index % len(_EXTRA)]
+
+
+def _label(kind: str) -> str:
+    key = _prefix(kind, LABELS)
+    return kind if key is None else LABELS[key] + kind[len(key):]
 
 
 def _save(fig: Any, path: str | Path, dpi: int) -> Path:
@@ -82,7 +98,7 @@ def plot_protocol(report: Mapping[str, Any], path: str | Path, *, truth: bool = 
             mean = np.asarray(entry[f"{group}_mean"])
             std = np.asarray(entry[f"{group}_std"])
             color = _color(kind, i)
-            ax.plot(time_s, mean, color=color, lw=1.4, label=kind)
+            ax.plot(time_s, mean, color=color, lw=1.4, label=_label(kind))
             ax.fill_between(time_s, mean - std, mean + std, color=color, alpha=0.2, lw=0)
         ax.set_xscale("log")
         ax.set_ylabel(f"{group} RMSE [{_UNITS[group]}]")
@@ -129,9 +145,12 @@ def plot_adaptation(report: Mapping[str, Any], path: str | Path, *, title: str |
     for ax, group in zip(axes[:, 0], groups, strict=True):
         for i, (kind, entry) in enumerate(models.items()):
             color = _color(kind, i)
-            ax.plot(time_s, entry[group], color=color, ls=styles[i % len(styles)], lw=1.3, label=kind)
+            # colour = learner, line style = with (solid) or without (dashed) adaptation
+            style = ("--" if "no adaptation" in kind else "-" if "adaptive" in kind
+                     else styles[i % len(styles)])
+            ax.plot(time_s, entry[group], color=color, ls=style, lw=1.3, label=_label(kind))
             pre = report["summary"][kind][group]["pre_rmse"]
-            ax.axhline(tol * pre, color=color, ls=styles[i % len(styles)], lw=0.7, alpha=0.6)
+            ax.axhline(tol * pre, color=color, ls=style, lw=0.7, alpha=0.6)
         ax.axvline(0.0, color="k", lw=0.8)
         ax.axvspan(0.0, deadline, color="0.85", alpha=0.5, lw=0)
         ax.set_yscale("log")

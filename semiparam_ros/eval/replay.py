@@ -31,8 +31,10 @@ from semiparam_ros.eval.protocol import (
 from semiparam_ros.io.bags import iter_samples, read_messages, topic_info
 
 __all__ = [
+    "EXTRA_KINDS",
     "FROZEN_P",
     "GROUND_TRUTH_WRENCH_TOPIC",
+    "JOINT_SP",
     "KINDS",
     "Topics",
     "adaptation_configs",
@@ -47,9 +49,15 @@ __all__ = [
 GROUND_TRUTH_WRENCH_TOPIC = "/ground_truth/wrench"
 #: The paper's three learners.
 KINDS: tuple[str, ...] = ("P", "NP", "SP")
+#: The joint semiparametric learner
+#: (:class:`~semiparam_ros.core.semiparametric_joint.JointSemiparametricModel`): the SP model built with
+#: ``semiparametric.combination = joint`` whatever the configuration says.
+JOINT_SP = "SPJ"
 #: Diagnostic variant (:class:`~semiparam_ros.eval.diagnostics.FrozenParametricSP`): SP whose rigid-body
 #: stage stops learning after the training stream.
 FROZEN_P = "SPfrozenP"
+#: Kinds :func:`build_models` accepts besides :data:`KINDS`.
+EXTRA_KINDS: tuple[str, ...] = (JOINT_SP, FROZEN_P)
 
 
 def _absolute(topic: str) -> str:
@@ -122,18 +130,21 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
 
     Args:
         config: Estimator configuration.
-        kinds: Any of ``"P"``, ``"NP"``, ``"SP"`` and the diagnostic :data:`FROZEN_P`.
+        kinds: Any of ``"P"``, ``"NP"``, ``"SP"`` (the cascade or the joint fit, as the configuration's
+            ``semiparametric.combination`` says), :data:`JOINT_SP` (always the joint fit) and the diagnostic
+            :data:`FROZEN_P`.
         n_train: Samples the rigid-body stage of :data:`FROZEN_P` learns (required for it).
 
     Returns:
         Models by kind, in the given order.
 
     Raises:
-        ValueError: On an unknown kind, or :data:`FROZEN_P` without ``n_train``.
+        ValueError: On an unknown kind, :data:`FROZEN_P` without ``n_train``, or :data:`JOINT_SP` with a
+            configuration whose two forgetting factors differ (the joint fit has one data weighting).
     """
-    unknown = [k for k in kinds if k not in (*KINDS, FROZEN_P)]
+    unknown = [k for k in kinds if k not in (*KINDS, *EXTRA_KINDS)]
     if unknown:
-        raise ValueError(f"unknown model kind(s) {unknown}; choose from {[*KINDS, FROZEN_P]}")
+        raise ValueError(f"unknown model kind(s) {unknown}; choose from {[*KINDS, *EXTRA_KINDS]}")
     regressor = build_regressor(config) if any(k != "NP" for k in kinds) else None
     models: dict[str, Any] = {}
     for kind in kinds:
@@ -141,6 +152,13 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
             if n_train is None:
                 raise ValueError(f"{FROZEN_P} needs the number of training samples")
             models[kind] = FrozenParametricSP(build_model(config, "SP", regressor), n_train)
+        elif kind == JOINT_SP:
+            try:
+                joint = config.with_overrides({"semiparametric.combination": "joint"})
+            except ValueError as err:
+                raise ValueError(f"model kind {JOINT_SP!r} (semiparametric.combination 'joint'): "
+                                 f"{err}") from None
+            models[kind] = build_model(joint, "SP", regressor)
         else:
             models[kind] = build_model(config, kind, regressor)
     return models
@@ -273,7 +291,7 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
             omitted.
         pretrain_path: Optional bag every learner is trained on first.
         topics: Topics to read.
-        kinds: Learners (``"SP"`` by default; ``"P"`` and ``"NP"`` possible).
+        kinds: Learners (``"SP"`` by default; ``"P"``, ``"NP"`` and :data:`JOINT_SP` possible).
         window_s: Sliding window [s].
         pre_s: Pre-pickup reference segment [s].
         deadline_s: Recovery deadline after the pickup [s].

@@ -16,6 +16,7 @@ from semiparam_ros.core.config import EstimatorConfig, load_config, write_config
 from semiparam_ros.eval.figures import plot_adaptation, plot_protocol
 from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags, load_samples
 from semiparam_ros.eval.report import (
+    CHECKED_SP_KINDS,
     adaptation_markdown,
     adaptation_report,
     paper_checks,
@@ -61,7 +62,11 @@ def load_evaluation_config(path: str | Path | None, overrides: Mapping[str, Any]
 
 
 def checks_markdown(checks: Sequence[Mapping[str, Any]]) -> str:
-    """Markdown table of :func:`~semiparam_ros.eval.report.paper_checks` results."""
+    """Markdown table of :func:`~semiparam_ros.eval.report.paper_checks` results.
+
+    One row per criterion; the criteria of SP and of SPJ (the joint fit) are separate rows named by their
+    model.
+    """
     lines = ["| criterion | value | limit | |", "|---|---|---|---|"]
     for c in checks:
         op = "<" if "first" in c["check"] else "≤"
@@ -90,7 +95,9 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
         overrides: Parameter overrides.
         joint_states_topic: JointState topic (default from the configuration).
         wrench_topic: WrenchStamped topic (default from the configuration).
-        models: Learners (default P, NP, SP; SP for the payload scenario).
+        models: Learners (default P, NP, SP; SP for the payload scenario); ``SPJ`` is the joint
+            semiparametric fit whatever ``semiparametric.combination`` says (its criteria are checked
+            separately from SP's).
         splits: Number of test parts.
         split_size: Samples per part (``None``: equal parts).
         window_s: Sliding window [s].
@@ -137,7 +144,9 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
             text += "\nAgainst the noise-free wrench:\n\n" + protocol_markdown(report, truth=True)
             text += (f"\nSensor noise (measured − noise-free): force {report['noise']['force_rmse']:.3g} N, "
                      f"torque {report['noise']['torque_rmse']:.3g} N·m\n")
-        if set(KINDS) <= set(report["models"]) and "force_rmse" in report["models"]["P"]:
+        names = set(report["models"])
+        if ({"P", "NP"} <= names and names & set(CHECKED_SP_KINDS)
+                and "force_rmse" in report["models"]["P"]):
             report["checks"] = paper_checks(report)
             text += "\n" + checks_markdown(report["checks"])
         if plot_path is not None:
@@ -157,7 +166,7 @@ def run_tune(*, train: Path, config: Path | None, overrides: Mapping[str, Any] |
              n_features: int | None = None, holdout: float = 0.2,
              grid: Mapping[str, Sequence[float]] | None = None, limit: int | None = None,
              out: Path | None = None,
-             json_path: Path | None = None, progress: bool = True) -> str:
+             json_path: Path | None = None, progress: bool = True, kind: str = "SP") -> str:
     """Run the hold-out grid search on a bag and write the tuned parameter file.
 
     Args:
@@ -173,6 +182,8 @@ def run_tune(*, train: Path, config: Path | None, overrides: Mapping[str, Any] |
         out: Destination of the tuned ROS 2 parameter file.
         json_path: Destination of the grid as JSON.
         progress: Show a progress bar.
+        kind: Learner to tune: ``"SP"`` (as configured) or ``"SPJ"`` (the joint fit; the written file then
+            selects ``semiparametric.combination: joint``).
 
     Returns:
         The text to print (the grid and the selection).
@@ -183,21 +194,22 @@ def run_tune(*, train: Path, config: Path | None, overrides: Mapping[str, Any] |
     cfg = load_evaluation_config(config, overrides)
     topics = Topics.from_config(cfg, joint_states_topic, wrench_topic)
     data, drops = load_samples(train, cfg, topics, limit=limit)
-    result = tune(cfg, data, holdout=holdout, n_features=n_features, grid=grid, progress=progress)
+    result = tune(cfg, data, holdout=holdout, n_features=n_features, grid=grid, kind=kind,
+                  progress=progress)
     chosen = ", ".join(f"{k} = {result.best[k]:g}" for k in TUNED_KEYS)
-    text = (f"hold-out grid search on {train}: {result.n_train} samples learned, {result.n_holdout} held "
-            "out, "
+    text = (f"hold-out grid search of {kind} on {train}: {result.n_train} samples learned, "
+            f"{result.n_holdout} held out, "
             f"D = {result.config['nonparametric.n_features']}\n\n" + grid_markdown(result)
             + f"\nselected: {chosen} (hold-out nRMSE {result.best['score']:.4f}; "
             f"the configuration's values: {result.default['score']:.4f})\n")
     if out is not None:
         write_config(result.config, out, header=(
-            f"semiparam_ros estimator parameters tuned by `tune` on {train}\n"
+            f"semiparam_ros estimator parameters tuned by `tune` ({kind}) on {train}\n"
             f"hold-out {holdout:g} ({result.n_holdout} samples): nRMSE {result.best['score']:.4f} "
             f"(base configuration {result.default['score']:.4f})"))
         text += f"wrote {out}\n"
     if json_path is not None:
         write_json({"grid": result.grid, "best": result.best, "default": result.default,
-                    "n_train": result.n_train, "n_holdout": result.n_holdout, "drops": drops,
+                    "n_train": result.n_train, "n_holdout": result.n_holdout, "drops": drops, "kind": kind,
                     "config": result.config.to_flat()}, json_path)
     return text

@@ -160,15 +160,20 @@ def tune(config: EstimatorConfig, data: SampleArrays, *, holdout: float = 0.2, n
         holdout: Held-out fraction.
         n_features: D of the random features (default: the configuration's).
         grid: Values per tuned key (missing keys: :data:`DEFAULT_GRID`).
-        kind: Learner to tune (the node runs ``"SP"``).
+        kind: Learner to tune (the node runs ``"SP"``); ``"SPJ"`` tunes the joint semiparametric fit, and the
+            returned configuration then has ``semiparametric.combination = joint``.
         progress: Show a tqdm bar.
 
     Returns:
         The :class:`TuneResult`.
 
     Raises:
-        ValueError: On an unknown grid key, an invalid value or too few samples.
+        ValueError: On an unknown grid key, an invalid value, too few samples, or ``"SPJ"`` with unequal
+            forgetting factors.
     """
+    if kind == "SPJ":
+        config = config.with_overrides({"semiparametric.combination": "joint"})
+        kind = "SP"
     if n_features is not None:
         config = config.with_overrides({"nonparametric.n_features": int(n_features)})
     axes: dict[str, list[float]] = {}
