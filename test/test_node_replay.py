@@ -41,13 +41,14 @@ def _rmse(errors: list[np.ndarray], cols: slice) -> float:
     return float(np.sqrt(np.mean(np.square(np.array(errors)[:, cols]))))
 
 
-def test_replay_matches_offline_core_and_beats_parametric(ros_env, tmp_path_factory):
+@pytest.mark.parametrize("combination", ["cascade", "joint"])
+def test_replay_matches_offline_core_and_beats_parametric(ros_env, tmp_path_factory, combination):
     bag = source_bag(tmp_path_factory.mktemp("bags"))
     messages = load_raw(bag, TOPICS, limit=N_MESSAGES)
-    offline = offline_replay(bag, N_MESSAGES, OVERRIDES)
+    offline = offline_replay(bag, N_MESSAGES, {**OVERRIDES, "semiparametric.combination": combination})
     assert len(offline.order) > 400
 
-    node = NodeProcess(ros_env, PARAMS)
+    node = NodeProcess(ros_env, [*PARAMS, f"semiparametric.combination:={combination}"])
     client = TestClient(ros_env)
     try:
         total = client.collect(WrenchStamped, "/estimator/predicted_wrench")
