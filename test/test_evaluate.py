@@ -352,9 +352,9 @@ def test_results_page_with_the_joint_model(tmp_path: Path) -> None:
     paper["checks"] = paper_checks(paper)
     within = protocol_report(run_protocol(kinds(), toy_stream(100, 12), toy_stream(300, 13), splits=3))
     stream = toy_stream(4000, 5, shift_at=2000)
-    adapt = run_adaptation({"SP adaptive": ToyRidge(3, 6, forgetting=0.99), "SPJ adaptive": ToyRidge(3, 6,
-                            forgetting=0.99), "SPJ no adaptation": ToyRidge(3, 6)}, stream, change_s=20.0,
-                           window_s=1.0)
+    learners = {"SP adaptive": ToyRidge(3, 6, forgetting=0.99), "SP no adaptation": ToyRidge(3, 6),
+                "SPJ adaptive": ToyRidge(3, 6, forgetting=0.98), "SPJ no adaptation": ToyRidge(3, 6, lam=3.0)}
+    adapt = run_adaptation(learners, stream, change_s=20.0, window_s=1.0)
     payload = adaptation_report(adapt, protocol={"bag": "payload", "pickup_time_s": 20.0, "forgetting": 0.99})
     figs = tmp_path / "figures"
     write_json(paper, figs / "paper.json")
@@ -373,6 +373,10 @@ def test_results_page_with_the_joint_model(tmp_path: Path) -> None:
     assert sum(line.startswith("| SP ") for line in verdicts) == 6
     assert sum(line.startswith("| NP ") for line in text.splitlines() if "RMSE at regime / P's" in line) == 2
     assert "| SPJ adaptive | force [N] |" in text and "| SPJ no adaptation | torque [N·m] |" in text
+    # the payload comparison of the two semiparametric models, with the numbers of the summary
+    assert "SP (the cascade) against SPJ (the joint fit)" in text
+    spj_peak = payload["summary"]["SPJ adaptive"]["force"]["peak"]
+    assert f"SPJ: force peak {spj_peak:.3g} N" in text
     write_json(within, figs / "within_xy.json")
     text = write_results(figs / "paper.json", figs / "payload.json", tmp_path / "results.md").read_text()
     w = within["models"]
