@@ -41,6 +41,9 @@ def test_invalid_startup_values_exit_with_a_clear_message(ros_env, tmp_path):
         "type": (["checkpoint.period:=abc"], ["checkpoint.period", "double"]),
         "odd_window": (["acceleration.window:=10"], ["acceleration.window", "odd"]),
         "joint": (["robot.joints:=[r_shoulder_pitch, no_such_joint]"], ["no_such_joint"]),
+        # the joint semiparametric fit has one data weighting: both forgetting factors are named
+        "joint_fit_forgetting": (["semiparametric.combination:=joint", "parametric.forgetting:=0.99"],
+                                 ["parametric.forgetting", "nonparametric.forgetting", "joint"]),
         "checkpoint": ([f"checkpoint.path:={incompatible}"], ["d100.npz", "load_on_start"]),
     }
     procs = {name: NodeProcess(ros_env, params, tag=name) for name, (params, _) in cases.items()}
