@@ -11,6 +11,10 @@ The JSON report of the paper's protocol (:func:`protocol_report`) has the fields
      "curves": {"time_s": [...], "P": {"force_mean": [...], "force_std": [...], ...}, ...,
                 "ground_truth": {"P": {...}, ...}}}
 
+Any learner kind can appear under ``models`` (e.g. ``SPJ``, the joint semiparametric fit, next to the paper's
+three). ``evaluate`` adds ``"checks"``: the output of :func:`paper_checks`, one entry per criterion with the
+``model`` it judges (SP's and SPJ's criteria are separate entries).
+
 ``force_rmse`` is the mean over splits of the component-averaged force RMSE (N) over the second half of
 each split ("at regime"), ``torque_rmse`` the same for torques (N·m), the ``_first_3s`` values over the first
 3 s of each split; ``update_us`` is the median wall time of one ``predict_learn_one`` (µs); standard
