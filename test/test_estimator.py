@@ -237,7 +237,8 @@ def test_stream_predictions_equal_a_priori_predictions_of_hand_loop(config, regr
     else:
         np.testing.assert_allclose(est.parameters, model.parameters, rtol=0, atol=1e-10)
         assert len(est.parameter_names) == len(est.parameters) == regressor.n_base
-        assert est.model_size == regressor.n_base * n_out + (N_FEATURES * n_out if kind == "SP" else 0)
+        weights = model.nonparametric.rls.weights.size if kind == "SP" else 0
+        assert est.model_size == est.parameters.size + weights
 
     # a-priori: the very first prediction is made with zero parameters (0 up to the round-off of the
     # in-rotation prediction), not with the sample's own label; the residual stage starts after its
@@ -738,7 +739,7 @@ def test_joint_torque_stream_one_data_path(config):
     # labels are the efforts of the configured joints, in the configured order, at the sample stamp
     k = np.array([(r.sample.stamp_ns - T0_NS) // DT_NS - 1 for r in results])
     np.testing.assert_array_equal(np.array([r.sample.y for r in results]), tau[k])
-    assert est.model_size == reg.n_base * 4 + N_FEATURES * 4
+    assert est.model_size == est.parameters.size + est.model.nonparametric.rls.weights.size
 
 
 def test_sensor_offset_is_identified(config):

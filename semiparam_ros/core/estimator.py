@@ -362,11 +362,15 @@ class OnlineEstimator:
 
     @property
     def model_size(self) -> int:
-        """Number of learned coefficients (parametric + residual weights)."""
+        """Number of learned coefficients: the base parameters π̂ plus the D × t residual weights.
+
+        The same for both SP combinations (the joint fit's random-feature factor carries t·p extra
+        columns, but the model it encodes is π and the D × t weights of the residual).
+        """
         n_out = self.regressor.n_outputs
         size = 0
         if self.kind in ("P", "SP"):
-            size += self.regressor.n_base * n_out
+            size += self.regressor.n_base
         if self.kind in ("NP", "SP"):
             size += int(self.config["nonparametric.n_features"]) * n_out
         return size
@@ -381,6 +385,9 @@ class OnlineEstimator:
 
     def _fingerprint(self) -> str:
         structure = {name: self.config[name] for name in _STRUCTURAL}
+        if self.kind == "SP" and self.config["semiparametric.combination"] != "cascade":
+            # only when not the default, so that checkpoints written before the option existed still load
+            structure["semiparametric.combination"] = self.config["semiparametric.combination"]
         structure["kind"] = self.kind
         structure["base_parameters"] = list(self.parameter_names)
         return json.dumps(structure, sort_keys=True)
