@@ -220,37 +220,27 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
             lam=config["parametric.lam"],
             forgetting=config["parametric.forgetting"],
         )
-    if config["semiparametric.combination"] == "joint":
-        return JointSemiparametricModel(
-            phi,
-            regressor.n_base,
-            n_inputs,
-            regressor.n_outputs,
-            lam_parametric=config["parametric.lam"],
-            lam_nonparametric=config["nonparametric.lam"],
-            n_features=config["nonparametric.n_features"],
-            sigma=config["nonparametric.sigma"],
-            forgetting=config["parametric.forgetting"],
-            seed=config["nonparametric.seed"],
-            standardizer_warmup=config["nonparametric.standardizer_warmup"],
-            standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
-        )
-    return SemiparametricModel(
-        phi,
-        regressor.n_base,
-        n_inputs,
-        regressor.n_outputs,
+    shared = dict(
         lam_parametric=config["parametric.lam"],
         lam_nonparametric=config["nonparametric.lam"],
         n_features=config["nonparametric.n_features"],
         sigma=config["nonparametric.sigma"],
-        forgetting_parametric=config["parametric.forgetting"],
-        forgetting_nonparametric=config["nonparametric.forgetting"],
         seed=config["nonparametric.seed"],
         standardizer_warmup=config["nonparametric.standardizer_warmup"],
+    )
+    if config["semiparametric.combination"] == "joint":
+        # the configuration guarantees equal forgetting factors for the joint fit
+        return JointSemiparametricModel(
+            phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,
+            forgetting=config["parametric.forgetting"],
+            standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
+        )
+    return SemiparametricModel(
+        phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,
+        forgetting_parametric=config["parametric.forgetting"],
+        forgetting_nonparametric=config["nonparametric.forgetting"],
         standardizer_min_scale=standardizer_min_scale(config, with_outputs=True),
     )
-
 
 @dataclass(frozen=True)
 class StepResult:

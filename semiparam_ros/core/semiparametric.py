@@ -387,7 +387,71 @@ def _make_standardizer(n_inputs: int, standardizer: Standardizer | None, warmup:
     return Standardizer(n_inputs, int(warmup), min_scale=min_scale)
 
 
-class SemiparametricModel(_Model):
+class _TwoStageModel(_Model):
+    """Plumbing shared by the two semiparametric models (the cascade and the joint fit).
+
+    Both hold a rigid-body learner ``parametric`` (:class:`ParametricModel`) and a random-feature learner
+    ``nonparametric`` (:class:`NonparametricModel`); see :mod:`semiparam_ros.core.semiparametric_joint`.
+    """
+
+    parametric: ParametricModel
+    nonparametric: NonparametricModel
+    n_inputs: int
+    n_outputs: int
+    n_samples_seen: int
+
+    @property
+    def regressor(self) -> Regressor:
+        """The injected regressor callable (shared by copies)."""
+        return self.parametric.regressor
+
+    def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        xv = _check_vector("x", x, self.n_inputs)
+        yv = None if y is None else _check_vector("y", y, self.n_outputs)
+        return xv, yv, self.parametric._phi(xv)
+
+    @property
+    def parameters(self) -> np.ndarray:
+        """π̂, the rigid-body (base) parameters of the parametric learner (n_params,)."""
+        return self.parametric.parameters
+
+    def reset(self) -> None:
+        """Forget both learners (and restart the online standardizer warm-up)."""
+        self.parametric.reset()
+        self.nonparametric.reset()
+        self.n_samples_seen = 0
+
+    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Return both learners' state as arrays."""
+        state = {f"{prefix}kind": np.array(self._kind),
+                 f"{prefix}n_samples_seen": np.array(self.n_samples_seen)}
+        state.update(self.parametric.state_dict(f"{prefix}parametric."))
+        state.update(self.nonparametric.state_dict(f"{prefix}nonparametric."))
+        return state
+
+    def _check_loaded(self, parametric: ParametricModel, nonparametric: NonparametricModel) -> None:
+        """Extra consistency checks of a loaded pair of learners (raise ValueError); none by default."""
+
+    def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
+        """Replace both learners' state (validated completely before anything changes).
+
+        Raises:
+            ValueError: Wrong kind, missing keys or sizes that do not match this model.
+        """
+        self._check_kind(state, prefix)
+        p = self.parametric.copy()
+        npm = self.nonparametric.copy()
+        p.load_state_dict(state, f"{prefix}parametric.")
+        npm.load_state_dict(state, f"{prefix}nonparametric.")
+        self._check_loaded(p, npm)
+        try:
+            n_seen = int(state[f"{prefix}n_samples_seen"])
+        except KeyError as err:
+            raise ValueError(f"state is missing key {err}") from err
+        self.parametric, self.nonparametric, self.n_samples_seen = p, npm, n_seen
+
+
+class SemiparametricModel(_TwoStageModel):
     """Parametric model first, then a nonparametric model of its residual (Camoriano et al. 2016).
 
     For a sample (x, y): ``ŷ = Φ(x) π̂`` (a-priori), the parametric stage is updated with y, then the
@@ -458,16 +522,6 @@ class SemiparametricModel(_Model):
         self.n_outputs = int(n_outputs)
         self.n_samples_seen = 0
 
-    @property
-    def regressor(self) -> Regressor:
-        """The injected regressor callable (shared by copies)."""
-        return self.parametric.regressor
-
-    def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        xv = _check_vector("x", x, self.n_inputs)
-        yv = None if y is None else _check_vector("y", y, self.n_outputs)
-        return xv, yv, self.parametric._phi(xv)
-
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
         """Predict ``ŷ + Δŷ`` with both parts.
 
@@ -515,39 +569,3 @@ class SemiparametricModel(_Model):
         out = self._step(x, y, True)
         assert out is not None
         return out
-
-    @property
-    def parameters(self) -> np.ndarray:
-        """π̂ of the parametric stage (n_params,)."""
-        return self.parametric.parameters
-
-    def reset(self) -> None:
-        """Forget both stages (and the online standardizer warm-up)."""
-        self.parametric.reset()
-        self.nonparametric.reset()
-        self.n_samples_seen = 0
-
-    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
-        """Return both stages' state as arrays."""
-        state = {f"{prefix}kind": np.array(self._kind),
-                 f"{prefix}n_samples_seen": np.array(self.n_samples_seen)}
-        state.update(self.parametric.state_dict(f"{prefix}parametric."))
-        state.update(self.nonparametric.state_dict(f"{prefix}nonparametric."))
-        return state
-
-    def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
-        """Replace both stages' state (validated completely before anything changes).
-
-        Raises:
-            ValueError: Wrong kind, missing keys or sizes that do not match this model.
-        """
-        self._check_kind(state, prefix)
-        p = self.parametric.copy()
-        npm = self.nonparametric.copy()
-        p.load_state_dict(state, f"{prefix}parametric.")
-        npm.load_state_dict(state, f"{prefix}nonparametric.")
-        try:
-            n_seen = int(state[f"{prefix}n_samples_seen"])
-        except KeyError as err:
-            raise ValueError(f"state is missing key {err}") from err
-        self.parametric, self.nonparametric, self.n_samples_seen = p, npm, n_seen

@@ -57,14 +57,13 @@ from semiparam_ros.core.semiparametric import (
     ParametricModel,
     Prediction,
     Regressor,
-    _check_vector,
-    _Model,
+    _TwoStageModel,
 )
 
 __all__ = ["JointSemiparametricModel"]
 
 
-class JointSemiparametricModel(_Model):
+class JointSemiparametricModel(_TwoStageModel):
     """Rigid-body parameters and a random-feature residual fitted jointly (exact ridge solution of (1)).
 
     Args:
@@ -111,19 +110,9 @@ class JointSemiparametricModel(_Model):
         self.n_samples_seen = 0
 
     @property
-    def regressor(self) -> Regressor:
-        """The injected regressor callable (shared by copies)."""
-        return self.parametric.regressor
-
-    @property
     def forgetting(self) -> float:
         """β, the forgetting factor per sample shared by both terms."""
         return self.parametric.rls.forgetting
-
-    def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        xv = _check_vector("x", x, self.n_inputs)
-        yv = None if y is None else _check_vector("y", y, self.n_outputs)
-        return xv, yv, self.parametric._phi(xv)
 
     def _combine(self, Phi: np.ndarray, pk: np.ndarray, pi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(Φπ̂, p + (Φ − P)π̂)`` from the kernel's prediction ``pk = [p | P_1 … P_t]`` of U."""
@@ -210,36 +199,6 @@ class JointSemiparametricModel(_Model):
         """π̂ of (1), the rigid-body parameters fitted jointly with the residual (n_params,)."""
         return self.parametric.parameters
 
-    def reset(self) -> None:
-        """Forget both terms (and restart the standardizer warm-up)."""
-        self.parametric.reset()
-        self.nonparametric.reset()
-        self.n_samples_seen = 0
-
-    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
-        """Return both learners' state as arrays."""
-        state = {f"{prefix}kind": np.array(self._kind),
-                 f"{prefix}n_samples_seen": np.array(self.n_samples_seen)}
-        state.update(self.parametric.state_dict(f"{prefix}parametric."))
-        state.update(self.nonparametric.state_dict(f"{prefix}nonparametric."))
-        return state
-
-    def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
-        """Replace both learners' state (validated completely before anything changes).
-
-        Raises:
-            ValueError: Wrong kind, missing keys, sizes or forgetting factors that do not match this model.
-        """
-        self._check_kind(state, prefix)
-        par = self.parametric.copy()
-        npm = self.nonparametric.copy()
-        par.load_state_dict(state, f"{prefix}parametric.")
-        npm.load_state_dict(state, f"{prefix}nonparametric.")
-        if par.rls.forgetting != npm.rls.forgetting:
+    def _check_loaded(self, parametric: ParametricModel, nonparametric: NonparametricModel) -> None:
+        if parametric.rls.forgetting != nonparametric.rls.forgetting:
             raise ValueError("state has different forgetting factors in its two learners")
-        try:
-            n_seen = int(state[f"{prefix}n_samples_seen"])
-        except KeyError as err:
-            raise ValueError(f"state is missing key {err}") from err
-        self.parametric, self.nonparametric, self.n_samples_seen = par, npm, n_seen
-
