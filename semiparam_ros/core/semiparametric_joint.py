@@ -34,11 +34,12 @@ When to prefer which (measured on the synthetic iCub bags, ``docs/results.md``):
 model has not seen (train XY circles, test XZ) the joint fit's error over the first 3 s is 0.77× (force)
 and 0.82× (torque) NP's, against the cascade's 1.00× and 0.84×, and at regime it ties NP; on the
 trajectory it was trained on, the cascade is ≈3 % better at regime (its ŷ input helps there). The price of
-fitting π jointly: π is identified only by the part of Φ that the kernel does not already explain, so once
-the kernel has learned a trajectory a change of the inertial parameters (a payload) is re-learned slowly —
-with forgetting β = 0.995 the joint fit recovers from a 0.5 kg pickup in 7–10 s against the cascade's
-0–4 s, and without forgetting it does not recover. The paper's cascade gives π priority for this reason;
-it stays the default.
+fitting everything jointly: (1) explains the samples before a change of the inertial parameters (a
+payload) with the new π as well, so its kernel term must absorb ``Φ(π_old − π_new)`` on the old samples,
+which it cannot tell from the new ones by x alone; with forgetting β = 0.995 the joint fit recovers from a
+0.5 kg pickup in 7–10 s against the cascade's 0–4 s, and without forgetting it does not recover (the
+cascade's residual targets stay relative to the π̂ of their time, and its ŷ input moves with the payload).
+The paper's cascade therefore stays the default.
 
 Parts reported in :class:`Prediction`: ``parametric = Φ(x) π̂`` (the rigid-body term of (1)),
 ``residual = total − parametric``. Units: x = [q, q̇, q̈] (rad, rad/s, rad/s²), y in N and N·m (wrench in
