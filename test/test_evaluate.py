@@ -269,6 +269,17 @@ def test_evaluate_cli_report_and_figure_on_committed_bag(tmp_path: Path, capsys)
         assert math.isfinite(report["models"][kind]["ground_truth"]["torque_rmse"])
     # SPJ is its own learner, not a copy of SP's predictions
     assert report["models"]["SPJ"]["force_rmse_splits"] != report["models"]["SP"]["force_rmse_splits"]
+    # paired comparisons: SP/SPJ vs NP and SPJ vs SP, measured and noise-free, consistent with the splits
+    assert "Paired over the test parts" in printed
+    assert len(report["comparisons"]) == 3 * 8
+    for row in report["comparisons"]:
+        a = report["models"][row["a"]]
+        b = report["models"][row["b"]]
+        if row["truth"]:
+            a, b = a["ground_truth"], b["ground_truth"]
+        key = f"{row['group']}_rmse" + ("" if row["segment"] == "regime" else "_first_3s")
+        assert row["ratio"] == pytest.approx(a[key] / b[key], rel=1e-12)
+        assert row["wins"] == sum(x < y for x, y in zip(a[key + "_splits"], b[key + "_splits"], strict=True))
     assert report["splits"] == 2 and report["samples_train"] == 300 and report["samples_test"] == 400
     assert report["config"]["nonparametric.n_features"] == 50
     assert report["config"]["robot.joints"] == ["r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw",

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from semiparam_ros.core.config import EstimatorConfig, load_config, write_config
+from semiparam_ros.eval.compare import comparison_markdown, paired_comparisons
 from semiparam_ros.eval.figures import plot_adaptation, plot_protocol
 from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags, load_samples
 from semiparam_ros.eval.report import (
@@ -149,6 +150,9 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
                 and "force_rmse" in report["models"]["P"]):
             report["checks"] = paper_checks(report)
             text += "\n" + checks_markdown(report["checks"])
+        report["comparisons"] = paired_comparisons(report)
+        if report["comparisons"]:
+            text += "\nPaired over the test parts:\n\n" + comparison_markdown(report["comparisons"])
         if plot_path is not None:
             plot_protocol(report, plot_path)
         if plot_truth_path is not None:
