@@ -42,8 +42,11 @@ single thread woken by a guard condition (this design) learns 100 % with a 4.95 
 of it the acceleration estimate's centring delay (bench/results/bench_node.json, load 1).
 A second thread only writes checkpoints (periodically every ``checkpoint.period`` seconds of wall time,
 on ``~/save``, on clean shutdown): it snapshots the learned state under a lock (a memory copy, ~1 ms at
-D = 500) and writes outside it, so neither callbacks nor learning ever wait for the disk. A node killed
-with SIGKILL loses at most the samples learned since the last periodic checkpoint.
+D = 500) and writes outside it, so neither callbacks nor learning ever wait for the disk. On a clean
+shutdown (Ctrl-C, SIGTERM) the messages still in the input queue are learned first (without publishing;
+at most ``queue_size`` messages, a few hundred ms at D = 500), so the final checkpoint holds everything
+received. A node killed with SIGKILL loses at most the samples learned since the last periodic
+checkpoint.
 
 Bad input (NaN/inf, unknown or missing joints, wrong frame, out-of-order or zero stamps, unconvertible
 messages) is dropped, counted by reason in ``/diagnostics`` and logged at most every 5 s; it never stops
@@ -121,6 +124,7 @@ PARAMETERS_QOS = QoSProfile(
 _OUTPUT_QOS = 100
 _LOG_THROTTLE_S = 5.0
 _BATCH = 50  # queued messages processed per turn of the executor (≈ 10–20 ms of learning at most)
+_SHUTDOWN_BUDGET_S = 10.0  # time allowed to learn the queue at shutdown (1000 messages take ≈ 0.2 s)
 _MAX_DRAIN = 64  # messages taken per subscription callback at most (bounds the executor's time away)
 
 
@@ -431,7 +435,8 @@ class EstimatorNode(Node):
             self._work_pending = True
             self._work_gc.trigger()
 
-    def _process(self, kind: str, data: JointStateData | WrenchData, t_recv: float) -> None:
+    def _process(self, kind: str, data: JointStateData | WrenchData, t_recv: float, *,
+                 publish: bool = True) -> None:
         est = self._estimator
         try:
             with self._model_lock:
@@ -454,6 +459,8 @@ class EstimatorNode(Node):
             self._last_drop_total = drop_total
             self.get_logger().warning(f"dropped input messages: {est.drops}",
                                       throttle_duration_sec=_LOG_THROTTLE_S)
+        if not publish:
+            return
         for result in results:
             try:
                 self._publish_result(result)
@@ -539,8 +546,35 @@ class EstimatorNode(Node):
             self._ckpt_event.set()
             self._ckpt_thread.join(timeout=30.0)
 
+    def _learn_remaining(self, budget_s: float = _SHUTDOWN_BUDGET_S) -> int:
+        """Learn the messages still queued, without publishing (the executor no longer runs).
+
+        Returns:
+            The number of queued messages processed (the rest, past the time budget, is dropped).
+        """
+        queue = getattr(self, "_queue", None)
+        if not queue:
+            return 0
+        deadline = time.monotonic() + budget_s
+        n = 0
+        while queue and time.monotonic() < deadline:
+            kind, data, t_recv = queue.popleft()
+            self._process(kind, data, t_recv, publish=False)
+            n += 1
+        return n
+
     def shutdown(self) -> None:
-        """Stop learning and write the final checkpoint (if configured); call before ``destroy_node``."""
+        """Learn what is still queued, then write the final checkpoint (if configured) and stop the threads.
+
+        Call before ``destroy_node`` (``main`` does), from the thread that ran the executor, once it has
+        stopped spinning.
+        """
+        try:
+            n = self._learn_remaining()
+            if n:
+                self.get_logger().info(f"learned {n} queued messages before the final checkpoint")
+        except Exception as err:  # shutting down must always reach the checkpoint
+            self.get_logger().error(f"could not learn the queued messages at shutdown: {err!r}")
         self._stop_threads(save=True)
 
     # Expose a few read-only views for tests and tools running the node in-process.
