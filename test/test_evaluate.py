@@ -559,3 +559,28 @@ def test_payload_cli_and_pickup_time(tmp_path: Path, capsys) -> None:
     # no scenario.yaml and no --pickup-time: a clear error
     assert main(["--payload", str(BAGS / "icub_xy"), "--no-progress"]) == 2
     assert "pickup" in capsys.readouterr().err
+
+
+def test_limited_load_stops_reading_the_ground_truth_early(monkeypatch) -> None:
+    """A prefix of the bag decodes only the matching prefix of the ground-truth topic (plus 1 s)."""
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.eval import replay
+
+    read = replay.read_messages
+    yielded = {"n": 0}
+
+    def counting(*args, **kwargs):
+        for m in read(*args, **kwargs):
+            yielded["n"] += 1
+            yield m
+
+    monkeypatch.setattr(replay, "read_messages", counting)
+    cfg = load_config(CONFIG)
+    full, _ = replay.load_samples(BAGS / "icub_xy", cfg)
+    n_full = yielded["n"]
+    yielded["n"] = 0
+    part, _ = replay.load_samples(BAGS / "icub_xy", cfg, limit=200)
+    assert len(part) == 200 and part.Y_true is not None
+    np.testing.assert_array_equal(part.Y_true, full.Y_true[:200])
+    period_s = full.sample_period_s
+    assert yielded["n"] <= 200 + 2 / period_s < n_full  # the prefix plus the margin, not the whole topic

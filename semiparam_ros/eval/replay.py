@@ -10,7 +10,8 @@ the wrench stamp) is its noise-free output, so errors can be split into model er
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import itertools
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,6 +48,8 @@ __all__ = [
 
 #: Topic of the noise-free wrench written by the simulator (absent in real logs).
 GROUND_TRUTH_WRENCH_TOPIC = "/ground_truth/wrench"
+#: With a sample limit, ground-truth messages are read until their stamp passes the last sample's by this.
+_TRUTH_MARGIN_NS = 1_000_000_000
 #: The paper's three learners.
 KINDS: tuple[str, ...] = ("P", "NP", "SP")
 #: The joint semiparametric learner
@@ -110,12 +113,20 @@ def load_samples(path: str | Path, config: EstimatorConfig, topics: Topics | Non
         kwargs["wrench_topic"] = topics.wrench
     else:
         kwargs["wrench_topic"] = None
-    samples = iter_samples(path, pipeline, **kwargs)
+    samples: Iterable[Any] = iter_samples(path, pipeline, **kwargs)
+    last_stamp = None
+    if limit is not None:
+        # a prefix: stop decoding the bag (and its ground truth, below) once it is complete
+        samples = list(itertools.islice(samples, max(int(limit), 0)))
+        last_stamp = max((s.stamp_ns for s in samples), default=None)
     truth: dict[int, np.ndarray] | None = None
     if config["robot.output"] == "wrench" and topics.ground_truth and topics.ground_truth in topic_info(path):
         # samples carry the wrench stamp: the noise-free wrench of the same stamp is the exact target
-        truth = {m.stamp_ns: m.wrench for m in read_messages(path, joint_states_topic=None,
-                                                             wrench_topic=topics.ground_truth)}
+        truth = {}
+        for m in read_messages(path, joint_states_topic=None, wrench_topic=topics.ground_truth):
+            if last_stamp is not None and m.stamp_ns > last_stamp + _TRUTH_MARGIN_NS:
+                break  # log-time order follows the stamps up to the margin
+            truth[m.stamp_ns] = m.wrench
     try:
         arrays = SampleArrays.from_samples(samples, truth, limit=limit)
     except ValueError as err:
