@@ -43,12 +43,13 @@ tuned=(--set parametric.lam=0.01 --set nonparametric.lam=0.001 --set nonparametr
        --set nonparametric.n_features=500)
 
 echo "== selection on the training bag: the protocol within XY (train on its first 5000 samples, test-then-train"
-echo "   on 5 parts of 1000 of the rest), SP, grid λ_NP × σ (λ_P = 0.01: insensitive, see tune below)"
+echo "   on 5 parts of 1000 of the rest), grid λ_NP × σ (λ_P = 0.01: insensitive, see tune below); SP selects"
+echo "   the values used; NP and SPJ, scored on the same runs, get their own selection in a second run below"
 mkdir -p "$figs/select_xy"
 for lnp in 0.001 0.01 0.1; do
   for sigma in 3 4 6 8; do
     "$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xy" --config "$config" "${tuned[@]}" \
-      --set nonparametric.lam=$lnp --set nonparametric.sigma=$sigma --models SP \
+      --set nonparametric.lam=$lnp --set nonparametric.sigma=$sigma --models NP SP SPJ \
       --train-limit 5000 --test-skip 5000 --splits 5 --split-size 1000 --window 3.0 \
       --json "$figs/select_xy/lnp${lnp}_sigma${sigma}.json" --no-progress > /dev/null
   done
@@ -65,6 +66,20 @@ echo "== paper protocol: train on XY, test-then-train on 10 sequential parts of 
 "$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
   --models P NP SP SPJ --splits 10 --split-size 1000 --window 3.0 \
   --json "$figs/paper.json" --plot "$figs/paper_fig3.png" --plot-truth "$figs/paper_fig3_noise_free.png"
+
+echo "== each learner with the values selected for it on the within-XY runs (same protocol, same parts)"
+while read -r kind lnp sigma; do
+  "$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
+    --set nonparametric.lam="$lnp" --set nonparametric.sigma="$sigma" --models "$kind" \
+    --splits 10 --split-size 1000 --window 3.0 --json "$figs/own_$kind.json" --no-progress > /dev/null
+done < <("$bin/python" -c '
+import json, pathlib, sys
+from semiparam_ros.eval.selection import select
+reports = [json.loads(p.read_text()) for p in sorted(pathlib.Path(sys.argv[1]).glob("*.json"))]
+for kind in ("NP", "SP", "SPJ"):
+    best = select(reports, kind)[0]
+    print(kind, repr(best.lam), repr(best.sigma))
+' "$figs/select_xy")
 
 echo "== diagnostic: SP with its rigid-body stage frozen after training (isolates the drift of that stage)"
 "$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \

@@ -12,8 +12,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from semiparam_ros.eval.compare import comparison_markdown, paired_comparisons
+from semiparam_ros.eval.compare import compare_pair, comparison_markdown, paired_comparisons
 from semiparam_ros.eval.report import adaptation_markdown, paper_checks, protocol_markdown
+from semiparam_ros.eval.selection import select
 
 __all__ = ["render_results", "write_results"]
 
@@ -152,18 +153,10 @@ def _differences(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]],
 
 def _selection_lines(selection: Sequence[Mapping[str, Any]]) -> list[str]:
     """Table of the protocol run within the XY bag over the grid, and the selected point."""
-    rows = []
-    for rep in selection:
-        sp = rep["models"]["SP"]
-        cfg = rep["config"]
-        rows.append((float(cfg["nonparametric.lam"]), float(cfg["nonparametric.sigma"]), sp["force_rmse"],
-                     sp["torque_rmse"], sp["force_rmse_first_3s"], sp["torque_rmse_first_3s"]))
-    if not rows:
+    points = select(selection, "SP")
+    if not points:
         return []
-    f_min = min(r[2] for r in rows)
-    t_min = min(r[3] for r in rows)
-    scored = sorted(((r[2] / f_min + r[3] / t_min, r) for r in rows), key=lambda x: x[0])
-    best = scored[0][1]
+    best = points[0]
     out = [
         "Selection by the paper's protocol within the XY bag (train on its first 5000 samples, "
         "test-then-train on 5 parts of 1000 of the rest; SP at regime; score = force RMSE / best force "
@@ -173,12 +166,50 @@ def _selection_lines(selection: Sequence[Mapping[str, Any]]) -> list[str]:
         "first 3 s torque [N·m] | score | |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for score, r in scored:
-        mark = "selected" if r is best else ""
-        out.append(f"| {r[0]:g} | {r[1]:g} | {r[2]:.4f} | {r[3]:.5f} | {r[4]:.3f} | {r[5]:.4f} | "
-                   f"{score:.4f} | {mark} |")
-    out += ["", f"Selected: `nonparametric.lam` = {best[0]:g}, `nonparametric.sigma` = {best[1]:g}.", ""]
+    for p in points:
+        mark = "selected" if p is best else ""
+        out.append(f"| {p.lam:g} | {p.sigma:g} | {p.force:.4f} | {p.torque:.5f} | {p.force_first:.3f} | "
+                   f"{p.torque_first:.4f} | {p.score:.4f} | {mark} |")
+    out += ["", f"Selected: `nonparametric.lam` = {best.lam:g}, `nonparametric.sigma` = {best.sigma:g}.", ""]
+    others = {k: select(selection, k) for k in ("NP", "SPJ")}
+    others = {k: v[0] for k, v in others.items() if v}
+    if others:
+        out += ["The same runs scored for the other learners select "
+                + ", ".join(f"{k}: λ_NP = {p.lam:g}, σ = {p.sigma:g} (score {p.score:.4f})"
+                            for k, p in others.items())
+                + " — used in the next section.", ""]
     return out
+
+
+def _own_selection_lines(paper: Mapping[str, Any], own: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """Each learner with its own selected hyperparameters on XZ (``figures/own_<kind>.json``)."""
+    if "NP" not in own:
+        return []
+    first_s = paper["protocol"].get("first_s", 3.0)
+    first = f"_first_{first_s:g}s"
+    out = ["### Each learner with its own selection", "",
+           "Above, NP and SPJ run with the values selected for SP. Selecting for each learner on the same "
+           "within-XY runs (as GURLS, the paper's library, does per model) and replaying the paper's "
+           "protocol with them (same parts, so the comparison with NP stays paired):", "",
+           "| model | λ_NP | σ | force at regime [N] | torque at regime [N·m] | force first 3 s [N] | "
+           "torque first 3 s [N·m] | force / NP's at regime (paired p) | "
+           "torque / NP's at regime (paired p) |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    ref = own["NP"]["models"]["NP"]
+    for kind, rep in own.items():
+        m = rep["models"][kind]
+        cfg = rep["config"]
+        cells = []
+        for g in ("force", "torque"):
+            if kind == "NP":
+                cells.append("1")
+                continue
+            c = compare_pair(m[f"{g}_rmse_splits"], ref[f"{g}_rmse_splits"])
+            cells.append(f"{c['ratio']:.4f} ({_p_text(c['p_t'])})")
+        out.append(f"| {kind} | {float(cfg['nonparametric.lam']):g} | {float(cfg['nonparametric.sigma']):g} "
+                   f"| {m['force_rmse']:.4g} | {m['torque_rmse']:.4g} | {m['force_rmse' + first]:.3g} "
+                   f"| {m['torque_rmse' + first]:.3g} | {cells[0]} | {cells[1]} |")
+    return [*out, ""]
 
 
 def _tuning_lines(paper: Mapping[str, Any], tuning: Mapping[str, Any] | None,
@@ -408,7 +439,8 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
                    tuning: Mapping[str, Any] | None = None,
                    sensitivity: Mapping[str, Any] | None = None,
                    selection: Sequence[Mapping[str, Any]] = (),
-                   within: Mapping[str, Any] | None = None) -> str:
+                   within: Mapping[str, Any] | None = None,
+                   own: Mapping[str, Mapping[str, Any]] | None = None) -> str:
     """Render the results page.
 
     Args:
@@ -422,6 +454,8 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
         selection: Reports of the protocol run within the training bag over a grid (selection).
         within: Optional report of the protocol within the training bag at the hyperparameters used, with
             NP, SP and SPJ (the cascade-vs-joint comparison in distribution).
+        own: Optional reports of the paper protocol by learner, each run with the hyperparameters selected
+            for that learner (``own_<kind>.json``).
 
     Returns:
         The markdown text.
@@ -477,6 +511,8 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
     lines += _differences(paper, sp_checks, diagnostic, sensitivity)
     if tuning or selection:
         lines += _tuning_lines(paper, tuning, selection)
+    if own:
+        lines += _own_selection_lines(paper, own)
     lines += [
         "Median update time (predict + learn, one sample, this machine): "
         + ", ".join(f"{k} {v:.0f} µs" for k, v in paper["update_us"].items()) + ".",
@@ -511,7 +547,8 @@ def write_results(paper_json: str | Path, payload_json: str | Path, out: str | P
 
     Figures are expected next to the JSON files (``paper_fig3.png``, ``paper_fig3_noise_free.png``,
     ``payload.png``) and linked relative to the page; ``diagnostic_frozen_p.json``, ``tune_xy.json``,
-    ``sensitivity.json``, ``within_xy.json`` and ``select_xy/*.json`` there are used if present.
+    ``sensitivity.json``, ``within_xy.json``, ``own_<kind>.json`` and ``select_xy/*.json`` there are used if
+    present.
 
     Args:
         paper_json: Report of the paper protocol.
@@ -541,8 +578,11 @@ def write_results(paper_json: str | Path, payload_json: str | Path, out: str | P
     selection = [json.loads(p.read_text()) for p in sorted(paper_json.parent.glob("select_xy/*.json"))]
     within_path = paper_json.with_name("within_xy.json")
     within = json.loads(within_path.read_text()) if within_path.is_file() else None
+    own = {kind: json.loads(path.read_text()) for kind in ("NP", "SP", "SPJ")
+           if (path := paper_json.with_name(f"own_{kind}.json")).is_file()}
     text = render_results(paper, payload, figures=figures, command=command, diagnostic=diagnostic,
-                          tuning=tuning, sensitivity=sensitivity, selection=selection, within=within)
+                          tuning=tuning, sensitivity=sensitivity, selection=selection, within=within,
+                          own=own)
     if notes is not None and Path(notes).is_file():
         text += "\n" + Path(notes).read_text()
     out.parent.mkdir(parents=True, exist_ok=True)
