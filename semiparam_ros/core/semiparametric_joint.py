@@ -159,7 +159,8 @@ class JointSemiparametricModel(_TwoStageModel):
         npm = self.nonparametric
         if not npm.standardizer.ready:
             # warm-up: φ = 0 in (1), so the kernel learner's rotations would push the row [0 | y, Φ] out
-            # unchanged; feed it to the π learner directly
+            # unchanged; feed it to the π learner directly (with β < 1 the kernel learner's clock starts
+            # after the warm-up: until then it holds only its prior, which is left undecayed)
             npm.standardizer.partial_fit(xv)
             par = Phi @ pi
             self.parametric.rls._update_valid(Phi, yv.reshape(-1, 1))
@@ -169,7 +170,9 @@ class JointSemiparametricModel(_TwoStageModel):
             u = np.concatenate([yv, Phi.reshape(-1)]).reshape(1, -1)
             pk, E = npm.rls._predict_update_rows_out(phi, u)
             par, total = self._combine(Phi, pk[0], pi)
-            # every rotated-out row gives t rows (Φ_k part, y_k part) of the profiled problem in π
+            # every rotated-out row gives t rows (Φ_k part, y_k part) of the profiled problem in π; they are
+            # finite (an orthogonal transform of finite, validated rows), so this update cannot be refused
+            # after the kernel learner's has been made
             Zp = np.ascontiguousarray(E[:, t:].reshape(-1, p))
             Up = np.ascontiguousarray(E[:, :t].reshape(-1, 1))
             self.parametric.rls._update_valid(Zp, Up)
