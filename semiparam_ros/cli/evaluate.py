@@ -24,6 +24,8 @@ from pathlib import Path
 
 import yaml
 
+from semiparam_ros.cli.errors import error_exit
+
 __all__ = ["add_config_arguments", "build_parser", "main", "parse_overrides"]
 
 
@@ -132,12 +134,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             forgetting_nonparametric=args.forgetting_np, json_path=args.json,
             plot_path=args.plot, plot_truth_path=args.plot_truth, markdown_path=args.markdown,
             progress=not args.no_progress)
-    except ValueError as err:
-        print(f"evaluate: error: {err}", file=sys.stderr)
-        return 2
-    except OSError as err:  # e.g. an output folder that cannot be created: a message, not a traceback
-        print(f"evaluate: error: {err}", file=sys.stderr)
-        return 1
+    except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created
+        return error_exit("evaluate", err)
     print(text, end="")
     return 0
 

@@ -15,6 +15,8 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from semiparam_ros.cli.errors import error_exit
+
 __all__ = ["build_parser", "main"]
 
 
@@ -146,12 +148,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             compress=not args.no_compress,
             progress=not args.quiet,
         )
-    except ValueError as err:
-        print(f"simulate: error: {err}", file=sys.stderr)
-        return 2
-    except OSError as err:  # e.g. an output folder that cannot be created: a message, not a traceback
-        print(f"simulate: error: {err}", file=sys.stderr)
-        return 1
+    except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created
+        return error_exit("simulate", err)
     for path in paths:
         print(path)
     return 0

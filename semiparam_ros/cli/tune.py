@@ -16,6 +16,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from semiparam_ros.cli.errors import error_exit
 from semiparam_ros.cli.evaluate import add_config_arguments, parse_overrides
 
 __all__ = ["build_parser", "main"]
@@ -61,12 +62,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         joint_states_topic=args.joint_states_topic, wrench_topic=args.wrench_topic,
                         n_features=args.n_features, holdout=args.holdout, grid=grid, limit=args.limit,
                         out=args.out, json_path=args.json, progress=not args.no_progress, kind=args.model)
-    except ValueError as err:
-        print(f"tune: error: {err}", file=sys.stderr)
-        return 2
-    except OSError as err:  # e.g. an output folder that cannot be created: a message, not a traceback
-        print(f"tune: error: {err}", file=sys.stderr)
-        return 1
+    except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created
+        return error_exit("tune", err)
     print(text, end="")
     return 0
 
