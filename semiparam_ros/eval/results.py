@@ -100,10 +100,16 @@ def _p_text(p: float | None) -> str:
     return "n/a" if p is None else f"{p:.2g}"
 
 
+def _pair_rows(paper: Mapping[str, Any], a: str, b: str, segment: str = "regime",
+               truth: bool | None = False) -> list[dict[str, Any]]:
+    """Return the report's paired comparisons of A with B in one segment (both targets if truth is None)."""
+    return [r for r in (paper.get("comparisons") or paired_comparisons(paper))
+            if (r["a"], r["b"], r["segment"]) == (a, b, segment) and (truth is None or r["truth"] == truth)]
+
+
 def _verdict(paper: Mapping[str, Any], a: str, b: str, alpha: float = 0.05) -> str:
     """Say per group whether A is ahead of, behind or not separable from B at regime (paired t-test)."""
-    rows = [r for r in (paper.get("comparisons") or paired_comparisons(paper))
-            if (r["a"], r["b"], r["segment"], r["truth"]) == (a, b, "regime", False)]
+    rows = _pair_rows(paper, a, b)
     if not rows:
         return f"{a} and {b} are close"
     parts = []
@@ -117,8 +123,7 @@ def _verdict(paper: Mapping[str, Any], a: str, b: str, alpha: float = 0.05) -> s
 
 
 def _paired_sp_text(paper: Mapping[str, Any]) -> str:
-    rows = [r for r in (paper.get("comparisons") or paired_comparisons(paper))
-            if (r["a"], r["b"], r["segment"], r["truth"]) == ("SP", "NP", "regime", False)]
+    rows = _pair_rows(paper, "SP", "NP")
     if not rows:
         return "the next point gives the cause of the gap."
     parts = ", ".join(f"{r['group']} in {r['wins']} of {r['n']} parts (p = {r['p_t']:.2g}, paired t)"
@@ -346,8 +351,7 @@ def _joint_lines(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]],
                            "above the limit" for c in failed)
         noise_text = (f" (noise {noise['force_rmse']:.3g} N, {noise['torque_rmse']:.3g} N·m)" if noise
                       else "")
-        paired = {(r["group"], r["truth"]): r for r in (paper.get("comparisons") or paired_comparisons(paper))
-                  if (r["a"], r["b"], r["segment"]) == ("SPJ", "NP", "regime")}
+        paired = {(r["group"], r["truth"]): r for r in _pair_rows(paper, "SPJ", "NP", truth=None)}
         detail = "; ".join(
             f"{group} {'noise-free' if truth else 'measured'}: SPJ − NP = {r['diff_mean']:+.2g} ± "
             f"{r['diff_sem'] or 0:.2g} {_UNIT[group]}, SPJ better in {r['wins']} of {r['n']} parts, "
