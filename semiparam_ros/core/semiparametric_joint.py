@@ -115,11 +115,12 @@ class JointSemiparametricModel(_TwoStageModel):
         """β, the forgetting factor per sample shared by both terms."""
         return self.parametric.rls.forgetting
 
-    def _combine(self, Phi: np.ndarray, pk: np.ndarray, pi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(Φπ̂, p + (Φ − P)π̂)`` from the kernel's prediction ``pk = [p | P_1 … P_t]`` of U."""
+    def _combine(self, Phi: np.ndarray, pk: np.ndarray,
+                 pi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(Φπ̂, p + (Φ − P)π̂, Φ − P)`` from the kernel's prediction ``pk = [p | P_1 … P_t]`` of U."""
         t, p = self.n_outputs, self.n_params
         eU = Phi - pk[t:].reshape(t, p)
-        return Phi @ pi, pk[:t] + eU @ pi
+        return Phi @ pi, pk[:t] + eU @ pi, eU
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
         """Predict ``Φπ̂ + Ŵᵀφ`` (the rigid-body term alone during the standardizer warm-up).
@@ -144,11 +145,8 @@ class JointSemiparametricModel(_TwoStageModel):
         else:
             pk = np.zeros(t * (1 + p))
             var_k = 0.0
-        par, total = self._combine(Phi, pk, pi)
-        var = None
-        if return_variance:
-            eU = Phi - pk[t:].reshape(t, p)
-            var = var_k + self.parametric.rls.variance(eU)
+        par, total, eU = self._combine(Phi, pk, pi)
+        var = var_k + self.parametric.rls.variance(eU) if return_variance else None
         return Prediction(par, total - par, total, var)
 
     def _step(self, x: Any, y: Any) -> Prediction:
@@ -169,7 +167,7 @@ class JointSemiparametricModel(_TwoStageModel):
             phi = npm._features(xv)
             u = np.concatenate([yv, Phi.reshape(-1)]).reshape(1, -1)
             pk, E = npm.rls._predict_update_rows_out(phi, u)
-            par, total = self._combine(Phi, pk[0], pi)
+            par, total, _ = self._combine(Phi, pk[0], pi)
             # every rotated-out row gives t rows (Φ_k part, y_k part) of the profiled problem in π; they are
             # finite (an orthogonal transform of finite, validated rows), so this update cannot be refused
             # after the kernel learner's has been made
