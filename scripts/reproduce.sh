@@ -22,7 +22,7 @@ while [ $# -gt 0 ]; do
   esac
 done
 bin=.venv/bin
-config=config/icub_right_arm.yaml
+source scripts/paper_params.sh  # config, tuned (the hyperparameters used below)
 gen=bags/generated
 figs="$out/figures"
 mkdir -p "$figs"
@@ -39,8 +39,6 @@ fi
 # test-then-train on 5 parts of its second half) both select λ_P = 0.01, λ_NP = 0.001, σ = 6 for D = 500.
 # The test bag (XZ) played no part in the choice. The selection is for the cascade SP; SPJ runs with the
 # same values (not selected separately).
-tuned=(--set parametric.lam=0.01 --set nonparametric.lam=0.001 --set nonparametric.sigma=6.0
-       --set nonparametric.n_features=500)
 
 echo "== selection on the training bag: the protocol within XY (train on its first 5000 samples, test-then-train"
 echo "   on 5 parts of 1000 of the rest), grid λ_NP × σ (λ_P = 0.01: insensitive, see tune below); SP selects"

@@ -1,0 +1,5 @@
+# Sourced by scripts/reproduce.sh and scripts/replicates.sh: the configuration and the hyperparameters of
+# the paper reproduction. Selected on the training bag (XY) only — see docs/results.md and reproduce.sh.
+config=config/icub_right_arm.yaml
+tuned=(--set parametric.lam=0.01 --set nonparametric.lam=0.001 --set nonparametric.sigma=6.0
+       --set nonparametric.n_features=500)
