@@ -393,6 +393,24 @@ def test_results_page_with_the_joint_model(tmp_path: Path) -> None:
     w = within["models"]
     assert "Within the training bag" in text and f"SP {w['SP']['force_rmse']:.4g} N" in text
     assert f"SPJ {w['SPJ']['force_rmse']:.4g} N" in text
+    # replicates over seeds: the section appears with the seed-level verdicts of the summary
+    from semiparam_ros.eval.replicates import replicate_summary
+
+    assert "### Replicates over simulator seeds" not in text
+    others = [protocol_report(run_protocol(kinds(), toy_stream(100, 20 + i), toy_stream(200, 30 + i),
+                                           splits=2)) for i in range(3)]
+    for rep in others:
+        rep["config"] = paper["config"]
+    summary = replicate_summary(others, [1, 2, 3])
+    write_json(summary, figs / "replicates.json")
+    text = write_results(figs / "paper.json", figs / "payload.json", tmp_path / "results.md").read_text()
+    assert "### Replicates over simulator seeds" in text and "seeds 1–3" in text
+    key = ("SPJ", "NP", "torque", "regime", "seeds", False)
+    (row,) = [r for r in summary["comparisons"]
+              if (r["a"], r["b"], r["group"], r["segment"], r["level"], r["truth"]) == key]
+    assert (f"torque (measured): {'ahead of' if row['diff_mean'] < 0 else 'behind'} NP" in text
+            or "torque (measured): not separable from NP" in text)
+    assert f"ratio {row['ratio']:.4f}, better on {row['wins']} of 3 seeds" in text
 
 
 def test_figures_draw_spj_in_its_own_colour_and_name() -> None:

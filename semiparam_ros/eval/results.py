@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from semiparam_ros.eval.compare import compare_pair, comparison_markdown, paired_comparisons
+from semiparam_ros.eval.replicates import replicates_markdown
 from semiparam_ros.eval.report import adaptation_markdown, paper_checks, protocol_markdown
 from semiparam_ros.eval.selection import select
 
@@ -437,6 +438,48 @@ def _comparison_lines(paper: Mapping[str, Any], first_s: float) -> list[str]:
     ]
 
 
+def _replicate_verdicts(replicates: Mapping[str, Any], alpha: float = 0.05) -> list[str]:
+    """One line per semiparametric learner: at regime over the seeds, ahead of / behind / tied with NP."""
+    out = []
+    for a in [k for k in replicates["models"] if k not in ("P", "NP")]:
+        parts = []
+        for r in replicates["comparisons"]:
+            if (r["a"], r["b"], r["segment"], r["level"]) != (a, "NP", "regime", "seeds"):
+                continue
+            if r["p_t"] is not None and r["p_t"] < alpha:
+                word = "ahead of" if r["diff_mean"] < 0 else "behind"
+            else:
+                word = "not separable from"
+            target = "noise-free" if r["truth"] else "measured"
+            parts.append(f"{r['group']} ({target}): {word} NP, ratio {r['ratio']:.4f}, better on {r['wins']} "
+                         f"of {r['n']} seeds, p = {_p_text(r['p_t'])}")
+        if parts:
+            out.append(f"- **{a} at regime:** " + "; ".join(parts) + ".")
+    return out
+
+
+def _replicate_lines(replicates: Mapping[str, Any] | None) -> list[str]:
+    """Return the section on the protocol replicated over simulator seeds (``figures/replicates.json``)."""
+    if not replicates:
+        return []
+    seeds = replicates["seeds"]
+    return [
+        "### Replicates over simulator seeds",
+        "",
+        "The parts above share one pair of logs, so their tests say how sure we are about these logs. "
+        f"`bash scripts/replicates.sh` repeats the whole experiment on {len(seeds)} more pairs of XY/XZ logs "
+        f"simulated with seeds {seeds[0]}–{seeds[-1]} (new sensor noise, new wander of the hand's speed, "
+        "circle centre and radius; robot, non-rigid effects, hyperparameters and protocol unchanged; "
+        "`figures/replicates.json`, `semiparam_ros/eval/replicates.py`). Each seed is an independent "
+        "replicate, so the seed-level tests below answer whether a criterion holds on logs of this kind:",
+        "",
+        *_replicate_verdicts(replicates),
+        "",
+        replicates_markdown(replicates).rstrip(),
+        "",
+    ]
+
+
 def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figures: Mapping[str, str],
                    command: str = "bash scripts/reproduce.sh",
                    diagnostic: Mapping[str, Any] | None = None,
@@ -444,7 +487,8 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
                    sensitivity: Mapping[str, Any] | None = None,
                    selection: Sequence[Mapping[str, Any]] = (),
                    within: Mapping[str, Any] | None = None,
-                   own: Mapping[str, Mapping[str, Any]] | None = None) -> str:
+                   own: Mapping[str, Mapping[str, Any]] | None = None,
+                   replicates: Mapping[str, Any] | None = None) -> str:
     """Render the results page.
 
     Args:
@@ -460,6 +504,8 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
             NP, SP and SPJ (the cascade-vs-joint comparison in distribution).
         own: Optional reports of the paper protocol by learner, each run with the hyperparameters selected
             for that learner (``own_<kind>.json``).
+        replicates: Optional summary of the protocol over simulator seeds
+            (:func:`~semiparam_ros.eval.replicates.replicate_summary`, ``replicates.json``).
 
     Returns:
         The markdown text.
@@ -512,6 +558,7 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
         lines += [f"Against the noise-free wrench: ![Fig. 3, noise-free]({figures['fig3_noise_free']})", ""]
     lines += _joint_lines(paper, checks, within)
     lines += _comparison_lines(paper, first_s)
+    lines += _replicate_lines(replicates)
     lines += _differences(paper, sp_checks, diagnostic, sensitivity)
     if tuning or selection:
         lines += _tuning_lines(paper, tuning, selection)
@@ -551,8 +598,8 @@ def write_results(paper_json: str | Path, payload_json: str | Path, out: str | P
 
     Figures are expected next to the JSON files (``paper_fig3.png``, ``paper_fig3_noise_free.png``,
     ``payload.png``) and linked relative to the page; ``diagnostic_frozen_p.json``, ``tune_xy.json``,
-    ``sensitivity.json``, ``within_xy.json``, ``own_<kind>.json`` and ``select_xy/*.json`` there are used if
-    present.
+    ``sensitivity.json``, ``within_xy.json``, ``own_<kind>.json``, ``replicates.json`` and
+    ``select_xy/*.json`` there are used if present.
 
     Args:
         paper_json: Report of the paper protocol.
@@ -584,9 +631,11 @@ def write_results(paper_json: str | Path, payload_json: str | Path, out: str | P
     within = json.loads(within_path.read_text()) if within_path.is_file() else None
     own = {kind: json.loads(path.read_text()) for kind in ("NP", "SP", "SPJ")
            if (path := paper_json.with_name(f"own_{kind}.json")).is_file()}
+    rep_path = paper_json.with_name("replicates.json")
+    replicates = json.loads(rep_path.read_text()) if rep_path.is_file() else None
     text = render_results(paper, payload, figures=figures, command=command, diagnostic=diagnostic,
                           tuning=tuning, sensitivity=sensitivity, selection=selection, within=within,
-                          own=own)
+                          own=own, replicates=replicates)
     if notes is not None and Path(notes).is_file():
         text += "\n" + Path(notes).read_text()
     out.parent.mkdir(parents=True, exist_ok=True)
