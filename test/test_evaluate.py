@@ -411,6 +411,12 @@ def test_results_page_with_the_joint_model(tmp_path: Path) -> None:
     assert (f"torque (measured): {'ahead of' if row['diff_mean'] < 0 else 'behind'} NP" in text
             or "torque (measured): not separable from NP" in text)
     assert f"ratio {row['ratio']:.4f}, better on {row['wins']} of 3 seeds" in text
+    # every failed SP criterion of the headline run says on how many seeds it holds
+    crit = {c["check"]: c for c in summary["criteria"]}
+    failed = [c["check"] for c in paper["checks"] if not c["passed"] and "at regime / NP's" in c["check"]]
+    assert failed  # the toy SP (λ = 0.5) and SPJ (λ = 2) are behind the toy NP at regime
+    for name in failed:
+        assert f"{name} holds on {crit[name]['passed']} of 3 seeds" in text
 
 
 def test_figures_draw_spj_in_its_own_colour_and_name() -> None:

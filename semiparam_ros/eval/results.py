@@ -135,14 +135,16 @@ def _paired_sp_text(paper: Mapping[str, Any]) -> str:
 
 def _differences(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]],
                  diagnostic: Mapping[str, Any] | None = None,
-                 sensitivity: Mapping[str, Any] | None = None) -> list[str]:
+                 sensitivity: Mapping[str, Any] | None = None,
+                 replicates: Mapping[str, Any] | None = None) -> list[str]:
     """Return the comparison with the paper, with the numbers of this run, as markdown lines."""
     m = paper["models"]
     noise = paper.get("noise", {})
     failed = [c["check"] for c in checks if not c["passed"]]
     out = ["### Where the synthetic data differ from the paper's", ""]
     if failed:
-        out += [f"**Not reproduced on these data:** {'; '.join(failed)}. Why:", ""]
+        out += [f"**Not reproduced on these data:** {'; '.join(failed)}."
+                f"{_replicate_check_text(replicates, failed)} Why:", ""]
     out += _DIFFERENCES.format(
         noise_f=f"{noise['force_rmse']:.3g}" if noise else "n/a",
         noise_t=f"{noise['torque_rmse']:.3g}" if noise else "n/a",
@@ -276,8 +278,27 @@ def _wins(models: Mapping[str, Any], a: str, b: str, key: str) -> tuple[int, int
     return sum(x < y for x, y in zip(sa, sb, strict=True)), len(sa)
 
 
+def _replicate_check_text(replicates: Mapping[str, Any] | None, names: Sequence[str]) -> str:
+    """Say on how many simulated log pairs each named criterion holds (empty without replicates)."""
+    if not replicates:
+        return ""
+    crit = {c["check"]: c for c in replicates["criteria"]}
+    rows = []
+    for name in names:
+        c = crit.get(name)
+        if c is None:
+            continue
+        rows.append(f"{name} holds on {c['passed']} of {c['n']} seeds (values {min(c['values']):.4f}–"
+                    f"{max(c['values']):.4f})")
+    if not rows:
+        return ""
+    return (f" Over {len(replicates['seeds'])} more independently simulated pairs of logs (replicates "
+            "section below): " + "; ".join(rows) + ".")
+
+
 def _joint_lines(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]],
-                 within: Mapping[str, Any] | None) -> list[str]:
+                 within: Mapping[str, Any] | None,
+                 replicates: Mapping[str, Any] | None = None) -> list[str]:
     """Return the section on the joint semiparametric model (SPJ), with the numbers of this run."""
     m = paper["models"]
     if "SPJ" not in m or not {"NP", "SP"} <= set(m):
@@ -362,7 +383,8 @@ def _joint_lines(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]],
         out.append(f"- **Strict ordering:** still not met by SPJ: {misses}. Paired over the parts (table "
                    f"below) {detail}: the data do not separate SPJ from NP there. All models but P reach "
                    f"the sensor noise at regime{noise_text}, so what is left to separate them is a "
-                   "fraction of a per cent. We did not retune on the test bag to flip it.")
+                   "fraction of a per cent. We did not retune on the test bag to flip it."
+                   + _replicate_check_text(replicates, [c["check"] for c in failed]))
     else:
         reg = [by.get(f"SPJ {g} RMSE at regime / NP's") for g in ("force", "torque")]
         vals = ", ".join(f"{c['value']:.4f}" for c in reg if c)
@@ -556,10 +578,10 @@ def render_results(paper: Mapping[str, Any], payload: Mapping[str, Any], *, figu
     lines += ["", f"![Fig. 3 reproduction]({figures['fig3']})", ""]
     if figures.get("fig3_noise_free"):
         lines += [f"Against the noise-free wrench: ![Fig. 3, noise-free]({figures['fig3_noise_free']})", ""]
-    lines += _joint_lines(paper, checks, within)
+    lines += _joint_lines(paper, checks, within, replicates)
     lines += _comparison_lines(paper, first_s)
     lines += _replicate_lines(replicates)
-    lines += _differences(paper, sp_checks, diagnostic, sensitivity)
+    lines += _differences(paper, sp_checks, diagnostic, sensitivity, replicates)
     if tuning or selection:
         lines += _tuning_lines(paper, tuning, selection)
     if own:
