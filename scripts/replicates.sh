@@ -41,17 +41,15 @@ one_seed() {
 export tuned_str="${tuned[*]}"  # words without spaces: split again inside one_seed
 export -f one_seed
 printf '%s\n' $seeds | xargs -P 2 -I{} bash -c 'one_seed {}'
-mkdir -p "$out/figures"
 .venv/bin/python -c '
 import json, sys
 from pathlib import Path
 from semiparam_ros.eval.replicates import replicate_summary, replicates_markdown
+from semiparam_ros.eval.report import write_json
 work, out = Path(sys.argv[1]), Path(sys.argv[2])
 seeds = [int(s) for s in sys.argv[3:]]
 summary = replicate_summary([json.loads((work / f"seed_{s}.json").read_text()) for s in seeds], seeds)
-tmp = out.with_suffix(".tmp")
-tmp.write_text(json.dumps(summary, indent=1) + "\n")
-tmp.replace(out)
+write_json(summary, out)
 print(replicates_markdown(summary))
 ' "$work" "$out/figures/replicates.json" $seeds
 echo "wrote $out/figures/replicates.json"

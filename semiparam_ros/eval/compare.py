@@ -25,12 +25,13 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-__all__ = ["DEFAULT_PAIRS", "compare_pair", "comparison_markdown", "paired_comparisons"]
+from semiparam_ros.eval.metrics import GROUP_UNITS
+from semiparam_ros.eval.report import first_key
+
+__all__ = ["DEFAULT_PAIRS", "compare_pair", "comparison_markdown", "format_p", "paired_comparisons"]
 
 #: Pairs compared by default when both learners are in a report: each semiparametric model against NP.
 DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("SP", "NP"), ("SPJ", "NP"), ("SPJ", "SP"))
-
-_UNITS = {"force": "N", "torque": "N·m"}
 
 
 def compare_pair(a: Sequence[float], b: Sequence[float]) -> dict[str, Any]:
@@ -82,7 +83,7 @@ def paired_comparisons(report: Mapping[str, Any], pairs: Sequence[tuple[str, str
     """
     models = report["models"]
     first_s = report["protocol"].get("first_s", 3.0) if first_s is None else first_s
-    first = f"_first_{first_s:g}s"
+    first = f"_{first_key(first_s)}"
     out: list[dict[str, Any]] = []
     for a, b in pairs:
         if a not in models or b not in models:
@@ -102,7 +103,8 @@ def paired_comparisons(report: Mapping[str, Any], pairs: Sequence[tuple[str, str
     return out
 
 
-def _p(value: float | None) -> str:
+def format_p(value: float | None) -> str:
+    """Format a p-value for a table: two significant digits, ``< 0.001`` below that, ``n/a`` for None."""
     return "n/a" if value is None else (f"{value:.2g}" if value >= 0.001 else "< 0.001")
 
 
@@ -126,9 +128,9 @@ def comparison_markdown(rows: Sequence[Mapping[str, Any]], first_s: float = 3.0)
              "| p (paired t) | p (sign) |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         seg = "at regime" if r["segment"] == "regime" else f"first {first_s:g} s"
-        unit = _UNITS.get(r["group"], "")
+        unit = GROUP_UNITS.get(r["group"], "")
         lines.append(
             f"| {r['a']} vs {r['b']} | {'noise-free' if r['truth'] else 'measured'} | {r['group']} | {seg} "
             f"| {r['ratio']:.4f} | {r['diff_mean']:+.2g} ± {_p_or(r['diff_sem'])} {unit} "
-            f"| {r['wins']} of {r['n']} | {_p(r['p_t'])} | {_p(r['p_sign'])} |")
+            f"| {r['wins']} of {r['n']} | {format_p(r['p_t'])} | {format_p(r['p_sign'])} |")
     return "\n".join(lines) + "\n"

@@ -22,6 +22,8 @@ matplotlib.use("Agg")  # before pyplot: headless, deterministic PNGs
 import matplotlib.pyplot as plt
 import numpy as np
 
+from semiparam_ros.eval.metrics import GROUP_UNITS
+
 __all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_protocol"]
 
 #: The paper's colours: parametric green, nonparametric red, semiparametric blue; the joint semiparametric
@@ -30,7 +32,6 @@ COLORS: dict[str, str] = {"P": "tab:green", "NP": "tab:red", "SP": "tab:blue", "
 #: Legend names of model kinds that differ from the kind (a kind is also the prefix of adaptation names,
 #: e.g. ``"SPJ adaptive (β=0.995)"``).
 LABELS: dict[str, str] = {"SPJ": "SP joint"}
-_UNITS = {"force": "N", "torque": "N·m"}
 _EXTRA = ("tab:orange", "tab:brown", "tab:gray", "tab:olive", "tab:cyan", "tab:pink")
 
 
@@ -101,7 +102,7 @@ def plot_protocol(report: Mapping[str, Any], path: str | Path, *, truth: bool = 
             ax.plot(time_s, mean, color=color, lw=1.4, label=_label(kind))
             ax.fill_between(time_s, mean - std, mean + std, color=color, alpha=0.2, lw=0)
         ax.set_xscale("log")
-        ax.set_ylabel(f"{group} RMSE [{_UNITS[group]}]")
+        ax.set_ylabel(f"{group} RMSE [{GROUP_UNITS[group]}]")
         ax.grid(True, which="both", alpha=0.3)
         ax.set_ylim(bottom=0)
     axes[0, 0].legend(loc="upper right")
@@ -154,7 +155,7 @@ def plot_adaptation(report: Mapping[str, Any], path: str | Path, *, title: str |
         ax.axvline(0.0, color="k", lw=0.8)
         ax.axvspan(0.0, deadline, color="0.85", alpha=0.5, lw=0)
         ax.set_yscale("log")
-        ax.set_ylabel(f"{group} RMSE [{_UNITS[group]}]")
+        ax.set_ylabel(f"{group} RMSE [{GROUP_UNITS[group]}]")
         ax.grid(True, which="both", alpha=0.3)
         if xlim is not None:
             ax.set_xlim(*xlim)

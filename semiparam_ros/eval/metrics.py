@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "GROUP_UNITS",
     "WRENCH_GROUPS",
     "component_rmse",
     "group_rmse",
@@ -25,6 +26,9 @@ __all__ = [
 
 #: Component groups of a wrench ``[fx, fy, fz, tx, ty, tz]``: force (N) and torque (N·m).
 WRENCH_GROUPS: dict[str, slice] = {"force": slice(0, 3), "torque": slice(3, 6)}
+
+#: Unit of each group's errors, for tables and axis labels.
+GROUP_UNITS: dict[str, str] = {"force": "N", "torque": "N·m"}
 
 
 def groups_for(n_outputs: int) -> dict[str, slice]:

@@ -24,17 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.eval.compare import DEFAULT_PAIRS, compare_pair
-from semiparam_ros.eval.report import paper_checks
+from semiparam_ros.eval.compare import DEFAULT_PAIRS, compare_pair, format_p
+from semiparam_ros.eval.metrics import GROUP_UNITS
+from semiparam_ros.eval.report import first_key, paper_checks
 
 __all__ = ["replicate_summary", "replicates_markdown"]
 
 _GROUPS = ("force", "torque")
-_UNITS = {"force": "N", "torque": "N·m"}
-
-
-def _segment_keys(first_s: float) -> tuple[tuple[str, str], ...]:
-    return (("regime", ""), ("first", f"_first_{first_s:g}s"))
 
 
 def _stats(report: Mapping[str, Any], kind: str, truth: bool) -> Mapping[str, Any] | None:
@@ -82,7 +78,7 @@ def replicate_summary(reports: Sequence[Mapping[str, Any]], seeds: Sequence[int]
         if rep.get("config") != ref.get("config"):
             raise ValueError(f"seed {seed}: configuration differs from the first report's")
     first_s = float(ref["protocol"].get("first_s", 3.0))
-    segments = _segment_keys(first_s)
+    segments = (("regime", ""), ("first", f"_{first_key(first_s)}"))
 
     per_seed: list[dict[str, Any]] = []
     for seed, rep in zip(seeds, reports, strict=True):
@@ -132,10 +128,6 @@ def replicate_summary(reports: Sequence[Mapping[str, Any]], seeds: Sequence[int]
             "criteria": list(criteria.values()), "comparisons": comparisons}
 
 
-def _p(value: float | None) -> str:
-    return "n/a" if value is None else (f"{value:.2g}" if value >= 0.001 else "< 0.001")
-
-
 def replicates_markdown(summary: Mapping[str, Any]) -> str:
     """Tables of a :func:`replicate_summary`: criteria over seeds, per-seed ratios, paired comparisons.
 
@@ -181,5 +173,6 @@ def replicates_markdown(summary: Mapping[str, Any]) -> str:
         target = "noise-free" if r["truth"] else "measured"
         lines.append(f"| {r['a']} vs {r['b']} | {target} | {r['group']} | {seg} |"
                      f" {r['level']} | {r['ratio']:.4f} | {r['diff_mean']:+.2g} ± {sem} "
-                     f"{_UNITS[r['group']]} | {r['wins']} of {r['n']} | {_p(r['p_t'])} | {_p(r['p_sign'])} |")
+                     f"{GROUP_UNITS[r['group']]} | {r['wins']} of {r['n']} | {format_p(r['p_t'])} | "
+                     f"{format_p(r['p_sign'])} |")
     return "\n".join(lines) + "\n"

@@ -35,31 +35,39 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.eval.metrics import group_rmse
+from semiparam_ros.eval.metrics import GROUP_UNITS, group_rmse
 from semiparam_ros.eval.protocol import AdaptationResult, ProtocolResult
 
 __all__ = [
     "CHECKED_SP_KINDS",
     "adaptation_markdown",
     "adaptation_report",
+    "first_key",
     "paper_checks",
     "protocol_markdown",
     "protocol_report",
     "write_json",
 ]
 
-_UNITS = {"force": "N", "torque": "N·m"}
 _SCALAR_LIST = re.compile(r"\[((?:\s*[^\[\]{}\s][^\[\]{}]*?)?)\s*\]")
 
 
-def _first_key(first_s: float) -> str:
+def first_key(first_s: float) -> str:
+    """Return the initial segment's name in report keys: ``"first_3s"`` for 3 s (``force_rmse_first_3s``).
+
+    Args:
+        first_s: Length of the initial segment [s].
+
+    Returns:
+        The key fragment, without the leading underscore.
+    """
     return f"first_{first_s:g}s"
 
 
 def _segment_stats(result: ProtocolResult, kind: str, first_s: float, truth: bool) -> dict[str, Any]:
     stats: dict[str, Any] = {}
     for group in result.groups:
-        for segment, suffix in (("regime", ""), ("first", "_" + _first_key(first_s))):
+        for segment, suffix in (("regime", ""), ("first", "_" + first_key(first_s))):
             values = result.segment_rmse(kind, group, segment, truth)
             stats[f"{group}_rmse{suffix}"] = float(np.mean(values))
             stats[f"{group}_rmse{suffix}_std"] = float(np.std(values))
@@ -165,7 +173,7 @@ def paper_checks(report: Mapping[str, Any], first_s: float = 3.0) -> list[dict[s
     sp_kinds = [k for k in CHECKED_SP_KINDS if k in models]
     if not {"P", "NP"} <= set(models) or not sp_kinds or "force_rmse" not in models["P"]:
         raise ValueError("paper checks need P, NP and SP (or SPJ) models and a wrench output")
-    first = "_" + _first_key(first_s)
+    first = "_" + first_key(first_s)
     checks: list[dict[str, Any]] = []
 
     def add(kind: str, name: str, value: float, limit: float, strict: bool = False) -> None:
@@ -204,13 +212,13 @@ def protocol_markdown(report: Mapping[str, Any], first_s: float = 3.0, truth: bo
     Returns:
         The table (with a trailing newline).
     """
-    first = "_" + _first_key(first_s)
+    first = "_" + first_key(first_s)
     groups = [g for g in ("force", "torque") if f"{g}_rmse" in next(iter(report["models"].values()))]
     header = ["model"]
     for g in groups:
-        header.append(f"{g} RMSE at regime [{_UNITS[g]}]")
+        header.append(f"{g} RMSE at regime [{GROUP_UNITS[g]}]")
     for g in groups:
-        header.append(f"{g} RMSE first {first_s:g} s [{_UNITS[g]}]")
+        header.append(f"{g} RMSE first {first_s:g} s [{GROUP_UNITS[g]}]")
     header.append("update [µs]")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for kind, stats in report["models"].items():
@@ -274,7 +282,7 @@ def adaptation_markdown(report: Mapping[str, Any]) -> str:
         for group, s in groups.items():
             rec = s["recovery_time_s"]
             lines.append("| " + " | ".join([
-                kind, f"{group} [{_UNITS.get(group, '')}]", _fmt(s["pre_rmse"]), _fmt(s["peak"]),
+                kind, f"{group} [{GROUP_UNITS.get(group, '')}]", _fmt(s["pre_rmse"]), _fmt(s["peak"]),
                 f"{_fmt(s['level_at_deadline'])} ({s['ratio_at_deadline']:.2f}×)", _fmt(s["post_rmse"]),
                 "never" if rec is None else f"+{rec:.1f} s", "yes" if s["recovered"] else "no"]) + " |")
     return "\n".join(lines) + "\n"

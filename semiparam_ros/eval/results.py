@@ -13,8 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from semiparam_ros.eval.compare import compare_pair, comparison_markdown, paired_comparisons
+from semiparam_ros.eval.metrics import GROUP_UNITS
 from semiparam_ros.eval.replicates import replicates_markdown
-from semiparam_ros.eval.report import adaptation_markdown, paper_checks, protocol_markdown
+from semiparam_ros.eval.report import adaptation_markdown, first_key, paper_checks, protocol_markdown
 from semiparam_ros.eval.selection import select
 
 __all__ = ["render_results", "write_results"]
@@ -94,7 +95,6 @@ def _frozen_text(diagnostic: Mapping[str, Any] | None) -> str:
             f"{d['SP']['force_rmse']:.4g} N, {d['SP']['torque_rmse']:.4g} N·m). ")
 
 
-_UNIT = {"force": "N", "torque": "N·m"}
 
 
 def _p_text(p: float | None) -> str:
@@ -108,19 +108,20 @@ def _pair_rows(paper: Mapping[str, Any], a: str, b: str, segment: str = "regime"
             if (r["a"], r["b"], r["segment"]) == (a, b, segment) and (truth is None or r["truth"] == truth)]
 
 
-def _verdict(paper: Mapping[str, Any], a: str, b: str, alpha: float = 0.05) -> str:
+def _direction(row: Mapping[str, Any], alpha: float = 0.05) -> str:
+    """Say whether A is ahead of, behind or not separable from B in a paired-comparison row (paired t)."""
+    if row["p_t"] is not None and row["p_t"] < alpha:
+        return "ahead of" if row["diff_mean"] < 0 else "behind"
+    return "not separable from"
+
+
+def _verdict(paper: Mapping[str, Any], a: str, b: str) -> str:
     """Say per group whether A is ahead of, behind or not separable from B at regime (paired t-test)."""
     rows = _pair_rows(paper, a, b)
     if not rows:
         return f"{a} and {b} are close"
-    parts = []
-    for r in rows:
-        if r["p_t"] is not None and r["p_t"] < alpha:
-            word = "ahead of" if r["diff_mean"] < 0 else "behind"
-        else:
-            word = "not separable from"
-        parts.append(f"in {r['group']} {a} is {word} {b} (paired p = {_p_text(r['p_t'])})")
-    return "; ".join(parts)
+    return "; ".join(f"in {r['group']} {a} is {_direction(r)} {b} (paired p = {_p_text(r['p_t'])})"
+                     for r in rows)
 
 
 def _paired_sp_text(paper: Mapping[str, Any]) -> str:
@@ -194,7 +195,7 @@ def _own_selection_lines(paper: Mapping[str, Any], own: Mapping[str, Mapping[str
     if "NP" not in own:
         return []
     first_s = paper["protocol"].get("first_s", 3.0)
-    first = f"_first_{first_s:g}s"
+    first = f"_{first_key(first_s)}"
     out = ["### Each learner with its own selection", "",
            "Above, NP and SPJ run with the values selected for SP. Selecting for each learner on the same "
            "within-XY runs (as GURLS, the paper's library, does per model) and replaying the paper's "
@@ -376,7 +377,7 @@ def _joint_lines(paper: Mapping[str, Any], checks: Sequence[Mapping[str, Any]],
         paired = {(r["group"], r["truth"]): r for r in _pair_rows(paper, "SPJ", "NP", truth=None)}
         detail = "; ".join(
             f"{group} {'noise-free' if truth else 'measured'}: SPJ − NP = {r['diff_mean']:+.2g} ± "
-            f"{r['diff_sem'] or 0:.2g} {_UNIT[group]}, SPJ better in {r['wins']} of {r['n']} parts, "
+            f"{r['diff_sem'] or 0:.2g} {GROUP_UNITS[group]}, SPJ better in {r['wins']} of {r['n']} parts, "
             f"p = {_p_text(r['p_t'])} (paired t)"
             for (group, truth), r in sorted(paired.items()) if f"SPJ {group} RMSE at regime / NP's" in
             {c["check"] for c in failed})
@@ -460,7 +461,7 @@ def _comparison_lines(paper: Mapping[str, Any], first_s: float) -> list[str]:
     ]
 
 
-def _replicate_verdicts(replicates: Mapping[str, Any], alpha: float = 0.05) -> list[str]:
+def _replicate_verdicts(replicates: Mapping[str, Any]) -> list[str]:
     """One line per semiparametric learner: at regime over the seeds, ahead of / behind / tied with NP."""
     out = []
     for a in [k for k in replicates["models"] if k not in ("P", "NP")]:
@@ -468,13 +469,9 @@ def _replicate_verdicts(replicates: Mapping[str, Any], alpha: float = 0.05) -> l
         for r in replicates["comparisons"]:
             if (r["a"], r["b"], r["segment"], r["level"]) != (a, "NP", "regime", "seeds"):
                 continue
-            if r["p_t"] is not None and r["p_t"] < alpha:
-                word = "ahead of" if r["diff_mean"] < 0 else "behind"
-            else:
-                word = "not separable from"
             target = "noise-free" if r["truth"] else "measured"
-            parts.append(f"{r['group']} ({target}): {word} NP, ratio {r['ratio']:.4f}, better on {r['wins']} "
-                         f"of {r['n']} seeds, p = {_p_text(r['p_t'])}")
+            parts.append(f"{r['group']} ({target}): {_direction(r)} NP, ratio {r['ratio']:.4f}, better on "
+                         f"{r['wins']} of {r['n']} seeds, p = {_p_text(r['p_t'])}")
         if parts:
             out.append(f"- **{a} at regime:** " + "; ".join(parts) + ".")
     return out

@@ -14,6 +14,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from semiparam_ros.eval.report import first_key
+
 __all__ = ["GridPoint", "select"]
 
 
@@ -60,7 +62,7 @@ def select(reports: Sequence[Mapping[str, Any]], kind: str) -> list[GridPoint]:
             continue
         try:
             cfg = rep["config"]
-            first = f"_first_{rep['protocol'].get('first_s', 3.0):g}s"
+            first = f"_{first_key(rep['protocol'].get('first_s', 3.0))}"
             raw.append((float(cfg["nonparametric.lam"]), float(cfg["nonparametric.sigma"]),
                         float(stats["force_rmse"]), float(stats["torque_rmse"]),
                         float(stats[f"force_rmse{first}"]), float(stats[f"torque_rmse{first}"])))
