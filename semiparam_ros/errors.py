@@ -1,0 +1,48 @@
+"""Exception types of semiparam_ros: one root, one subclass per concern.
+
+Callers catch what they mean: :class:`ConfigurationError` for invalid parameters, :class:`RejectedSampleError`
+for one bad input sample (the estimator counts it as a drop and goes on), :class:`CheckpointError` for a
+checkpoint that cannot be read or does not fit the model, :class:`BagError` for a bag that cannot be read
+or written. Every subclass also derives from :class:`ValueError`, so code written against the earlier
+``ValueError`` contract keeps working. Anything else raised inside the package (``TypeError``,
+``IndexError``, a plain ``ValueError`` from NumPy, …) is a programming error and is never counted as a
+drop.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "BagError",
+    "CheckpointError",
+    "ConfigurationError",
+    "RejectedSampleError",
+    "SemiparamError",
+]
+
+
+class SemiparamError(Exception):
+    """Root of every exception that semiparam_ros raises on purpose."""
+
+
+class ConfigurationError(SemiparamError, ValueError):
+    """A parameter or a combination of parameters is invalid; the message names the parameter."""
+
+
+class RejectedSampleError(SemiparamError, ValueError):
+    """One input sample (or message) cannot be learned or predicted: wrong shape, NaN/inf, out of range.
+
+    The model's state is unchanged when this is raised.
+    """
+
+
+class CheckpointError(SemiparamError, ValueError):
+    """A checkpoint is missing, corrupt, or was written for another model structure or hyperparameters."""
+
+
+class BagError(SemiparamError, ValueError):
+    """A bag cannot be read or written as requested.
+
+    Raised for a missing path, a corrupt MCAP file that yields no message, a missing topic, a topic that
+    carries an unexpected message type, or an output folder that exists already. The message names the
+    path and, where relevant, the topic; the underlying library error is chained as ``__cause__``.
+    """
