@@ -385,12 +385,10 @@ class EstimatorConfig:
         return dict(zip(self["robot.locked_joints"], self["robot.locked_positions"], strict=True))
 
     def urdf_path(self) -> Path:
-        """Return the URDF path: ``robot.urdf`` expanded, or the iCub URDF of example-robot-data."""
-        if self["robot.urdf"]:
-            return Path(self["robot.urdf"]).expanduser()
-        from semiparam_ros.core.dynamics import icub_urdf_path  # lazy: pinocchio is heavy
+        """Return the URDF path that ``robot.urdf`` names (see :func:`core.dynamics.resolve_urdf`)."""
+        from semiparam_ros.core.dynamics import resolve_urdf  # lazy: pinocchio is heavy
 
-        return icub_urdf_path()
+        return resolve_urdf(self["robot.urdf"])
 
 
 def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:

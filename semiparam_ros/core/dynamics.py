@@ -48,9 +48,11 @@ __all__ = [
     "INERTIAL_PARAMETER_NAMES",
     "BaseParameterMap",
     "RigidBodyRegressor",
+    "example_robot_data_path",
     "icub_urdf_path",
     "is_physically_consistent",
     "point_mass_parameters",
+    "resolve_urdf",
 ]
 
 #: Names of the 10 inertial parameters of one body, in Pinocchio's order (about the body frame origin).
@@ -70,9 +72,10 @@ INERTIAL_PARAMETER_NAMES: tuple[str, ...] = (
 _WRENCH_NAMES: tuple[str, ...] = ("fx", "fy", "fz", "tx", "ty", "tz")
 _MOVING_TYPES = ("revolute", "continuous", "prismatic")
 _OUTPUTS = ("wrench", "joint_torques")
-_ICUB_RELATIVE = pathlib.Path(
-    "cmeel.prefix", "share", "example-robot-data", "robots", "icub_description", "robots", "icub.urdf"
-)
+_ERD_PREFIX = pathlib.Path("cmeel.prefix", "share", "example-robot-data")
+_ICUB_RELATIVE = "robots/icub_description/robots/icub.urdf"
+#: Prefix of a ``robot.urdf`` value that names a file of the installed example-robot-data wheel.
+EXAMPLE_ROBOT_DATA_SCHEME = "example-robot-data://"
 
 #: Relative rank tolerance of the base-parameter QR (on unit-norm columns). Structural dependencies show
 #: up at ~1e-15 relative; identifiable directions of the robots tested here are above ~1e-4.
@@ -86,11 +89,25 @@ _COEFFICIENT_ZERO = 1e-10
 def icub_urdf_path() -> pathlib.Path:
     """Return the path of the iCub URDF shipped in the ``example-robot-data`` wheel.
 
-    The wheel installs it under ``<site-packages>/cmeel.prefix/share/example-robot-data/robots/
-    icub_description/robots/icub.urdf``.
-
     Returns:
         The absolute path of ``icub.urdf``.
+
+    Raises:
+        FileNotFoundError: If no installed ``example-robot-data`` provides the file.
+    """
+    return example_robot_data_path(_ICUB_RELATIVE)
+
+
+def example_robot_data_path(relative: str) -> pathlib.Path:
+    """Return the absolute path of a file of the installed ``example-robot-data`` wheel.
+
+    The wheel installs its files under ``<site-packages>/cmeel.prefix/share/example-robot-data/``.
+
+    Args:
+        relative: Path below that folder, e.g. ``"robots/panda_description/urdf/panda.urdf"``.
+
+    Returns:
+        The absolute, resolved path.
 
     Raises:
         FileNotFoundError: If no installed ``example-robot-data`` provides the file.
@@ -115,13 +132,34 @@ def icub_urdf_path() -> pathlib.Path:
         if base in seen:
             continue
         seen.add(base)
-        path = base / _ICUB_RELATIVE
+        path = base / _ERD_PREFIX / relative
         if path.is_file():
             return path.resolve()
     raise FileNotFoundError(
-        f"icub.urdf not found: looked for {_ICUB_RELATIVE} under {len(seen)} site-packages/sys.path entries; "
+        f"{relative} not found under {_ERD_PREFIX} in {len(seen)} site-packages/sys.path entries; "
         "install the 'example-robot-data' wheel (requirements.txt) or give the URDF path explicitly"
     )
+
+
+def resolve_urdf(spec: str) -> pathlib.Path:
+    """Return the URDF file that a ``robot.urdf`` value names.
+
+    Args:
+        spec: ``""`` for the iCub URDF of example-robot-data; ``"example-robot-data://<relative>"`` for
+            another file of that wheel (e.g. ``example-robot-data://robots/panda_description/urdf/panda.urdf``);
+            anything else is a file path (``~`` expanded; relative paths are taken from the current folder).
+
+    Returns:
+        The path (not checked for existence unless it comes from example-robot-data).
+
+    Raises:
+        FileNotFoundError: If an example-robot-data file is named and not installed.
+    """
+    if not spec:
+        return icub_urdf_path()
+    if spec.startswith(EXAMPLE_ROBOT_DATA_SCHEME):
+        return example_robot_data_path(spec[len(EXAMPLE_ROBOT_DATA_SCHEME):])
+    return pathlib.Path(spec).expanduser()
 
 
 def point_mass_parameters(mass: float, position: Sequence[float] | np.ndarray) -> np.ndarray:
