@@ -23,6 +23,16 @@ velocities already received.
 Both estimators decide every input stamp exactly once, in stamp order: an estimate, or ``None`` for
 the samples that cannot get one (the warm-up after start, a reset, or a gap longer than ``max_gap_s``).
 Memory is bounded by ``window``.
+
+Rate-independent window (``window_s``). A window given in seconds is converted to samples at the
+**measured** joint-state rate: the first :data:`RATE_SAMPLES` stamps are held back, the median of their
+intervals ``Δt`` fixes ``window = 2·round(window_s / (2Δt)) + 1`` (odd, ≥ 3) for ``savgol`` and
+``round(window_s / Δt) + 1`` (≥ 2) for ``finite_difference``, and the held samples are then fed to that
+estimator, so they are decided as usual (only later). The median ignores a few jittered or dropped stamps;
+the window then stays fixed (a rate change later is absorbed by the true-stamp fit). ``window_s = 0.08``
+(the node's default) is 9 samples at 100 Hz, 17 at 200 Hz and 81 at 1 kHz; the savgol estimate then
+refers to the stamp ``window_s / 2 = 40 ms`` before the newest joint state. Measurements behind the
+default: ``bench/accel_window.py`` (``bench/results/accel_window.md``).
 """
 
 from __future__ import annotations
@@ -35,17 +45,23 @@ from numba import njit
 
 __all__ = [
     "METHODS",
+    "RATE_SAMPLES",
     "AccelerationConfig",
     "AccelerationEstimator",
     "Decision",
     "FiniteDifferenceEstimator",
     "SavitzkyGolayEstimator",
     "estimate_accelerations",
+    "RateAdaptiveEstimator",
     "make_estimator",
+    "samples_for_window",
     "savgol_weights_reference",
 ]
 
 METHODS = ("savgol", "finite_difference")
+
+#: Stamps held back to measure the joint-state rate when the window is given in seconds (19 intervals).
+RATE_SAMPLES = 20
 
 Decision = tuple[int, "np.ndarray | None"]
 """``(stamp_ns, ddq)`` for one input stamp: the estimate in rad/s², or ``None`` (warm-up / gap)."""
@@ -58,7 +74,9 @@ class AccelerationConfig:
     Attributes:
         method: ``"savgol"`` (centred local polynomial, delayed, zero phase) or
             ``"finite_difference"`` (causal, immediate, lagging).
-        window: Samples used per estimate; odd for ``savgol``; ≥ 2.
+        window: Samples used per estimate; odd for ``savgol``; ≥ 2. Ignored when ``window_s`` is set.
+        window_s: Window length in seconds (> 0), converted to samples at the measured rate (see the
+            module docstring); ``None`` uses ``window``.
         polyorder: Polynomial degree of ``savgol`` (1 ≤ polyorder < window).
         cutoff_hz: Low-pass cut-off of ``finite_difference`` in Hz (> 0; ``math.inf`` disables it).
         max_gap_s: Restart the estimator when two consecutive stamps are further apart than this (s);
@@ -76,10 +94,18 @@ class AccelerationConfig:
     polyorder: int = 2
     cutoff_hz: float = 20.0
     max_gap_s: float | None = None
+    window_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise ValueError(f"acceleration method must be one of {METHODS}, got {self.method!r}")
+        if self.window_s is not None:
+            if not (isinstance(self.window_s, int | float) and math.isfinite(self.window_s)
+                    and self.window_s > 0):
+                raise ValueError(f"acceleration window_s must be a finite number > 0 (s), got {self.window_s!r}")
+            if self.method == "savgol" and not 1 <= int(self.polyorder) <= 10:
+                raise ValueError(f"savgol polyorder must be in [1, 10], got {self.polyorder}")
+            return
         if isinstance(self.window, bool) or not isinstance(self.window, int | np.integer) or self.window < 2:
             raise ValueError(f"acceleration window must be an integer >= 2, got {self.window!r}")
         if self.method == "savgol":
@@ -331,6 +357,11 @@ class AccelerationEstimator:
         return self._tring[start : start + self._m]
 
     # -- subclass hooks --------------------------------------------------------------------------
+    @property
+    def window(self) -> int:
+        """Samples per estimate."""
+        return self._w
+
     def _estimate(self) -> list[Decision]:  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -451,9 +482,142 @@ def make_estimator(n_joints: int, config: AccelerationConfig | None = None) -> A
         A :class:`SavitzkyGolayEstimator` or :class:`FiniteDifferenceEstimator`.
     """
     config = config or AccelerationConfig()
+    if config.window_s is not None:
+        return RateAdaptiveEstimator(n_joints, config)
     if config.method == "savgol":
         return SavitzkyGolayEstimator(n_joints, config)
     return FiniteDifferenceEstimator(n_joints, config)
+
+
+def samples_for_window(window_s: float, dt_s: float, method: str = "savgol", polyorder: int = 2) -> int:
+    """Convert a window in seconds to samples at the interval ``dt_s``.
+
+    Args:
+        window_s: Window length (s), > 0.
+        dt_s: Sample interval (s), > 0.
+        method: ``"savgol"`` (odd result, ≥ max(3, polyorder + 1 rounded up to odd)) or
+            ``"finite_difference"`` (≥ 2).
+        polyorder: Polynomial degree of savgol.
+
+    Returns:
+        ``2·round(window_s / (2·dt_s)) + 1`` for savgol, ``round(window_s / dt_s) + 1`` otherwise,
+        raised to the smallest valid window.
+    """
+    if method == "savgol":
+        low = max(3, int(polyorder) + 1)
+        low += 1 - low % 2  # odd, above polyorder
+        return max(low, 2 * round(window_s / (2.0 * dt_s)) + 1)
+    return max(2, round(window_s / dt_s) + 1)
+
+
+class RateAdaptiveEstimator(AccelerationEstimator):
+    """An estimator whose window is given in seconds, sized at the measured joint-state rate.
+
+    The first :data:`RATE_SAMPLES` samples (stamps and velocities) are held, undecided; the median of
+    their intervals fixes the window (:func:`samples_for_window`), the inner estimator of
+    ``config.method`` is built with it, and the held samples are fed to it in order. After that every
+    call is forwarded. Intervals longer than ``max_gap_s`` are left out of the median (a dropout is not
+    the rate). Memory: at most ``max(RATE_SAMPLES, window)`` samples.
+
+    Args:
+        n_joints: Number of joints.
+        config: Settings with ``window_s`` set.
+    """
+
+    def __init__(self, n_joints: int, config: AccelerationConfig) -> None:
+        if config.window_s is None:
+            raise ValueError("RateAdaptiveEstimator needs config.window_s")
+        if n_joints < 1:
+            raise ValueError(f"n_joints must be >= 1, got {n_joints}")
+        self.n_joints = int(n_joints)
+        self.config = config
+        self._inner: AccelerationEstimator | None = None
+        self._held: list[tuple[int, np.ndarray]] = []
+
+    @property
+    def inner(self) -> AccelerationEstimator | None:
+        """The sized estimator, or None while the rate is being measured."""
+        return self._inner
+
+    @property
+    def window(self) -> int:
+        """Samples per estimate; 0 while the rate is being measured."""
+        return 0 if self._inner is None else self._inner.window
+
+    @property
+    def delay_samples(self) -> int:
+        """As the inner estimator's (``window // 2`` for savgol); 0 before the rate is known."""
+        return 0 if self._inner is None else self._inner.delay_samples
+
+    @property
+    def mean_dt_s(self) -> float:
+        """Mean interval seen by the inner estimator (s); NaN before the rate is known."""
+        return math.nan if self._inner is None else self._inner.mean_dt_s
+
+    @property
+    def delay_s(self) -> float:
+        """Emission delay of the inner estimator (s); before the rate is known, ``window_s / 2`` for savgol."""
+        if self._inner is None:
+            return 0.5 * float(self.config.window_s) if self.config.method == "savgol" else 0.0
+        return self._inner.delay_s
+
+    @property
+    def lag_s(self) -> float:
+        """Low-frequency lag of the inner estimator (s); NaN before the rate is known for finite_difference."""
+        if self._inner is None:
+            return 0.0 if self.config.method == "savgol" else math.nan
+        return self._inner.lag_s
+
+    def reset(self) -> list[Decision]:
+        """Forget the history; the measured window is kept (the rate does not change with a dropout)."""
+        if self._inner is not None:
+            return self._inner.reset()
+        held = [(s, None) for s, _ in self._held]
+        self._held = []
+        return held
+
+    def update(self, stamp_ns: int, dq: np.ndarray) -> list[Decision]:
+        """See :meth:`AccelerationEstimator.update` (same checks, state unchanged on error)."""
+        stamp_ns = int(stamp_ns)
+        dq = np.asarray(dq, dtype=np.float64)
+        if dq.shape != (self.n_joints,):
+            raise ValueError(f"dq must have shape ({self.n_joints},), got {dq.shape}")
+        if not np.isfinite(dq).all():
+            raise ValueError("dq contains NaN or inf")
+        last = self._held[-1][0] if self._inner is None and self._held else (
+            self._inner._last_stamp if self._inner is not None else None)
+        if last is not None and stamp_ns <= last:
+            raise ValueError(f"stamps must increase: {stamp_ns} after {last}")
+        return self.update_trusted(stamp_ns, dq)
+
+    def update_trusted(self, stamp_ns: int, dq: np.ndarray) -> list[Decision]:
+        """See :meth:`AccelerationEstimator.update_trusted`."""
+        if self._inner is not None:
+            return self._inner.update_trusted(stamp_ns, dq)
+        self._held.append((int(stamp_ns), np.array(dq, dtype=np.float64)))
+        if len(self._held) < RATE_SAMPLES:
+            return []
+        stamps = np.array([s for s, _ in self._held], dtype=np.int64)
+        dts = np.diff(stamps) * 1e-9
+        gap = self.config.max_gap_s
+        if gap is not None:
+            dts = dts[dts <= gap]
+        if dts.size == 0:  # every interval was a dropout: keep measuring on the newest sample
+            decided = [(s, None) for s, _ in self._held[:-1]]
+            self._held = self._held[-1:]
+            return decided
+        cfg = self.config
+        window = samples_for_window(float(cfg.window_s), float(np.median(dts)), cfg.method, cfg.polyorder)
+        sized = AccelerationConfig(method=cfg.method, window=window, polyorder=cfg.polyorder,
+                                   cutoff_hz=cfg.cutoff_hz, max_gap_s=cfg.max_gap_s)
+        inner = SavitzkyGolayEstimator(self.n_joints, sized) if cfg.method == "savgol" else \
+            FiniteDifferenceEstimator(self.n_joints, sized)
+        self._inner = inner
+        held, self._held = self._held, []
+        decisions: list[Decision] = []
+        for s, v in held:
+            decisions.extend(inner.update_trusted(s, v))
+        return decisions
 
 
 def estimate_accelerations(

@@ -113,10 +113,17 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "joint acceleration estimator from velocities: centred local polynomial (delayed by half "
                   "a window, no phase lag) or causal filtered finite difference",
                   choices=("savgol", "finite_difference")),
-    ParameterSpec("acceleration.window", "integer", 9,
-                  "samples in the acceleration estimator window (odd for savgol)", min=3, max=201),
+    ParameterSpec("acceleration.window_s", "double", 0.08,
+                  "length of the acceleration estimator window [s], converted to samples at the joint-state "
+                  "rate measured on the first 20 stamps (savgol: 2·round(window_s/(2Δt)) + 1 samples; the "
+                  "estimate is window_s/2 late: 40 ms by default; 0.08 s = 9 samples at 100 Hz, 81 at 1 kHz)",
+                  min=0.0, max=10.0, min_exclusive=True),
+    ParameterSpec("acceleration.window", "integer", 0,
+                  "window in samples (odd for savgol), overriding acceleration.window_s; 0 = use window_s "
+                  "(a fixed sample count means a different time span at every rate: prefer window_s)",
+                  min=0, max=2001),
     ParameterSpec("acceleration.polyorder", "integer", 2,
-                  "polynomial degree of the savgol estimator (< acceleration.window); 2 is exact for "
+                  "polynomial degree of the savgol estimator (< the window in samples); 2 is exact for "
                   "constant jerk over the window", min=1, max=10),
     ParameterSpec("acceleration.cutoff_hz", "double", 20.0,
                   "low-pass cut-off of the finite-difference estimator [Hz]", min=0.0, max=10000.0,
@@ -136,8 +143,27 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "or joint effort [N m]; 0 = no bound", min=0.0, max=1e12),
     # parametric stage
     ParameterSpec("parametric.lam", "double", 1e-2,
-                  "ridge regularization of the rigid-body (base inertial parameter) stage", min=0.0,
-                  min_exclusive=True, max=1e12),
+                  "ridge regularization of the rigid-body (base inertial parameter) stage; with "
+                  "parametric.column_scaling it acts on dimensionless parameters (see core.estimator)",
+                  min=0.0, min_exclusive=True, max=1e12),
+    ParameterSpec("parametric.prior", "string", "urdf",
+                  "what the rigid-body stage is regularized toward (and predicts before any data): 'urdf' = "
+                  "the URDF's base parameters (RNEA with the URDF; zero friction and offsets), 'zero' = all "
+                  "zero, the paper's protocol", choices=("urdf", "zero")),
+    ParameterSpec("parametric.column_scaling", "bool", True,
+                  "scale each regressor column by its RMS over random states, so that one parametric.lam "
+                  "means the same for parameters of very different magnitudes (false = the paper's raw "
+                  "columns)"),
+    ParameterSpec("parametric.friction", "bool", True,
+                  "joint_torques: learn per-joint viscous [N·m·s/rad] and Coulomb [N·m] friction, "
+                  "f_v·dq + f_c·tanh(dq/v_s)"),
+    ParameterSpec("parametric.coulomb_velocity", "double", 0.02,
+                  "velocity scale v_s of the smooth Coulomb sign tanh(dq/v_s) [rad/s]", min=0.0,
+                  min_exclusive=True, max=10.0),
+    ParameterSpec("parametric.offsets", "bool", True,
+                  "joint_torques: learn a constant torque offset per joint [N·m]"),
+    ParameterSpec("parametric.armature", "bool", False,
+                  "joint_torques: learn a motor armature inertia per joint (a ddq_i column) [kg·m^2]"),
     ParameterSpec("parametric.forgetting", "double", 1.0,
                   "forgetting factor of the rigid-body stage (1 = no forgetting; the regularizer is kept)",
                   min=0.9, max=1.0, min_exclusive=False),
@@ -306,11 +332,15 @@ class EstimatorConfig:
         if checked["robot.output"] == "wrench" and not checked["robot.ft_sensor"]:
             raise ValueError("parameter 'robot.ft_sensor' must name the F/T sensor joint when "
                              "robot.output is 'wrench'")
-        if checked["acceleration.method"] == "savgol" and checked["acceleration.window"] % 2 == 0:
+        window = checked["acceleration.window"]
+        if window and window < (3 if checked["acceleration.method"] == "savgol" else 2):
+            raise ValueError(f"parameter 'acceleration.window' = {window} is too small: 0 (use "
+                             "acceleration.window_s), or >= 3 for savgol, >= 2 for finite_difference")
+        if window and checked["acceleration.method"] == "savgol" and window % 2 == 0:
             raise ValueError("parameter 'acceleration.window' must be odd for the savgol method, got "
                              f"{checked['acceleration.window']}")
-        if checked["acceleration.method"] == "savgol" and (
-            checked["acceleration.polyorder"] >= checked["acceleration.window"]
+        if window and checked["acceleration.method"] == "savgol" and (
+            checked["acceleration.polyorder"] >= window
         ):
             raise ValueError("parameter 'acceleration.polyorder' must be below 'acceleration.window' for the "
                              f"savgol method, got {checked['acceleration.polyorder']} >= "

@@ -26,6 +26,21 @@ joint's frame.
 
 Only some combinations of the parameters are identifiable from ``y``: the base parameters, found
 numerically by a rank-revealing QR factorisation of the regressor stacked at many random states.
+
+Joint friction, offsets and armature (``output="joint_torques"``). Real joint-torque measurements carry
+what the rigid-body model lacks; each option appends one column per joint (non-zero only in that joint's
+row ``i``), in blocks after the inertial columns, named ``<joint>.<kind>``:
+
+* ``friction``: viscous ``f_v,i · q̇_i`` (``<joint>.viscous``, N·m·s/rad) and Coulomb
+  ``f_c,i · tanh(q̇_i / v_s)`` (``<joint>.coulomb``, N·m), a smooth sign with velocity scale ``v_s``
+  (``coulomb_velocity``, rad/s);
+* ``joint_offsets``: a constant ``o_i`` (``<joint>.offset``, N·m): torque-sensor offset or gravity
+  mis-modelling that does not depend on the state;
+* ``armature``: ``I_a,i · q̈_i`` (``<joint>.armature``, kg·m²): reflected rotor inertia. For a joint
+  whose axis is fixed in the base (the first joint) it duplicates an inertia column and merges into
+  that base parameter.
+
+Their URDF value is 0 (the URDF's ``<dynamics damping>`` is not used: it is a simulation setting).
 """
 
 from __future__ import annotations
@@ -46,6 +61,7 @@ import scipy.linalg
 
 __all__ = [
     "INERTIAL_PARAMETER_NAMES",
+    "EXTRA_COLUMN_KINDS",
     "BaseParameterMap",
     "RigidBodyRegressor",
     "example_robot_data_path",
@@ -74,6 +90,8 @@ _MOVING_TYPES = ("revolute", "continuous", "prismatic")
 _OUTPUTS = ("wrench", "joint_torques")
 _ERD_PREFIX = pathlib.Path("cmeel.prefix", "share", "example-robot-data")
 _ICUB_RELATIVE = "robots/icub_description/robots/icub.urdf"
+#: Suffixes of the per-joint extra columns, in their block order.
+EXTRA_COLUMN_KINDS: tuple[str, ...] = ("viscous", "coulomb", "offset", "armature")
 #: Prefix of a ``robot.urdf`` value that names a file of the installed example-robot-data wheel.
 EXAMPLE_ROBOT_DATA_SCHEME = "example-robot-data://"
 
@@ -253,6 +271,9 @@ class BaseParameterMap:
         projection: (n_base, n_params) matrix ``K`` with ``π_base = K π``.
         singular_ratios: ``|R_ii| / |R_00|`` of the pivoted QR of the column-scaled stacked regressor,
             in pivot order (how clearly the rank was revealed).
+        column_rms: (n_base,) RMS of each base-regressor column over the same random states (units of
+            y per unit of the parameter): the characteristic magnitude used to scale the columns so that
+            one ridge λ acts alike on all parameters; ``None`` if not computed.
     """
 
     independent: np.ndarray
@@ -261,6 +282,7 @@ class BaseParameterMap:
     names: tuple[str, ...]
     projection: np.ndarray
     singular_ratios: np.ndarray
+    column_rms: np.ndarray | None = None
 
     @property
     def n_base(self) -> int:
@@ -283,7 +305,8 @@ class RigidBodyRegressor:
             fixed joint, which coincides with the child link's frame), or None.
         body_names: Name (child link of the joint) of each body whose 10 parameters are in ``π``.
         parameter_names: ``"<param>_<body>"`` for each column, then ``"offset_<output>"`` for the
-            constant offsets when enabled.
+            constant sensor offsets when enabled, then ``"<joint>.<kind>"`` for the per-joint extra
+            columns (see the module docstring).
         output_names: ``fx … tz`` for a wrench, the joint names for torques.
         gravity: Gravity (3,) in m/s², in the URDF root frame.
         locked: The position (rad or m) of every locked joint that was given a non-zero value.
@@ -299,6 +322,10 @@ class RigidBodyRegressor:
         gravity: Sequence[float] | np.ndarray = (0.0, 0.0, -9.81),
         output: str = "wrench",
         sensor_offset: bool = False,
+        friction: bool = False,
+        coulomb_velocity: float = 0.02,
+        joint_offsets: bool = False,
+        armature: bool = False,
         source: str | None = None,
         base_seed: int = 0,
         base_samples: int | None = None,
@@ -314,6 +341,10 @@ class RigidBodyRegressor:
             "gravity": gravity,
             "output": output,
             "sensor_offset": sensor_offset,
+            "friction": friction,
+            "coulomb_velocity": coulomb_velocity,
+            "joint_offsets": joint_offsets,
+            "armature": armature,
             "source": source,
             "base_seed": base_seed,
             "base_samples": base_samples,
@@ -325,6 +356,16 @@ class RigidBodyRegressor:
         if output not in _OUTPUTS:
             raise ValueError(f"output must be one of {_OUTPUTS}, got {output!r}")
         self.output = output
+        extras = tuple(kind for kind, on in zip(
+            EXTRA_COLUMN_KINDS, (friction, friction, joint_offsets, armature), strict=True) if on)
+        if extras and output != "joint_torques":
+            raise ValueError("friction, joint_offsets and armature need output='joint_torques' (a wrench "
+                             "has sensor_offset instead)")
+        vs = float(coulomb_velocity) if not isinstance(coulomb_velocity, bool) else math.nan
+        if friction and not (math.isfinite(vs) and vs > 0.0):
+            raise ValueError(f"coulomb_velocity must be a finite number > 0 (rad/s), got {coulomb_velocity!r}")
+        self.extra_kinds: tuple[str, ...] = extras
+        self.coulomb_velocity = vs
         if isinstance(joints, str) or not isinstance(joints, Sequence):
             raise ValueError(f"joints must be a sequence of joint names, got {joints!r}")
         joint_names = tuple(joints)
@@ -471,11 +512,14 @@ class RigidBodyRegressor:
         self.n_bodies = len(body_jids)
         self.sensor_offset = bool(sensor_offset)
         self._n_rigid = 10 * self.n_bodies
-        self.n_params = self._n_rigid + (self.n_outputs if self.sensor_offset else 0)
+        self._n_offset = self.n_outputs if self.sensor_offset else 0
+        self.n_params = self._n_rigid + self._n_offset + len(self.extra_kinds) * self.n_joints
         names = [f"{p}_{b}" for b in self.body_names for p in INERTIAL_PARAMETER_NAMES]
         if self.sensor_offset:
             names += [f"offset_{o}" for o in self.output_names]
+        names += [f"{j}.{kind}" for kind in self.extra_kinds for j in joint_names]
         self.parameter_names: tuple[str, ...] = tuple(names)
+        self._diag = np.arange(self.n_joints)
 
         # Preallocated state vectors: the sensor free-flyer stays at the identity, v = a = 0.
         self._q = pin.neutral(model)
@@ -512,6 +556,10 @@ class RigidBodyRegressor:
         gravity: Sequence[float] | np.ndarray = (0.0, 0.0, -9.81),
         output: str = "wrench",
         sensor_offset: bool = False,
+        friction: bool = False,
+        coulomb_velocity: float = 0.02,
+        joint_offsets: bool = False,
+        armature: bool = False,
         base_seed: int = 0,
         base_samples: int | None = None,
     ) -> RigidBodyRegressor:
@@ -529,6 +577,10 @@ class RigidBodyRegressor:
             output: ``"wrench"`` (6 outputs: the sensor reading) or ``"joint_torques"`` (one per joint).
             sensor_offset: Append ``n_outputs`` identity columns: constant offsets of the measurement
                 (F/T sensors drift). Their URDF value is 0.
+            friction: Append per-joint viscous and Coulomb friction columns (``output="joint_torques"``).
+            coulomb_velocity: Velocity scale v_s of the Coulomb term ``tanh(q̇ / v_s)`` (rad/s, > 0).
+            joint_offsets: Append a constant torque offset per joint (``output="joint_torques"``).
+            armature: Append a motor-armature column ``q̈_i`` per joint (``output="joint_torques"``).
             base_seed: Seed of the random states used to find the base parameters.
             base_samples: Number of random states used to find the base parameters (default
                 ``max(64, 3·n_params)``).
@@ -552,6 +604,10 @@ class RigidBodyRegressor:
             gravity=gravity,
             output=output,
             sensor_offset=sensor_offset,
+            friction=friction,
+            coulomb_velocity=coulomb_velocity,
+            joint_offsets=joint_offsets,
+            armature=armature,
             source=str(path),
             base_seed=base_seed,
             base_samples=base_samples,
@@ -648,8 +704,7 @@ class RigidBodyRegressor:
             for i in range(qs.shape[0]):
                 self._fill(qs[i], dqs[i], ddqs[i])
                 self._rigid(out[i])
-            if self.sensor_offset:
-                out[:, :, self._n_rigid :] = self._eye
+                self._extra(out[i], dqs[i], ddqs[i])
             return out
         dq_arr = _as_float("dq", dq)
         ddq_arr = _as_float("ddq", ddq)
@@ -667,12 +722,32 @@ class RigidBodyRegressor:
             dq_arr = self._vector("dq", dq_arr)
             ddq_arr = self._vector("ddq", ddq_arr)
         self._fill(q_arr, dq_arr, ddq_arr)
-        if self.sensor_offset:
+        if self.n_params > self._n_rigid:
             out = np.empty((self.n_outputs, self.n_params))
             self._rigid(out)
-            out[:, self._n_rigid :] = self._eye
+            self._extra(out, dq_arr, ddq_arr)
             return out
         return -self._block() if self._sign < 0 else self._block().copy()
+
+    def _extra(self, out: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> None:
+        """Write the sensor-offset and per-joint extra columns of one state into ``out`` (t, n_params)."""
+        c = self._n_rigid
+        if self.sensor_offset:
+            out[:, c : c + self.n_outputs] = self._eye
+            c += self.n_outputs
+        n, d = self.n_joints, self._diag
+        for kind in self.extra_kinds:
+            block = out[:, c : c + n]
+            block[:] = 0.0
+            if kind == "viscous":
+                block[d, d] = dq
+            elif kind == "coulomb":
+                block[d, d] = np.tanh(dq / self.coulomb_velocity)
+            elif kind == "offset":
+                block[d, d] = 1.0
+            else:  # armature
+                block[d, d] = ddq
+            c += n
 
     def wrench(self, q: Any, dq: Any, ddq: Any, params: Any = None) -> np.ndarray:
         """Return the model's output ``Φ(q, q̇, q̈) π`` (the sensor wrench, or the joint torques).
@@ -753,6 +828,7 @@ class RigidBodyRegressor:
         ratios = diag / diag[0] if diag[0] > 0 else np.zeros_like(diag)
         rank = int(np.count_nonzero(ratios > BASE_RANK_TOLERANCE))
         ind, dep = perm[:rank], perm[rank:]
+        rows = W.shape[0]
         beta_s = (
             scipy.linalg.solve_triangular(R[:rank, :rank], R[:rank, rank:])
             if dep.size
@@ -780,6 +856,7 @@ class RigidBodyRegressor:
             names=tuple(names),
             projection=projection,
             singular_ratios=ratios,
+            column_rms=scale[ind] / math.sqrt(rows),
         )
 
     @property

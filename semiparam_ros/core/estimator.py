@@ -41,6 +41,8 @@ __all__ = [
     "build_model",
     "build_pipeline",
     "build_regressor",
+    "column_scale",
+    "parametric_prior",
     "regressor_function",
     "standardizer_min_scale",
 ]
@@ -84,8 +86,12 @@ _STRUCTURAL = (
 def build_regressor(config: EstimatorConfig) -> RigidBodyRegressor:
     """Build the rigid-body regressor described by a configuration.
 
+    With ``robot.output: joint_torques``, ``parametric.friction`` / ``offsets`` / ``armature`` append the
+    per-joint friction, offset and armature columns (see :mod:`semiparam_ros.core.dynamics`); with
+    ``wrench``, ``parametric.sensor_offset`` appends the six sensor offsets.
+
     Args:
-        config: Estimator configuration (``robot.*`` and ``parametric.sensor_offset``).
+        config: Estimator configuration (``robot.*`` and ``parametric.*``).
 
     Returns:
         The regressor of the F/T sensor wrench or of the joint torques.
@@ -102,24 +108,80 @@ def build_regressor(config: EstimatorConfig) -> RigidBodyRegressor:
         gravity=tuple(config["robot.gravity"]),
         output=output,
         sensor_offset=bool(config["parametric.sensor_offset"]) and output == "wrench",
+        friction=bool(config["parametric.friction"]) and output == "joint_torques",
+        coulomb_velocity=config["parametric.coulomb_velocity"],
+        joint_offsets=bool(config["parametric.offsets"]) and output == "joint_torques",
+        armature=bool(config["parametric.armature"]) and output == "joint_torques",
     )
 
 
-def regressor_function(regressor: RigidBodyRegressor) -> Callable[[np.ndarray], np.ndarray]:
+def regressor_function(regressor: RigidBodyRegressor,
+                       scale: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray]:
     """Adapt a regressor to the learners' flat input ``x = [q, dq, ddq]``.
 
     Args:
         regressor: Rigid-body regressor of n joints.
+        scale: Optional column scales ``c`` (n_base,): the function then returns ``Φ_b diag(1/c)``, the
+            regressor of the scaled parameters ``θ = c ⊙ π_b`` (see :func:`column_scale`).
 
     Returns:
-        A function mapping x (3n,) to the base regressor (t × n_base).
+        A function mapping x (3n,) to the base regressor (t × n_base), scaled if asked.
     """
     n = regressor.n_joints
 
     def base_regressor(x: np.ndarray) -> np.ndarray:
         return regressor.base_regressor(x[:n], x[n : 2 * n], x[2 * n : 3 * n])
 
-    return base_regressor
+    if scale is None:
+        return base_regressor
+    inv = 1.0 / np.asarray(scale, dtype=np.float64)
+
+    def scaled_regressor(x: np.ndarray) -> np.ndarray:
+        Phi = regressor.base_regressor(x[:n], x[n : 2 * n], x[2 * n : 3 * n])
+        Phi *= inv
+        return Phi
+
+    return scaled_regressor
+
+
+def column_scale(config: EstimatorConfig, regressor: RigidBodyRegressor) -> np.ndarray:
+    """Characteristic magnitude ``c_j`` of each base-regressor column (ones without column scaling).
+
+    With ``parametric.column_scaling`` the learners see ``Φ_b diag(1/c)`` and learn ``θ = c ⊙ π_b``, where
+    ``c_j`` is the RMS of column j over the random states of the base-parameter search (q within the
+    limits, |q̇| ≤ 1.5 rad/s, |q̈| ≤ 10 rad/s²; :attr:`BaseParameterMap.column_rms`). ``θ_j`` is then
+    parameter j's typical contribution to y (N, N·m): the ridge ``λ‖θ − θ₀‖²`` penalizes every parameter
+    by the output it explains, so one λ means the same for a link mass (kg), an inertia (kg·m²), a viscous
+    coefficient (N·m·s/rad) and an offset (N·m), on any robot. ``π_b = θ / c``.
+
+    Args:
+        config: Estimator configuration (``parametric.column_scaling``).
+        regressor: The rigid-body regressor.
+
+    Returns:
+        (n_base,) positive scales (units of y per unit of the parameter).
+    """
+    rms = regressor.base.column_rms
+    if not config["parametric.column_scaling"] or rms is None:
+        return np.ones(regressor.n_base)
+    return np.asarray(rms, dtype=np.float64).copy()
+
+
+def parametric_prior(config: EstimatorConfig, regressor: RigidBodyRegressor) -> np.ndarray:
+    """The base parameters the rigid-body stage is regularized toward, in unscaled units.
+
+    Args:
+        config: Estimator configuration (``parametric.prior``).
+        regressor: The rigid-body regressor.
+
+    Returns:
+        (n_base,): ``'urdf'`` the URDF's base parameters (zero for sensor offsets, friction, joint offsets
+        and armature), so that before any data the prediction is RNEA with the URDF's inertias;
+        ``'zero'`` zeros (the paper's protocol).
+    """
+    if config["parametric.prior"] == "zero":
+        return np.zeros(regressor.n_base)
+    return regressor.to_base(regressor.urdf_parameters())
 
 
 def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
@@ -143,7 +205,8 @@ def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
         sync_tolerance=config["sync.tolerance"],
         acceleration=AccelerationConfig(
             method=config["acceleration.method"],
-            window=config["acceleration.window"],
+            window=config["acceleration.window"] or 9,
+            window_s=None if config["acceleration.window"] else config["acceleration.window_s"],
             polyorder=config["acceleration.polyorder"],
             cutoff_hz=config["acceleration.cutoff_hz"],
             max_gap_s=bound("acceleration.max_gap_s"),
@@ -179,7 +242,11 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
 
 def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
                 regressor: RigidBodyRegressor | None = None) -> Model:
-    """Build one of the paper's three learners, with zero initial parameters.
+    """Build one of the paper's three learners.
+
+    The rigid-body stage works on the scaled base parameters ``θ = c ⊙ π_b`` (:func:`column_scale`) and
+    starts from (and is regularized toward) :func:`parametric_prior`; its ``parameters`` are θ̂ (divide by
+    :func:`column_scale` for π̂_b, as :attr:`OnlineEstimator.parameters` does).
 
     Args:
         config: Estimator configuration (``parametric.*``, ``nonparametric.*``).
@@ -211,7 +278,9 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
             standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
         )
     regressor = regressor if regressor is not None else build_regressor(config)
-    phi = regressor_function(regressor)
+    scale = column_scale(config, regressor)
+    phi = regressor_function(regressor, scale if config["parametric.column_scaling"] else None)
+    prior = scale * parametric_prior(config, regressor)
     if kind == "P":
         return ParametricModel(
             phi,
@@ -219,6 +288,7 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
             regressor.n_outputs,
             lam=config["parametric.lam"],
             forgetting=config["parametric.forgetting"],
+            prior=prior,
         )
     shared = dict(
         lam_parametric=config["parametric.lam"],
@@ -234,12 +304,14 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
             phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,
             forgetting=config["parametric.forgetting"],
             standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
+            prior=prior,
         )
     return SemiparametricModel(
         phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,
         forgetting_parametric=config["parametric.forgetting"],
         forgetting_nonparametric=config["nonparametric.forgetting"],
         standardizer_min_scale=standardizer_min_scale(config, with_outputs=True),
+        prior=prior,
     )
 
 @dataclass(frozen=True)
@@ -276,6 +348,7 @@ class OnlineEstimator:
         self.regressor = regressor if regressor is not None else build_regressor(config)
         self.pipeline = build_pipeline(config)
         self.model = build_model(config, kind, self.regressor)
+        self._scale = column_scale(config, self.regressor)
         self.learning_enabled = bool(config["learning_enabled"])
         self.n_samples_learned = 0
         self._rejected = 0
@@ -342,8 +415,14 @@ class OnlineEstimator:
 
     @property
     def parameters(self) -> np.ndarray | None:
-        """Current estimate of the base inertial parameters (None for the NP learner)."""
-        return self.model.parameters
+        """Current estimate of the base parameters π̂_b in physical units (None for the NP learner).
+
+        Inertial combinations (kg, kg·m, kg·m²), then sensor offsets (N, N·m) or per-joint viscous
+        (N·m·s/rad), Coulomb (N·m), offset (N·m) and armature (kg·m²) terms, named by
+        :attr:`parameter_names`.
+        """
+        theta = self.model.parameters
+        return None if theta is None else theta / self._scale
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -378,6 +457,15 @@ class OnlineEstimator:
         if self.kind == "SP" and self.config["semiparametric.combination"] != "cascade":
             # only when not the default, so that checkpoints written before the option existed still load
             structure["semiparametric.combination"] = self.config["semiparametric.combination"]
+        # issue 12's options, likewise only when they differ from what earlier checkpoints were written
+        # with (zero prior, raw columns); friction/offsets/armature show in the base-parameter names
+        if self.kind != "NP":
+            if self.config["parametric.prior"] != "zero":
+                structure["parametric.prior"] = self.config["parametric.prior"]
+            if self.config["parametric.column_scaling"]:
+                structure["parametric.column_scaling"] = True
+            if any(name.endswith(".coulomb") for name in self.parameter_names):
+                structure["parametric.coulomb_velocity"] = self.config["parametric.coulomb_velocity"]
         structure["kind"] = self.kind
         structure["base_parameters"] = list(self.parameter_names)
         return json.dumps(structure, sort_keys=True)

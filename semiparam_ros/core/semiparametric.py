@@ -118,17 +118,25 @@ class ParametricModel(_Model):
         regressor: Maps x to the (n_outputs, n_params) regressor matrix ``Φ(x)``.
         n_params: Number of (base) parameters.
         n_outputs: t, length of y.
-        lam: Ridge regularizer λ > 0 (the parameters start at zero, as in the paper: no CAD prior).
+        lam: Ridge regularizer λ > 0 (prior precision of π, units of Φ²).
         forgetting: β ∈ (0, 1] per sample; β < 1 forgets while keeping the prior (see ``core.rrls``).
+        prior: Prior mean π₀ (n_params,) the ridge pulls toward, e.g. a URDF's base parameters; default
+            zero (the paper: no CAD prior).
 
     Raises:
         ValueError: Invalid sizes or hyperparameters.
+
+    **Prior mean.** The model solves ``π̂ = argmin Σ β^{n−m}‖y_m − Φ_m π‖² + λ‖π − π₀‖²`` by learning the
+    deviation ``δ = π − π₀`` with the recursive ridge of :mod:`semiparam_ros.core.rrls` on the targets
+    ``y − Φπ₀``; ``π̂ = π₀ + δ̂`` and ``ŷ = Φ(π₀ + δ̂)``. Before any data ``δ̂ = 0``, so the prediction is
+    ``Φπ₀`` exactly; and bounded forgetting, which keeps the regularizer on δ at strength λ around 0, keeps
+    it around π₀ — unexcited directions relax toward the prior, never toward zero.
     """
 
     _kind = "parametric"
 
     def __init__(self, regressor: Regressor, n_params: int, n_outputs: int, *, lam: float = 1.0,
-                 forgetting: float = 1.0) -> None:
+                 forgetting: float = 1.0, prior: Any = None) -> None:
         if not callable(regressor):
             raise ValueError("regressor must be callable")
         self.regressor = regressor
@@ -137,7 +145,40 @@ class ParametricModel(_Model):
         self.n_outputs = int(n_outputs)
         if self.n_outputs < 1:
             raise ValueError(f"n_outputs must be >= 1, got {n_outputs!r}")
+        self._set_prior(np.zeros(self.n_params) if prior is None else prior)
         self.n_samples_seen = 0
+
+    def _set_prior(self, prior: Any) -> None:
+        p = np.asarray(prior, dtype=np.float64)
+        if p.shape != (self.n_params,):
+            raise ValueError(f"prior must have shape ({self.n_params},), got {p.shape}")
+        if not (np.abs(p).max(initial=0.0) <= MAX_ABS_INPUT):
+            raise ValueError("prior contains NaN, inf or absurdly large entries")
+        self.prior = np.ascontiguousarray(p)
+        self.prior.flags.writeable = False
+        self._has_prior = bool(np.any(p != 0.0))
+
+    def _prior_output(self, Phi: np.ndarray) -> np.ndarray | None:
+        """``Φπ₀`` (t,), or None for a zero prior."""
+        return Phi @ self.prior if self._has_prior else None
+
+    def _predict_phi(self, Phi: np.ndarray) -> np.ndarray:
+        """``Φ(π₀ + δ̂)`` for a validated regressor (t,)."""
+        yp = self.rls.predict(Phi)[:, 0]
+        y0 = self._prior_output(Phi)
+        return yp if y0 is None else yp + y0
+
+    def _predict_update_phi(self, Phi: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """A-priori ``Φ(π₀ + δ̂)``, then learn ``y − Φπ₀`` (validated inputs); counters untouched."""
+        y0 = self._prior_output(Phi)
+        if y0 is None:
+            return self.rls._predict_update_valid(Phi, y.reshape(-1, 1))[:, 0]
+        return self.rls._predict_update_valid(Phi, (y - y0).reshape(-1, 1))[:, 0] + y0
+
+    def _update_phi(self, Phi: np.ndarray, y: np.ndarray) -> None:
+        """Learn ``y − Φπ₀`` (validated inputs); counters untouched."""
+        y0 = self._prior_output(Phi)
+        self.rls._update_valid(Phi, (y if y0 is None else y - y0).reshape(-1, 1))
 
     # --- internals shared with SemiparametricModel
     def _phi(self, x: np.ndarray) -> np.ndarray:
@@ -167,7 +208,7 @@ class ParametricModel(_Model):
         """
         xv, _ = self._check(x)
         Phi = self._phi(xv)
-        yp = self.rls.predict(Phi)[:, 0]
+        yp = self._predict_phi(Phi)
         var = self.rls.variance(Phi) if return_variance else None
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy(), var)
 
@@ -179,7 +220,7 @@ class ParametricModel(_Model):
         """
         xv, yv = self._check(x, y)
         Phi = self._phi(xv)
-        self.rls._update_valid(Phi, yv.reshape(-1, 1))
+        self._update_phi(Phi, yv)
         self.n_samples_seen += 1
 
     def predict_learn_one(self, x: Any, y: Any) -> Prediction:
@@ -190,35 +231,40 @@ class ParametricModel(_Model):
         """
         xv, yv = self._check(x, y)
         Phi = self._phi(xv)
-        yp = self.rls._predict_update_valid(Phi, yv.reshape(-1, 1))[:, 0]
+        yp = self._predict_update_phi(Phi, yv)
         self.n_samples_seen += 1
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy())
 
     @property
     def parameters(self) -> np.ndarray:
-        """π̂, the current parameter estimate (n_params,)."""
-        return self.rls.weights[:, 0].copy()
+        """π̂ = π₀ + δ̂, the current parameter estimate (n_params,)."""
+        return self.rls.weights[:, 0] + self.prior
 
     def reset(self) -> None:
-        """Forget everything learned (π̂ back to 0)."""
+        """Forget everything learned (π̂ back to the prior π₀)."""
         self.rls.reset()
         self.n_samples_seen = 0
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the learned state (not the regressor) as arrays."""
         state = {f"{prefix}kind": np.array(self._kind), f"{prefix}n_outputs": np.array(self.n_outputs),
-                 f"{prefix}n_samples_seen": np.array(self.n_samples_seen)}
+                 f"{prefix}n_samples_seen": np.array(self.n_samples_seen),
+                 f"{prefix}prior": self.prior.copy()}
         state.update(self.rls.state_dict(f"{prefix}rls."))
         return state
 
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
         """Replace the learned state (validated completely before anything changes).
 
+        The prior stored with the state is loaded with it (δ̂ is relative to it); a state without one
+        (written before priors existed) had a zero prior.
+
         Raises:
             ValueError: Wrong kind, missing keys, or sizes that do not match this model's regressor.
         """
         self._check_kind(state, prefix)
         rls = RecursiveRLS.from_state_dict(state, f"{prefix}rls.")
+        prior = np.asarray(state.get(f"{prefix}prior", np.zeros(rls.n_features)), dtype=np.float64)
         try:
             n_outputs = int(state[f"{prefix}n_outputs"])
             n_seen = int(state[f"{prefix}n_samples_seen"])
@@ -227,6 +273,10 @@ class ParametricModel(_Model):
         if rls.n_features != self.n_params or rls.n_outputs != 1 or n_outputs != self.n_outputs:
             raise ValueError(f"state is for n_params={rls.n_features}, n_outputs={n_outputs}; this model has "
                              f"n_params={self.n_params}, n_outputs={self.n_outputs}")
+        if prior.shape != (self.n_params,) or not np.isfinite(prior).all():
+            raise ValueError(f"state has a prior of shape {prior.shape} or non-finite values; expected "
+                             f"({self.n_params},) finite")
+        self._set_prior(prior)
         self.rls, self.n_samples_seen = rls, n_seen
 
 
@@ -477,6 +527,7 @@ class SemiparametricModel(_TwoStageModel):
         yhat_statistics: What the online warm-up standardizes the ŷ block with: ``"measured"`` (default)
             the statistics of the measured y over the warm-up samples, ``"predicted"`` those of the
             a-priori ŷ itself (the behaviour before this option existed).
+        prior: Prior mean π₀ of the parametric stage (see :class:`ParametricModel`); default zero.
 
     Raises:
         ValueError: Invalid sizes or hyperparameters.
@@ -505,13 +556,14 @@ class SemiparametricModel(_TwoStageModel):
                  sigma: float = 1.0, forgetting_parametric: float = 1.0,
                  forgetting_nonparametric: float = 1.0, seed: int = 0,
                  standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
-                 standardizer_min_scale: Any = 0.0, yhat_statistics: str = "measured") -> None:
+                 standardizer_min_scale: Any = 0.0, yhat_statistics: str = "measured",
+                 prior: Any = None) -> None:
         if yhat_statistics not in self._YHAT_STATISTICS:
             raise ValueError(f"yhat_statistics must be one of {self._YHAT_STATISTICS}, "
                              f"got {yhat_statistics!r}")
         self.yhat_statistics = yhat_statistics
         self.parametric = ParametricModel(regressor, n_params, n_outputs, lam=lam_parametric,
-                                          forgetting=forgetting_parametric)
+                                          forgetting=forgetting_parametric, prior=prior)
         self.nonparametric = NonparametricModel(int(n_inputs) + int(n_outputs), n_outputs,
                                                 n_features=n_features, sigma=sigma, lam=lam_nonparametric,
                                                 forgetting=forgetting_nonparametric, seed=seed,
@@ -529,7 +581,7 @@ class SemiparametricModel(_TwoStageModel):
             ValueError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        yp = self.parametric.rls.predict(Phi)[:, 0]
+        yp = self.parametric._predict_phi(Phi)
         r, var_np = self.nonparametric._predict(np.concatenate([xv, yp]), return_variance)
         var = None
         if return_variance:
@@ -539,7 +591,7 @@ class SemiparametricModel(_TwoStageModel):
     def _step(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
         xv, yv, Phi = self._check(x, y)
         assert yv is not None
-        yp = self.parametric.rls._predict_update_valid(Phi, yv.reshape(-1, 1))[:, 0]
+        yp = self.parametric._predict_update_phi(Phi, yv)
         self.parametric.n_samples_seen += 1
         npm = self.nonparametric
         if not npm.standardizer.ready and self.yhat_statistics == "measured":

@@ -84,6 +84,9 @@ class JointSemiparametricModel(_TwoStageModel):
             During the warm-up the kernel term is zero and the samples are learned by the rigid-body term
             alone (they enter (1) with ``φ = 0``).
         standardizer_min_scale: Floor of the warm-up's scales (scalar or one per input, units of x).
+        prior: Prior mean π₀ of π (n_params,), default zero: (1) then penalizes ``λ_P‖π − π₀‖²``, solved as
+            (1) in ``δ = π − π₀`` with targets ``y − Φπ₀`` (so bounded forgetting keeps π̂ around π₀, and
+            before any data the prediction is ``Φπ₀``).
 
     Raises:
         ValueError: Invalid sizes or hyperparameters.
@@ -95,10 +98,10 @@ class JointSemiparametricModel(_TwoStageModel):
                  lam_parametric: float = 1.0, lam_nonparametric: float = 1.0, n_features: int = 500,
                  sigma: float = 1.0, forgetting: float = 1.0, seed: int = 0,
                  standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
-                 standardizer_min_scale: Any = 0.0) -> None:
-        # the π learner: a ParametricModel gives the regressor checks; its RLS is fed profiled rows
+                 standardizer_min_scale: Any = 0.0, prior: Any = None) -> None:
+        # the π learner: a ParametricModel gives the regressor checks; its RLS is fed profiled rows (of δ)
         self.parametric = ParametricModel(regressor, n_params, n_outputs, lam=lam_parametric,
-                                          forgetting=forgetting)
+                                          forgetting=forgetting, prior=prior)
         p, t = self.parametric.n_params, self.parametric.n_outputs
         self.nonparametric = NonparametricModel(int(n_inputs), t * (1 + p), n_features=n_features,
                                                 sigma=sigma, lam=lam_nonparametric, forgetting=forgetting,
@@ -146,6 +149,9 @@ class JointSemiparametricModel(_TwoStageModel):
             pk = np.zeros(t * (1 + p))
             var_k = 0.0
         par, total, eU = self._combine(Phi, pk, pi)
+        y0 = self.parametric._prior_output(Phi)
+        if y0 is not None:
+            par, total = par + y0, total + y0
         var = var_k + self.parametric.rls.variance(eU) if return_variance else None
         return Prediction(par, total - par, total, var)
 
@@ -153,8 +159,11 @@ class JointSemiparametricModel(_TwoStageModel):
         xv, yv, Phi = self._check(x, y)
         assert yv is not None
         t, p = self.n_outputs, self.n_params
-        pi = self.parametric.rls.weights[:, 0]
+        pi = self.parametric.rls.weights[:, 0]  # δ̂ = π̂ − π₀
         npm = self.nonparametric
+        y0 = self.parametric._prior_output(Phi)
+        if y0 is not None:
+            yv = yv - y0  # (1) in δ: the targets are what the prior leaves over
         if not npm.standardizer.ready:
             # warm-up: φ = 0 in (1), so the kernel learner's rotations would push the row [0 | y, Φ] out
             # unchanged; feed it to the π learner directly (with β < 1 the kernel learner's clock starts
@@ -162,6 +171,8 @@ class JointSemiparametricModel(_TwoStageModel):
             npm.standardizer.partial_fit(xv)
             par = Phi @ pi
             self.parametric.rls._update_valid(Phi, yv.reshape(-1, 1))
+            if y0 is not None:
+                par = par + y0
             pred = Prediction(par, np.zeros(t), par.copy())
         else:
             phi = npm._features(xv)
@@ -174,6 +185,8 @@ class JointSemiparametricModel(_TwoStageModel):
             Zp = np.ascontiguousarray(E[:, t:].reshape(-1, p))
             Up = np.ascontiguousarray(E[:, :t].reshape(-1, 1))
             self.parametric.rls._update_valid(Zp, Up)
+            if y0 is not None:
+                par, total = par + y0, total + y0
             pred = Prediction(par, total - par, total)
         self.parametric.n_samples_seen += 1
         npm.n_samples_seen += 1
