@@ -73,7 +73,8 @@ def kuka(root: Path) -> tuple[dict[float, float], dict[float, float], float]:
             sl = slice(m, -m)
             pred = reg.wrench(q[sl], dq[sl], ddq[sl])
             torque_err[ws].append(float(np.sqrt(np.mean((tau[sl] - pred) ** 2))))
-            ref_err[ws].append(float(np.sqrt(np.mean((ddq[sl] - ref[sl]) ** 2)) / np.sqrt(np.mean(ref[sl] ** 2))))
+            rel = np.sqrt(np.mean((ddq[sl] - ref[sl]) ** 2)) / np.sqrt(np.mean(ref[sl] ** 2))
+            ref_err[ws].append(float(rel))
     return ({k: float(np.mean(v)) for k, v in torque_err.items()},
             {k: float(np.mean(v)) for k, v in ref_err.items()}, 1.0 / dt)
 

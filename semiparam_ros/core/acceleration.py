@@ -50,9 +50,9 @@ __all__ = [
     "AccelerationEstimator",
     "Decision",
     "FiniteDifferenceEstimator",
+    "RateAdaptiveEstimator",
     "SavitzkyGolayEstimator",
     "estimate_accelerations",
-    "RateAdaptiveEstimator",
     "make_estimator",
     "samples_for_window",
     "savgol_weights_reference",
@@ -102,7 +102,8 @@ class AccelerationConfig:
         if self.window_s is not None:
             if not (isinstance(self.window_s, int | float) and math.isfinite(self.window_s)
                     and self.window_s > 0):
-                raise ValueError(f"acceleration window_s must be a finite number > 0 (s), got {self.window_s!r}")
+                raise ValueError(
+                    f"acceleration window_s must be a finite number > 0 (s), got {self.window_s!r}")
             if self.method == "savgol" and not 1 <= int(self.polyorder) <= 10:
                 raise ValueError(f"savgol polyorder must be in [1, 10], got {self.polyorder}")
             return
@@ -556,14 +557,14 @@ class RateAdaptiveEstimator(AccelerationEstimator):
 
     @property
     def delay_s(self) -> float:
-        """Emission delay of the inner estimator (s); before the rate is known, ``window_s / 2`` for savgol."""
+        """Emission delay of the inner estimator (s); before the rate is known ``window_s / 2`` (savgol)."""
         if self._inner is None:
             return 0.5 * float(self.config.window_s) if self.config.method == "savgol" else 0.0
         return self._inner.delay_s
 
     @property
     def lag_s(self) -> float:
-        """Low-frequency lag of the inner estimator (s); NaN before the rate is known for finite_difference."""
+        """Low-frequency lag of the inner estimator (s); NaN before the rate is known (finite_difference)."""
         if self._inner is None:
             return 0.0 if self.config.method == "savgol" else math.nan
         return self._inner.lag_s

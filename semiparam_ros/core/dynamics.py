@@ -60,8 +60,8 @@ import pinocchio as pin
 import scipy.linalg
 
 __all__ = [
-    "INERTIAL_PARAMETER_NAMES",
     "EXTRA_COLUMN_KINDS",
+    "INERTIAL_PARAMETER_NAMES",
     "BaseParameterMap",
     "RigidBodyRegressor",
     "example_robot_data_path",
@@ -363,7 +363,8 @@ class RigidBodyRegressor:
                              "has sensor_offset instead)")
         vs = float(coulomb_velocity) if not isinstance(coulomb_velocity, bool) else math.nan
         if friction and not (math.isfinite(vs) and vs > 0.0):
-            raise ValueError(f"coulomb_velocity must be a finite number > 0 (rad/s), got {coulomb_velocity!r}")
+            raise ValueError(
+                f"coulomb_velocity must be a finite number > 0 (rad/s), got {coulomb_velocity!r}")
         self.extra_kinds: tuple[str, ...] = extras
         self.coulomb_velocity = vs
         if isinstance(joints, str) or not isinstance(joints, Sequence):

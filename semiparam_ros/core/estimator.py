@@ -168,7 +168,7 @@ def column_scale(config: EstimatorConfig, regressor: RigidBodyRegressor) -> np.n
 
 
 def parametric_prior(config: EstimatorConfig, regressor: RigidBodyRegressor) -> np.ndarray:
-    """The base parameters the rigid-body stage is regularized toward, in unscaled units.
+    """Return the base parameters the rigid-body stage is regularized toward, in unscaled units.
 
     Args:
         config: Estimator configuration (``parametric.prior``).
