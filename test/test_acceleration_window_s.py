@@ -102,9 +102,9 @@ def test_config_window_in_samples_still_overrides_window_s():
     assert fixed.acceleration.window_s is None and fixed.acceleration.window == 11
     adaptive = build_pipeline(EstimatorConfig.from_flat(base))
     assert adaptive.acceleration.window_s == WINDOW_S
-    with pytest.raises(ValueError, match="acceleration.window"):
+    with pytest.raises(ValueError, match=r"acceleration\.window"):
         EstimatorConfig.from_flat({**base, "acceleration.window": 2})
-    with pytest.raises(ValueError, match="acceleration.window_s"):
+    with pytest.raises(ValueError, match=r"acceleration\.window_s"):
         EstimatorConfig.from_flat({**base, "acceleration.window_s": 0.0})
     with pytest.raises(ValueError, match="window_s"):
         AccelerationConfig(window_s=math.nan)
