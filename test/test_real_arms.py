@@ -223,6 +223,35 @@ def test_checkpoint_keeps_the_prior_and_refuses_another_prior(tmp_path):
 
 
 # ---------------------------------------------------------------- shipped parameter files
+def test_template_lists_every_parameter_with_its_default(tmp_path):
+    """Uncommenting config/template.yaml's '# key: value' lines gives a file that sets every parameter, to its
+    default (the F/T names are blanked there: a joint-torque arm has no sensor)."""
+    import re
+
+    from semiparam_ros.core.config import PARAMETERS
+
+    text = (ROOT / "config" / "template.yaml").read_text()
+    body = text[text.index("estimator:"):]
+    lines = [re.sub(r"^(\s*)# (\w+:.*)$", r"\1\2", line) for line in body.splitlines()
+             if not re.match(r"^\s*#   ", line)]
+    (tmp_path / "t.yaml").write_text("\n".join(lines) + "\n")
+    import yaml
+
+    def flatten(tree, prefix=""):
+        out = {}
+        for k, v in tree.items():
+            out.update(flatten(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
+        return out
+
+    flat = flatten(yaml.safe_load((tmp_path / "t.yaml").read_text())["estimator"]["ros__parameters"])
+    assert set(flat) == {p.name for p in PARAMETERS}
+    blank = {"robot.ft_sensor", "robot.frame_id", "robot.urdf", "robot.joints", "robot.output"}
+    for p in PARAMETERS:
+        if p.name not in blank:
+            assert flat[p.name] == p.default, p.name
+    assert load_config(tmp_path / "t.yaml")["robot.output"] == "joint_torques"
+
+
 @pytest.mark.parametrize("path", CONFIGS, ids=[p.stem for p in CONFIGS])
 def test_shipped_parameter_files_validate_and_run(path):
     """Every config/*.yaml loads, builds the SP estimator and learns from joint-state messages at 1 kHz

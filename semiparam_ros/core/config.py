@@ -157,8 +157,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("parametric.friction", "bool", True,
                   "joint_torques: learn per-joint viscous [N·m·s/rad] and Coulomb [N·m] friction, "
                   "f_v·dq + f_c·tanh(dq/v_s)"),
-    ParameterSpec("parametric.coulomb_velocity", "double", 0.02,
-                  "velocity scale v_s of the smooth Coulomb sign tanh(dq/v_s) [rad/s]", min=0.0,
+    ParameterSpec("parametric.coulomb_velocity", "double", 0.05,
+                  "velocity scale v_s of the smooth Coulomb sign tanh(dq/v_s) [rad/s]: a few times the "
+                  "velocity noise, so that noise at rest does not flip the sign", min=0.0,
                   min_exclusive=True, max=10.0),
     ParameterSpec("parametric.offsets", "bool", True,
                   "joint_torques: learn a constant torque offset per joint [N·m]"),
