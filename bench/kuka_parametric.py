@@ -42,9 +42,9 @@ def main() -> None:
     test, _ = load_samples(args.data / "measurements_3", base)
     n = test.Y.shape[1]
     variants: dict[str, dict] = {
-        "P rigid only, prior zero, raw columns (paper)": {"parametric.friction": False, "parametric.offsets": False,
-                                                          "parametric.prior": "zero",
-                                                          "parametric.column_scaling": False},
+        "P rigid only, prior zero, raw columns (paper)": {
+            "parametric.friction": False, "parametric.offsets": False, "parametric.prior": "zero",
+            "parametric.column_scaling": False},
         "P rigid only, prior zero": {"parametric.friction": False, "parametric.offsets": False,
                                      "parametric.prior": "zero"},
         "P rigid only, prior urdf": {"parametric.friction": False, "parametric.offsets": False},

@@ -6,8 +6,12 @@ Every parameter but the three a user must give is listed commented, with its des
 default; test/test_real_arms.py checks that uncommenting them gives exactly the defaults.
 """
 
-import textwrap, yaml
+import textwrap
+
+import yaml
+
 from semiparam_ros.core.config import PARAMETERS
+
 lines = """# semiparam_ros estimator: template for any fixed-base URDF arm with joint-torque sensing.
 # Only the three uncommented values are needed; every other parameter has a robot- and rate-independent
 # default, listed (commented) below with its meaning and range. Units: rad, rad/s, rad/s^2, N, N·m, s.
@@ -45,7 +49,7 @@ for p in PARAMETERS:
     text = p.description
     if p.choices or p.min is not None:
         text += f" [{p.range_text()}]"
-    for l in textwrap.wrap(text, 96):
-        lines.append(ind + "#   " + l)
+    for part in textwrap.wrap(text, 96):
+        lines.append(ind + "#   " + part)
     lines.append(ind + f"# {key}: {v}")
 open("config/template.yaml", "w").write("\n".join(lines) + "\n")
