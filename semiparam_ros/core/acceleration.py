@@ -43,6 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from semiparam_ros.errors import ConfigurationError
+
 __all__ = [
     "METHODS",
     "RATE_SAMPLES",
@@ -102,7 +104,7 @@ class AccelerationConfig:
         if self.window_s is not None:
             if not (isinstance(self.window_s, int | float) and math.isfinite(self.window_s)
                     and self.window_s > 0):
-                raise ValueError(
+                raise ConfigurationError(
                     f"acceleration window_s must be a finite number > 0 (s), got {self.window_s!r}")
             if self.method == "savgol" and not 1 <= int(self.polyorder) <= 10:
                 raise ValueError(f"savgol polyorder must be in [1, 10], got {self.polyorder}")
@@ -527,7 +529,7 @@ class RateAdaptiveEstimator(AccelerationEstimator):
 
     def __init__(self, n_joints: int, config: AccelerationConfig) -> None:
         if config.window_s is None:
-            raise ValueError("RateAdaptiveEstimator needs config.window_s")
+            raise ConfigurationError("RateAdaptiveEstimator needs config.window_s")
         if n_joints < 1:
             raise ValueError(f"n_joints must be >= 1, got {n_joints}")
         self.n_joints = int(n_joints)

@@ -27,6 +27,8 @@ from typing import Any
 
 import yaml
 
+from semiparam_ros.errors import ConfigurationError
+
 __all__ = [
     "PARAMETERS",
     "EstimatorConfig",
@@ -335,7 +337,7 @@ class EstimatorConfig:
                              "robot.output is 'wrench'")
         window = checked["acceleration.window"]
         if window and window < (3 if checked["acceleration.method"] == "savgol" else 2):
-            raise ValueError(f"parameter 'acceleration.window' = {window} is too small: 0 (use "
+            raise ConfigurationError(f"parameter 'acceleration.window' = {window} is too small: 0 (use "
                              "acceleration.window_s), or >= 3 for savgol, >= 2 for finite_difference")
         if window and checked["acceleration.method"] == "savgol" and window % 2 == 0:
             raise ValueError("parameter 'acceleration.window' must be odd for the savgol method, got "

@@ -59,6 +59,8 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from semiparam_ros.errors import ConfigurationError
+
 __all__ = [
     "EXTRA_COLUMN_KINDS",
     "INERTIAL_PARAMETER_NAMES",
@@ -359,11 +361,11 @@ class RigidBodyRegressor:
         extras = tuple(kind for kind, on in zip(
             EXTRA_COLUMN_KINDS, (friction, friction, joint_offsets, armature), strict=True) if on)
         if extras and output != "joint_torques":
-            raise ValueError("friction, joint_offsets and armature need output='joint_torques' (a wrench "
-                             "has sensor_offset instead)")
+            raise ConfigurationError("friction, joint_offsets and armature need output='joint_torques' "
+                                     "(a wrench has sensor_offset instead)")
         vs = float(coulomb_velocity) if not isinstance(coulomb_velocity, bool) else math.nan
         if friction and not (math.isfinite(vs) and vs > 0.0):
-            raise ValueError(
+            raise ConfigurationError(
                 f"coulomb_velocity must be a finite number > 0 (rad/s), got {coulomb_velocity!r}")
         self.extra_kinds: tuple[str, ...] = extras
         self.coulomb_velocity = vs
