@@ -9,8 +9,12 @@ torque, N·m; in the sensor frame of the input), joint torques as ``sensor_msgs/
 
 Layout of ``~/inertial_parameters``: one dimension, ``layout.dim[0].label`` holds the base-parameter names
 joined by commas (``size`` = number of parameters, ``stride`` = size); each name is a linear combination of
-URDF parameters as given by :attr:`RigidBodyRegressor.base_parameter_names`. A name never contains a comma
-(commas inside a name are replaced by ``;``), so ``label.split(",")`` recovers them.
+URDF parameters as given by :attr:`RigidBodyRegressor.base_parameter_names`, in physical units (kg, kg·m,
+kg·m²), followed, with ``robot.output: joint_torques``, by the per-joint friction and offset terms named
+``<joint>.viscous`` (N·m·s/rad), ``<joint>.coulomb`` (N·m), ``<joint>.offset`` (N·m) and
+``<joint>.armature`` (kg·m², when enabled; merged into an inertia combination where not separately
+identifiable), or by ``offset_fx … offset_tz`` (N, N·m) for an F/T sensor offset. A name never contains a
+comma (commas inside a name are replaced by ``;``), so ``label.split(",")`` recovers them.
 """
 
 from __future__ import annotations
