@@ -108,3 +108,7 @@ def test_config_window_in_samples_still_overrides_window_s():
         EstimatorConfig.from_flat({**base, "acceleration.window_s": 0.0})
     with pytest.raises(ValueError, match="window_s"):
         AccelerationConfig(window_s=math.nan)
+    with pytest.raises(ValueError, match="cutoff_hz"):  # the other settings are still checked
+        AccelerationConfig(window_s=0.08, method="finite_difference", cutoff_hz=-1.0)
+    with pytest.raises(ValueError, match="max_gap_s"):
+        AccelerationConfig(window_s=0.08, max_gap_s=math.inf)

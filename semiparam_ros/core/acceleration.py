@@ -108,10 +108,10 @@ class AccelerationConfig:
                     f"acceleration window_s must be a finite number > 0 (s), got {self.window_s!r}")
             if self.method == "savgol" and not 1 <= int(self.polyorder) <= 10:
                 raise ValueError(f"savgol polyorder must be in [1, 10], got {self.polyorder}")
-            return
-        if isinstance(self.window, bool) or not isinstance(self.window, int | np.integer) or self.window < 2:
+        elif (isinstance(self.window, bool) or not isinstance(self.window, int | np.integer)
+              or self.window < 2):
             raise ValueError(f"acceleration window must be an integer >= 2, got {self.window!r}")
-        if self.method == "savgol":
+        elif self.method == "savgol":
             if self.window % 2 == 0 or self.window < 3:
                 raise ValueError(f"savgol window must be odd and >= 3, got {self.window}")
             if not 1 <= int(self.polyorder) < self.window:

@@ -20,8 +20,9 @@ Topics (relative names, remap with ``-r``):
   with ``robot.output: joint_torques`` instead ``predicted_joint_torques`` (``sensor_msgs/JointState``,
   ``effort`` in N·m); every prediction is a priori: it was made before its own sample was learned;
 * out ``~/inertial_parameters`` (``std_msgs/Float64MultiArray``, base parameters in physical units, then
-  friction/offset terms such as ``lwr_0_joint.viscous``, names comma-joined in ``layout.dim[0].label``; reliable + transient local, depth 1): published once per diagnostics period
-  when learning changed them, and after start, reset and load;
+  friction/offset terms such as ``lwr_0_joint.viscous``, names comma-joined in ``layout.dim[0].label``;
+  reliable + transient local, depth 1): published once per diagnostics period when learning changed them,
+  and after start, reset and load;
 * out ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) every ``diagnostics.period`` (wall time),
   keys listed in :mod:`semiparam_ros.ros.diagnostics`.
 
