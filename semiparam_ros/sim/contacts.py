@@ -68,8 +68,12 @@ class ContactConfig:
 
     def __post_init__(self) -> None:
         if isinstance(self.rate, bool) or not (np.isfinite(self.rate) and self.rate > 0):
-            raise ValueError(f"contact rate must be a positive number of episodes per minute, got {self.rate!r}")
-        object.__setattr__(self, "duration_range", _pair(self.duration_range, "contact duration_range", positive=True))
+            raise ValueError(
+                f"contact rate must be a positive number of episodes per minute, got {self.rate!r}"
+            )
+        object.__setattr__(
+            self, "duration_range", _pair(self.duration_range, "contact duration_range", positive=True)
+        )
         object.__setattr__(self, "force_range", _pair(self.force_range, "contact force_range", positive=True))
         if self.window is not None:
             object.__setattr__(self, "window", _pair(self.window, "contact window", positive=False))
@@ -79,7 +83,7 @@ class ContactConfig:
                 raise ValueError(f"contact {name} must be finite and >= 0 s, got {value!r}")
 
     def span(self, duration: float) -> tuple[float, float]:
-        """The window (s) for a recording of ``duration`` s, clipped to ``[0, duration]``."""
+        """Return the window (s) for a recording of ``duration`` s, clipped to ``[0, duration]``."""
         start, end = self.window if self.window is not None else (0.15 * duration, 0.65 * duration)
         return max(0.0, start), min(float(duration), end)
 
@@ -143,7 +147,9 @@ class ContactEpisode:
         }
 
 
-def draw_episodes(config: ContactConfig, duration: float, rng: np.random.Generator) -> tuple[ContactEpisode, ...]:
+def draw_episodes(
+    config: ContactConfig, duration: float, rng: np.random.Generator
+) -> tuple[ContactEpisode, ...]:
     """Draw the contact episodes of one recording (module docstring).
 
     Args:

@@ -649,7 +649,9 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
     )
 
 
-def hand_contact_wrenches(kin: ArmKinematics, q: np.ndarray, force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def hand_contact_wrenches(
+    kin: ArmKinematics, q: np.ndarray, force: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Return a hand contact as applied (hand frame) and as transmitted to the F/T sensor (sensor frame).
 
     A force ``F`` applied to the distal subtree at the hand frame's origin ``p_h`` adds ``[F_s, a × F_s]``
