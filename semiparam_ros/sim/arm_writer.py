@@ -145,7 +145,7 @@ def write_arm_recording(
         entry["count"] = counts.get(topic, 0)
     info = dict(rec.info)
     info["topics"] = topics
-    atomic_write_text(
-        path / SCENARIO_FILE, yaml.safe_dump(info, sort_keys=False, default_flow_style=None, width=110)
-    )
+    sidecar = path / SCENARIO_FILE
+    atomic_write_text(sidecar, yaml.safe_dump(info, sort_keys=False, default_flow_style=None, width=110))
+    sidecar.chmod(0o644)  # readable like the bag files (the temporary file was created 0600)
     return path

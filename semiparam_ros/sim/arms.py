@@ -337,6 +337,8 @@ ARM_ROBOTS: dict[str, ArmRobot] = {
 #: ``contacts`` (contact episodes in [0.15, 0.65]·T, then a pickup at 0.75·T; 120 s unless given).
 ARM_SCENARIOS: tuple[str, ...] = ("excitation", "payload", "contacts")
 
+_DEFAULT_PERTURBATION = ParameterPerturbation()
+
 #: Default length of the ``excitation`` and ``payload`` scenarios (s) and of the ``contacts`` one.
 _DEFAULT_DURATION = 60.0
 _CONTACTS_DURATION = 120.0
@@ -675,6 +677,7 @@ def arm_preset_configs(
     payload_mass: float | None = None,
     payload_time: float | None = None,
     contacts: ContactConfig | None = None,
+    perturbation: ParameterPerturbation | None = _DEFAULT_PERTURBATION,
     **overrides: Any,
 ) -> list[ArmScenarioConfig]:
     """Return the scenario configurations of an arm; bag names ``<robot>_<scenario>_<rate>hz``.
@@ -687,7 +690,8 @@ def arm_preset_configs(
         payload_mass: Payload of ``payload`` and ``contacts`` (kg); default the robot's.
         payload_time: Pickup time (s); default the middle (``contacts``: 0.75·T).
         contacts: How ``contacts`` draws its episodes (default :class:`ContactConfig`).
-        **overrides: Other :class:`ArmScenarioConfig` fields (seed, perturbation, friction_scale,
+        perturbation: True parameters vs the URDF's (None: the URDF's exactly).
+        **overrides: Other :class:`ArmScenarioConfig` fields (seed, friction_scale,
             armature, noise_scale, start_ns); None values are ignored.
 
     Returns:
@@ -718,5 +722,9 @@ def arm_preset_configs(
             if scenario == "payload":
                 kwargs.update(payload_mass=mass, payload_time=payload_time)
         name = f"{robot}_{scenario}_{_rate_label(rate)}"
-        out.append(ArmScenarioConfig(name=name, robot=robot, duration=length, rate=float(rate), **kwargs))
+        out.append(
+            ArmScenarioConfig(
+                name=name, robot=robot, duration=length, rate=float(rate), perturbation=perturbation, **kwargs
+            )
+        )
     return out

@@ -10,10 +10,11 @@ frame during the episode; its magnitude follows a smooth trapezoid
 with ``t₀`` the start, ``d`` the duration, ``r = min(ramp, d/4)`` the rise and fall time (s), ``f`` the
 peak magnitude (N) and ``u`` a unit vector. ``F`` is exactly zero outside ``[t₀, t₀ + d]``.
 
-Episodes are drawn by :func:`draw_episodes`: inside a time window, start times follow a Poisson process of
-``rate`` episodes per minute (exponential waiting times, counted from the end of the previous episode plus
-``min_gap``, so episodes never overlap), durations are uniform in ``duration_range`` (s), peak magnitudes
-uniform in ``force_range`` (N), directions uniform on the sphere.
+Episodes are drawn by :func:`draw_episodes`: a window of W s holds ``N = round(rate·W/60)`` episodes, one
+in each of N equal slots (stratified, so the count is exact and the episodes spread over the window, but
+their timing is random); in its slot of length L an episode lasts d ~ uniform in ``duration_range``
+(capped at ``L − min_gap``), starts uniformly where it fits and ends at least ``min_gap`` before the slot
+does. Peak magnitudes are uniform in ``force_range`` (N), directions uniform on the sphere.
 
 How a contact shows in the measurement is computed by the scenario modules (the same rigid-body
 machinery as the rest of the simulation): for an F/T sensor, the transmitted wrench ``[F_s, a × F_s]`` in
@@ -49,7 +50,7 @@ class ContactConfig:
     """How contact episodes are drawn.
 
     Attributes:
-        rate: Mean number of episodes per minute (> 0).
+        rate: Episodes per minute of the window (> 0); the count is round(rate·W/60).
         duration_range: (min, max) duration of an episode (s).
         force_range: (min, max) peak magnitude of the force (N).
         window: (start, end) of the time span that holds the episodes (s from the start of the
@@ -158,25 +159,32 @@ def draw_episodes(
         rng: Random generator (its own stream: drawing contacts must not change any other signal).
 
     Returns:
-        The episodes, in time order, non-overlapping, each entirely inside the window.
+        The episodes, in time order, each entirely inside the window, separated by at least ``min_gap``.
+
+    Raises:
+        ValueError: If the rate leaves too little time per episode for the shortest duration and the gap.
     """
     start, end = config.span(duration)
     lo_d, hi_d = config.duration_range
     lo_f, hi_f = config.force_range
-    mean_wait = 60.0 / config.rate
+    count = int(np.floor(config.rate * max(0.0, end - start) / 60.0 + 0.5))
+    if count == 0:
+        return ()
+    slot = (end - start) / count
+    if slot - config.min_gap < lo_d:
+        raise ValueError(
+            f"{config.rate} contacts per minute leave {slot:.3g} s per episode: too short for a "
+            f"{lo_d} s episode and a {config.min_gap} s gap"
+        )
     episodes: list[ContactEpisode] = []
-    t = start
-    while True:
-        t0 = t + rng.exponential(mean_wait)
-        d = rng.uniform(lo_d, hi_d)
+    for k in range(count):
+        d = rng.uniform(lo_d, min(hi_d, slot - config.min_gap))
+        t0 = start + k * slot + rng.uniform(0.0, slot - config.min_gap - d)
         f = rng.uniform(lo_f, hi_f)
         u = rng.standard_normal(3)
         u /= np.linalg.norm(u)
-        if t0 + d > end:
-            break
         direction = (float(u[0]), float(u[1]), float(u[2]))
         episodes.append(ContactEpisode(float(t0), float(d), float(f), direction, min(config.ramp, d / 4.0)))
-        t = t0 + d + config.min_gap
     return tuple(episodes)
 
 
