@@ -18,6 +18,7 @@ from semiparam_ros.sim.arms import (
     ArmScenarioConfig,
     ParameterPerturbation,
     arm_preset_configs,
+    arm_regressor,
     perturb_parameters,
     simulate_arm,
 )
@@ -334,3 +335,39 @@ def test_invalid_arm_configs_raise():
         ParameterPerturbation(mass=1.5)
     with pytest.raises(ValueError):
         arm_preset_configs("panda", ("xy",))
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_noise_free_data_identify_base_parameters_friction_and_offsets(robot):
+    """The learner's convention: least squares on [base regressor, q̇, tanh(q̇/v_s), 1] per joint recovers the
+    true base parameters, friction coefficients and offsets of a noise-free recording (no payload)."""
+    rec = simulate_arm(
+        ArmScenarioConfig(name=f"{robot}_ident", robot=robot, duration=20.0, rate=100.0, noise_scale=0.0)
+    )
+    reg = arm_regressor(robot)
+    k, n = rec.q.shape
+    v_s = rec.info["friction"]["smoothing_velocity_rad_per_s"]
+    phi = reg.base_regressor(rec.q, rec.dq, rec.ddq)  # (k, n, n_base)
+    fric = np.zeros((k, n, 3 * n))
+    for i in range(n):
+        fric[:, i, 3 * i] = rec.dq[:, i]
+        fric[:, i, 3 * i + 1] = np.tanh(rec.dq[:, i] / v_s)
+        fric[:, i, 3 * i + 2] = 1.0
+    A = np.concatenate([phi, fric], axis=2).reshape(k * n, -1)
+    scale = np.linalg.norm(A, axis=0)
+    x, *_ = np.linalg.lstsq(A / scale, rec.true_torques.reshape(-1), rcond=None)
+    x /= scale
+    cond = np.linalg.cond(A / scale)
+    truth = np.concatenate(
+        [
+            reg.to_base(rec.parameters_before),
+            np.ravel(
+                np.column_stack(
+                    [rec.info["friction"][key] for key in ("viscous_Nms_per_rad", "coulomb_Nm", "offset_Nm")]
+                )
+            ),
+        ]
+    )
+    # Relative error of a least-squares solution with zero residual: ≲ κ·ε (κ of the scaled matrix).
+    err = np.abs(x - truth) / np.maximum(np.abs(truth), 1e-3)
+    assert cond < 1e6 and err.max() < 1e-6, (cond, err.max())
