@@ -299,7 +299,7 @@ ARM_ROBOTS: dict[str, ArmRobot] = {
         position_noise_std=1e-5,
         velocity_noise_std=1e-3,
         payload_mass=1.0,
-        payload_point=(0.0, 0.0, 0.03),
+        payload_point=(0.02, 0.01, 0.03),
     ),
     "ur5": ArmRobot(
         name="ur5",
@@ -329,7 +329,7 @@ ARM_ROBOTS: dict[str, ArmRobot] = {
         position_noise_std=2e-5,
         velocity_noise_std=2e-3,
         payload_mass=1.5,
-        payload_point=(0.0, 0.0, 0.05),
+        payload_point=(0.02, 0.0, 0.05),
     ),
 }
 
