@@ -151,3 +151,25 @@ def test_contacts_scenario_puts_the_pickup_after_the_last_contact():
     assert config.pickup_time is not None and config.pickup_time >= end + 10.0  # 10 s of contact-free error
     episodes = draw_episodes(config.contacts, config.duration, np.random.default_rng(0))
     assert len(episodes) == round(config.contacts.rate * (end - start) / 60.0) >= 3
+
+
+def test_cli_writes_an_icub_contacts_bag(tmp_path):
+    from semiparam_ros.cli.simulate import main
+
+    args = [
+        "--scenario",
+        "contacts",
+        "--duration",
+        "6",
+        "--contact-rate",
+        "40",
+        "--contact-force",
+        "10",
+        "12",
+    ]
+    assert main([*args, "--rate", "100", "--out", str(tmp_path), "--quiet"]) == 0
+    info = yaml.safe_load((tmp_path / "icub_contacts" / "scenario.yaml").read_text())
+    episodes = info["contacts"]["episodes"]
+    assert len(episodes) == 2 and all(10 <= e["peak_force_N"] <= 12 for e in episodes)  # 40/min · 3 s
+    assert info["payload"]["time_s"] == 4.5 and episodes[-1]["end_s"] <= 3.9
+    assert info["topics"]["/ground_truth/external_wrench"]["count"] == 600
