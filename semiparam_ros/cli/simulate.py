@@ -223,7 +223,7 @@ def _reject(args: argparse.Namespace, names: Sequence[str], robot: str) -> None:
     """Raise ValueError if an option that does not apply to this robot was given."""
     given = ["--" + n.replace("_", "-") for n in names if getattr(args, n) not in (None, False)]
     if given:
-        raise ValueError(f"{', '.join(given)} do(es) not apply to {robot}")
+        raise ValueError(f"{', '.join(given)}: not applicable to {robot}")
 
 
 def _contact_config(args: argparse.Namespace, cls: type) -> object:
