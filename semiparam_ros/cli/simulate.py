@@ -1,10 +1,13 @@
-"""``simulate``: write synthetic iCub right-arm recordings as rosbag2/MCAP bags.
+"""``simulate``: write synthetic robot recordings as rosbag2/MCAP bags.
 
 Examples::
 
     simulate --out bags/generated                      # default preset: icub_xy, icub_xz, icub_payload, 60 s
     simulate --out bags/generated --preset paper       # 1000 s, wrench 10 Hz (10 000 samples), joints 100 Hz
     simulate --out /tmp/b --scenario xy --duration 10 --no-effects --no-noise   # clean rigid-body bag
+    simulate --out bags/generated --scenario contacts  # icub_contacts: 120 s, contacts, then a 0.5 kg pickup
+    simulate --robot panda --rate 1000 --out bags/generated   # panda_excitation_1000hz, panda_payload_1000hz
+    simulate --robot ur5 --rate 100 --scenario contacts --contact-rate 6 --out bags/generated
 
 Argument parsing only; the work is done by :mod:`semiparam_ros.sim`.
 """
@@ -24,10 +27,22 @@ def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``simulate``."""
     p = argparse.ArgumentParser(
         prog="simulate",
-        description="Simulate the iCub right arm (circles in XY/XZ, multi-sine, payload pickup) and write "
-        "rosbag2/MCAP bags with /joint_states, /wrench and ground-truth topics.",
+        description="Simulate the iCub right arm (F/T sensor: circles in XY/XZ, multi-sine, payload pickup, "
+        "contacts) or a joint-torque arm (Panda, UR5: multi-sine, friction, payload, contacts) and "
+        "write rosbag2/MCAP bags with /joint_states, /wrench (iCub) and ground-truth topics.",
     )
     p.add_argument("--out", default="bags/generated", help="parent folder of the bags (default: %(default)s)")
+    p.add_argument(
+        "--robot",
+        choices=("icub", "panda", "ur5"),
+        default="icub",
+        help="icub: F/T sensor in the upper arm; panda, ur5: measured joint torques (default %(default)s)",
+    )
+    p.add_argument(
+        "--rate",
+        type=float,
+        help="sampling rate (Hz): joint states of an arm (default 1000), both streams of the iCub",
+    )
     p.add_argument(
         "--preset",
         choices=("default", "paper"),
@@ -37,8 +52,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--scenario",
         action="append",
-        choices=("xy", "xz", "payload", "multisine"),
-        help="scenario to write (repeatable; default: xy, xz, payload)",
+        choices=("xy", "xz", "payload", "multisine", "contacts", "excitation"),
+        help="scenario to write (repeatable). iCub: xy, xz, payload, multisine, contacts (default xy, xz, "
+        "payload); arms: excitation, payload, contacts (default excitation, payload). contacts: contact "
+        "episodes in [0.15, 0.65]·T then a payload pickup at 0.75·T, T = 120 s unless --duration",
     )
     p.add_argument("--duration", type=float, help="length of each bag (s)")
     p.add_argument("--samples", type=int, help="number of wrench samples (sets the duration)")
@@ -48,7 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--radius", type=float, help="circle radius (m, default 0.10)")
     p.add_argument("--speed", type=float, help="hand speed (m/s, default 0.6)")
     p.add_argument("--seed", type=int, help="seed of noise and multi-sine (default 0)")
-    p.add_argument("--payload-mass", type=float, default=0.5, help="payload mass (kg, default %(default)s)")
+    p.add_argument(
+        "--payload-mass", type=float, help="payload mass (kg; default 0.5 iCub, 1.0 Panda, 1.5 UR5)"
+    )
     p.add_argument("--payload-time", type=float, help="pickup time (s from the start; default: middle)")
     p.add_argument(
         "--payload-trajectory",
@@ -81,7 +100,39 @@ def build_parser() -> argparse.ArgumentParser:
         help="factor on all non-rigid effects (on top of the calibrated defaults)",
     )
     p.add_argument("--noise-scale", type=float, default=1.0, help="factor on all noise levels")
-    p.add_argument("--no-effects", action="store_true", help="no non-rigid effects (rigid-body wrench only)")
+    p.add_argument(
+        "--no-effects",
+        action="store_true",
+        help="no non-rigid effects: rigid-body wrench only (iCub), no friction, offsets or armature (arms)",
+    )
+    c = p.add_argument_group("contact episodes (scenario contacts)")
+    c.add_argument("--contact-rate", type=float, help="episodes per minute (default 4)")
+    c.add_argument(
+        "--contact-force", type=float, nargs=2, metavar=("MIN", "MAX"), help="peak force (N, 5 30)"
+    )
+    c.add_argument(
+        "--contact-duration", type=float, nargs=2, metavar=("MIN", "MAX"), help="duration (s, default 0.2 3)"
+    )
+    c.add_argument(
+        "--contact-window",
+        type=float,
+        nargs=2,
+        metavar=("START", "END"),
+        help="time span holding the episodes (s; default 0.15·T to 0.65·T)",
+    )
+    a = p.add_argument_group("joint-torque arms (--robot panda|ur5)")
+    a.add_argument(
+        "--friction-scale", type=float, help="factor on friction, offsets and armature (default 1)"
+    )
+    a.add_argument("--armature", type=float, help="armature of every joint (kg·m², default 0)")
+    a.add_argument(
+        "--perturbation",
+        type=float,
+        nargs=3,
+        metavar=("MASS", "INERTIA", "COM"),
+        help="true vs URDF parameters: relative mass, inertia change, COM shift (m); default 0.15 0.15 0.01",
+    )
+    a.add_argument("--no-perturbation", action="store_true", help="true parameters = the URDF's")
     p.add_argument("--no-noise", action="store_true", help="no noise on joints and wrench")
     p.add_argument("--overwrite", action="store_true", help="replace existing bag folders")
     p.add_argument("--no-compress", action="store_true", help="do not zstd-compress the MCAP chunks")
@@ -100,6 +151,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.robot != "icub":
+        return _main_arm(args)
+    from semiparam_ros.sim.contacts import ContactConfig
     from semiparam_ros.sim.effects import DEFAULT_EFFECTS
     from semiparam_ros.sim.generate import generate
     from semiparam_ros.sim.scenario import DEFAULT_VARIABILITY, PRESETS, TrajectoryVariability, preset_configs
@@ -119,21 +173,31 @@ def main(argv: Sequence[str] | None = None) -> int:
                 max_period=DEFAULT_VARIABILITY.max_period,
                 components=DEFAULT_VARIABILITY.components,
             )
+        _reject(args, ("friction_scale", "armature", "perturbation", "no_perturbation"), "--robot icub")
+        scenarios = tuple(args.scenario or ("xy", "xz", "payload"))
+        if "excitation" in scenarios:
+            raise ValueError(
+                "scenario 'excitation' is for the arms (--robot panda|ur5); the iCub has xy, xz, "
+                "payload, multisine, contacts"
+            )
+        joint_rate = args.joint_rate if args.joint_rate is not None else args.rate
+        wrench_rate = args.wrench_rate if args.wrench_rate is not None else args.rate
         duration = args.duration
         if args.samples is not None:
             if args.samples <= 0:
                 raise ValueError("--samples must be positive")
-            rate = args.wrench_rate or PRESETS[args.preset]["wrench_rate"]
+            rate = wrench_rate or PRESETS[args.preset]["wrench_rate"]
             duration = args.samples / rate
         configs = preset_configs(
             args.preset,
-            tuple(args.scenario or ("xy", "xz", "payload")),
+            scenarios,
             effects=effects,
-            payload_mass=args.payload_mass,
+            payload_mass=0.5 if args.payload_mass is None else args.payload_mass,
             payload_trajectory=args.payload_trajectory,
+            contacts=_contact_config(args, ContactConfig),
             duration=duration,
-            joint_rate=args.joint_rate,
-            wrench_rate=args.wrench_rate,
+            joint_rate=joint_rate,
+            wrench_rate=wrench_rate,
             delay=args.delay,
             radius=args.radius,
             speed=args.speed,
@@ -149,6 +213,102 @@ def main(argv: Sequence[str] | None = None) -> int:
             progress=not args.quiet,
         )
     except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created
+        return error_exit("simulate", err)
+    for path in paths:
+        print(path)
+    return 0
+
+
+def _reject(args: argparse.Namespace, names: Sequence[str], robot: str) -> None:
+    """Raise ValueError if an option that does not apply to this robot was given."""
+    given = ["--" + n.replace("_", "-") for n in names if getattr(args, n) not in (None, False)]
+    if given:
+        raise ValueError(f"{', '.join(given)}: not applicable to {robot}")
+
+
+def _contact_config(args: argparse.Namespace, cls: type) -> object:
+    """Return the ContactConfig of the options (defaults where not given)."""
+    kwargs: dict[str, object] = {}
+    if args.contact_rate is not None:
+        kwargs["rate"] = args.contact_rate
+    if args.contact_force is not None:
+        kwargs["force_range"] = tuple(args.contact_force)
+    if args.contact_duration is not None:
+        kwargs["duration_range"] = tuple(args.contact_duration)
+    if args.contact_window is not None:
+        kwargs["window"] = tuple(args.contact_window)
+    return cls(**kwargs)
+
+
+def _main_arm(args: argparse.Namespace) -> int:
+    """Run ``simulate`` for a joint-torque arm (Panda, UR5)."""
+    from semiparam_ros.sim.arms import ParameterPerturbation, arm_preset_configs
+    from semiparam_ros.sim.contacts import ContactConfig
+    from semiparam_ros.sim.generate import generate
+
+    try:
+        _reject(
+            args,
+            (
+                "joint_rate",
+                "wrench_rate",
+                "delay",
+                "radius",
+                "speed",
+                "speed_variation",
+                "centre_wander",
+                "radius_wander",
+                "no_variability",
+            ),
+            f"--robot {args.robot}",
+        )
+        if args.effects_scale != 1.0:
+            raise ValueError("--effects-scale is for the iCub; use --friction-scale for the arms")
+        if args.preset != "default":
+            raise ValueError(
+                f"--preset {args.preset} is for the iCub; use --rate and --duration for the arms"
+            )
+        scenarios = tuple(args.scenario or ("excitation", "payload"))
+        wrong = [s for s in scenarios if s not in ("excitation", "payload", "contacts")]
+        if wrong:
+            raise ValueError(
+                f"scenarios {wrong} are for the iCub; the arms have excitation, payload, contacts"
+            )
+        rate = 1000.0 if args.rate is None else args.rate
+        duration = args.duration
+        if args.samples is not None:
+            if args.samples <= 0:
+                raise ValueError("--samples must be positive")
+            duration = args.samples / rate
+        if args.no_perturbation:
+            perturbation = None
+        elif args.perturbation is not None:
+            perturbation = ParameterPerturbation(*args.perturbation)
+        else:
+            perturbation = ParameterPerturbation()
+        friction_scale = 1.0 if args.friction_scale is None else args.friction_scale
+        configs = arm_preset_configs(
+            args.robot,
+            scenarios,
+            rate=rate,
+            duration=duration,
+            payload_mass=args.payload_mass,
+            payload_time=args.payload_time,
+            contacts=_contact_config(args, ContactConfig),
+            seed=args.seed,
+            perturbation=perturbation,
+            friction_scale=0.0 if args.no_effects else friction_scale,
+            armature=args.armature,
+            noise_scale=0.0 if args.no_noise else args.noise_scale,
+        )
+        paths = generate(
+            args.out,
+            configs,
+            overwrite=args.overwrite,
+            compress=not args.no_compress,
+            progress=not args.quiet,
+        )
+    except (ValueError, OSError) as err:
         return error_exit("simulate", err)
     for path in paths:
         print(path)

@@ -7,6 +7,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from semiparam_ros.sim.arm_writer import write_arm_recording
+from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.scenario import LEAD_IN_S, ScenarioConfig, simulate
 from semiparam_ros.sim.writer import write_recording
 
@@ -15,7 +17,7 @@ __all__ = ["generate"]
 
 def generate(
     out_dir: str | Path,
-    configs: Sequence[ScenarioConfig],
+    configs: Sequence[ScenarioConfig | ArmScenarioConfig],
     *,
     overwrite: bool = False,
     compress: bool = True,
@@ -25,7 +27,8 @@ def generate(
 
     Args:
         out_dir: Parent folder (created if missing).
-        configs: The scenarios (e.g. from :func:`~semiparam_ros.sim.scenario.preset_configs`).
+        configs: The scenarios: iCub (:func:`~semiparam_ros.sim.scenario.preset_configs`) or joint-torque
+            arms (:func:`~semiparam_ros.sim.arms.arm_preset_configs`).
         overwrite: Replace existing bag folders of the same names.
         compress: zstd-compress the MCAP chunks.
         progress: Show a tqdm progress bar on stderr.
@@ -48,10 +51,20 @@ def generate(
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for config in configs:
+        if isinstance(config, ArmScenarioConfig):
+            count = round(config.duration * config.rate)
+            with tqdm(total=count, desc=config.name, unit="stamp", disable=not progress, leave=True) as bar:
+                arm = simulate_arm(config)
+                paths.append(
+                    write_arm_recording(
+                        arm, out / config.name, overwrite=overwrite, compress=compress, progress=bar.update
+                    )
+                )
+            continue
         # Work units: wrench samples simulated + messages written (5 topics).
         n_joint = round((config.duration + 2.0 * LEAD_IN_S) * config.joint_rate)  # lead-in and lead-out
         n_wrench = round(config.duration * config.wrench_rate)
-        total = n_wrench + 2 * n_joint + 3 * n_wrench
+        total = n_wrench + 2 * n_joint + (3 if config.contacts is None else 5) * n_wrench
         with tqdm(total=total, desc=config.name, unit="msg", disable=not progress, leave=True) as bar:
             recording = simulate(config, progress=bar.update)
             paths.append(

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.core.dynamics import RigidBodyRegressor, icub_urdf_path, point_mass_parameters
+from semiparam_ros.sim.contacts import ContactConfig, ContactEpisode, contact_forces, draw_episodes
 from semiparam_ros.sim.effects import (
     DEFAULT_EFFECTS,
     SENSOR_FRAME,
@@ -61,6 +62,7 @@ from semiparam_ros.sim.trajectories import (
 
 __all__ = [
     "CIRCLES",
+    "CONTACTS_DURATION_S",
     "DEFAULT_START_NS",
     "DEFAULT_VARIABILITY",
     "LEAD_IN_S",
@@ -71,6 +73,7 @@ __all__ = [
     "ScenarioConfig",
     "SimulatedRecording",
     "TrajectoryVariability",
+    "hand_contact_wrenches",
     "preset_configs",
     "simulate",
 ]
@@ -226,6 +229,7 @@ class ScenarioConfig:
         variability: Cycle-to-cycle variability of the circles (None or inactive: exact repetition).
         start_ns: First joint-state stamp (ns); the first wrench is ``LEAD_IN_S + delay`` later and the
             joint states continue ``LEAD_IN_S`` after the last wrench.
+        contacts: Contact episodes at the hand (:mod:`semiparam_ros.sim.contacts`), or None for none.
     """
 
     name: str
@@ -242,6 +246,7 @@ class ScenarioConfig:
     effects: EffectParameters = field(default=DEFAULT_EFFECTS)
     variability: TrajectoryVariability | None = field(default=DEFAULT_VARIABILITY)
     start_ns: int = DEFAULT_START_NS
+    contacts: ContactConfig | None = None
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:
@@ -268,6 +273,8 @@ class ScenarioConfig:
             raise ValueError("start_ns + delay must be >= 0")
         if self.variability is not None and not isinstance(self.variability, TrajectoryVariability):
             raise ValueError("variability must be a TrajectoryVariability or None")
+        if self.contacts is not None and not isinstance(self.contacts, ContactConfig):
+            raise ValueError("contacts must be a ContactConfig or None")
 
     @property
     def pickup_time(self) -> float | None:
@@ -299,6 +306,11 @@ class SimulatedRecording:
         wrench_q, wrench_dq, wrench_ddq: (M, 4) true joint state at the wrench stamps.
         parameters_before, parameters_after: Full inertial parameters before and after the pickup.
         info: Scenario description for ``scenario.yaml`` (plain Python).
+        contact_episodes: The contact episodes (empty without contacts).
+        contact_wrench: (M, 6) applied contact force at the hand, ``[F, 0]`` (N) in the hand frame
+            ``r_hand_dh_frame`` (about its origin, where it acts), or None without contacts.
+        external_wrench: (M, 6) the contact's transmitted wrench at the sensor (N, N·m, sensor frame, before
+            the sensor's calibration error), included in ``true_wrench``; None without contacts.
     """
 
     config: ScenarioConfig
@@ -321,6 +333,9 @@ class SimulatedRecording:
     parameters_before: np.ndarray
     parameters_after: np.ndarray
     info: dict[str, Any]
+    contact_episodes: tuple[ContactEpisode, ...] = ()
+    contact_wrench: np.ndarray | None = None
+    external_wrench: np.ndarray | None = None
 
 
 def _stamps(start_ns: int, count: int, rate: float, offset_ns: int = 0) -> np.ndarray:
@@ -548,7 +563,23 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
         cables[start:stop] = harness_wrench(kin, wq[start:stop], wdq[start:stop], fx)
         if progress is not None:
             progress(stop - start)
-    truth = sensor_reading(rigid + cables, t_wrench, fx)
+    contact_info: dict[str, Any] | None = None
+    episodes: tuple[ContactEpisode, ...] = ()
+    contact_w: np.ndarray | None = None
+    external: np.ndarray | None = None
+    if config.contacts is not None:
+        # Its own random stream (the 4th child), so that the other signals stay as without contacts.
+        rng_contact = np.random.default_rng(seq.spawn(1)[0])
+        episodes = draw_episodes(config.contacts, config.duration, rng_contact)
+        contact_w, external = hand_contact_wrenches(kin, wq, contact_forces(episodes, t_wrench))
+        contact_info = {
+            **config.contacts.as_dict(),
+            "frame": _HAND_FRAME,
+            "convention": "force the environment applies to the hand at the frame origin; direction fixed "
+            "in the root frame during an episode",
+            "episodes": [e.as_dict() for e in episodes],
+        }
+    truth = sensor_reading(rigid + cables if external is None else rigid + cables + external, t_wrench, fx)
     noise = np.empty((n_wrench, 6))
     noise[:, :3] = fx.force_noise_std * rng_wrench.standard_normal((n_wrench, 3))
     noise[:, 3:] = fx.torque_noise_std * rng_wrench.standard_normal((n_wrench, 3))
@@ -589,6 +620,8 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
             "min_joint_limit_margin_rad": margin,
         },
     }
+    if contact_info is not None:
+        info["contacts"] = contact_info
     return SimulatedRecording(
         config=config,
         joint_names=ARM_JOINTS,
@@ -610,7 +643,39 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
         parameters_before=params_before,
         parameters_after=params_after,
         info=info,
+        contact_episodes=episodes,
+        contact_wrench=contact_w,
+        external_wrench=external,
     )
+
+
+def hand_contact_wrenches(
+    kin: ArmKinematics, q: np.ndarray, force: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return a hand contact as applied (hand frame) and as transmitted to the F/T sensor (sensor frame).
+
+    A force ``F`` applied to the distal subtree at the hand frame's origin ``p_h`` adds ``[F_s, a × F_s]``
+    to the reading (module docstring of :mod:`semiparam_ros.sim.effects`), with ``F_s = R_sᵀ F`` and
+    ``a = R_sᵀ (p_h − p_s)`` the hand origin seen from the sensor.
+
+    Args:
+        kin: Arm kinematics (same locked joints as the simulation).
+        q: (k, 4) joint positions (rad).
+        force: (k, 3) applied force (N), root-frame axes; rows that are exactly zero are skipped.
+
+    Returns:
+        ``(applied, transmitted)``: (k, 6) ``[R_hᵀ F, 0]`` in the hand frame and (k, 6)
+        ``[F_s, a × F_s]`` (N, N·m) in the sensor frame.
+    """
+    applied = np.zeros((q.shape[0], 6))
+    transmitted = np.zeros((q.shape[0], 6))
+    for i in np.flatnonzero(np.any(force != 0.0, axis=1)):
+        (Rs, ps), (Rh, ph) = kin.frame_poses(q[i], [SENSOR_FRAME, _HAND_FRAME])
+        f_s = Rs.T @ force[i]
+        transmitted[i, :3] = f_s
+        transmitted[i, 3:] = np.cross(Rs.T @ (ph - ps), f_s)
+        applied[i, :3] = Rh.T @ force[i]
+    return applied, transmitted
 
 
 #: Presets: stream rates and length of the bags ``simulate --preset`` writes.
@@ -620,7 +685,17 @@ PRESETS: dict[str, dict[str, float]] = {
     "paper": {"joint_rate": 100.0, "wrench_rate": 10.0, "duration": 1000.0},
 }
 
-_SCENARIO_NAMES = {"xy": "icub_xy", "xz": "icub_xz", "payload": "icub_payload", "multisine": "icub_multisine"}
+_SCENARIO_NAMES = {
+    "xy": "icub_xy",
+    "xz": "icub_xz",
+    "payload": "icub_payload",
+    "multisine": "icub_multisine",
+    "contacts": "icub_contacts",
+}
+
+#: Length of the ``contacts`` scenario when no duration is given (s): contacts in [18, 78] s, payload
+#: pickup at 90 s, 30 s to adopt it.
+CONTACTS_DURATION_S = 120.0
 
 
 def preset_configs(
@@ -630,6 +705,7 @@ def preset_configs(
     effects: EffectParameters = DEFAULT_EFFECTS,
     payload_mass: float = 0.5,
     payload_trajectory: str = "xy",
+    contacts: ContactConfig | None = None,
     **overrides: Any,
 ) -> list[ScenarioConfig]:
     """Return the scenario configurations of a preset.
@@ -637,11 +713,14 @@ def preset_configs(
     Args:
         preset: ``"default"`` (60 s, both streams 100 Hz) or ``"paper"`` (1000 s, wrench 10 Hz, joint
             states 100 Hz).
-        scenarios: Any of ``"xy"``, ``"xz"``, ``"payload"``, ``"multisine"``; bag names are
-            ``icub_<scenario>``.
+        scenarios: Any of ``"xy"``, ``"xz"``, ``"payload"``, ``"multisine"``, ``"contacts"``; bag names
+            are ``icub_<scenario>``. ``contacts`` is the payload scenario with contact episodes at the hand
+            before the pickup: :data:`CONTACTS_DURATION_S` long unless a duration is given, contacts in
+            ``[0.15, 0.65]·T``, pickup at ``0.75·T`` unless ``payload_time`` is given.
         effects: Effect parameters (already scaled).
         payload_mass: Payload of the ``payload`` scenario (kg).
-        payload_trajectory: Trajectory of the ``payload`` scenario.
+        payload_trajectory: Trajectory of the ``payload`` and ``contacts`` scenarios.
+        contacts: How the ``contacts`` scenario draws its episodes (default :class:`ContactConfig`).
         **overrides: Any :class:`ScenarioConfig` field (duration, rates, delay, radius, speed, seed,
             payload_time, start_ns); None values are ignored.
 
@@ -663,6 +742,16 @@ def preset_configs(
         kwargs = dict(base)
         if scenario == "payload":
             kwargs.update(trajectory=payload_trajectory, payload_mass=payload_mass)
+        elif scenario == "contacts":
+            duration = float(overrides.get("duration") or CONTACTS_DURATION_S)
+            pickup = overrides.get("payload_time")
+            kwargs.update(
+                trajectory=payload_trajectory,
+                payload_mass=payload_mass,
+                duration=duration,
+                payload_time=0.75 * duration if pickup is None else pickup,
+                contacts=contacts if contacts is not None else ContactConfig(),
+            )
         else:
             kwargs.update(trajectory=scenario, payload_mass=0.0)
         out.append(replace(ScenarioConfig(name=_SCENARIO_NAMES[scenario]), effects=effects, **kwargs))

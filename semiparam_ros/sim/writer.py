@@ -12,6 +12,14 @@ Topics (every stamp is the sampling instant; log time = header stamp; messages i
 * ``/ground_truth/joint_accelerations`` (``trajectory_msgs/msg/JointTrajectory``): one point with the true
   q, q̇, q̈ of the four arm joints, stamped like ``/joint_states``.
 
+With contact episodes (``ScenarioConfig.contacts``), at every wrench stamp (zero outside the episodes):
+
+* ``/ground_truth/contact_wrench`` (WrenchStamped): the force the environment applies to the hand at the
+  origin of ``r_hand_dh_frame``, in that frame (N; torque 0).
+* ``/ground_truth/external_wrench`` (WrenchStamped): its transmitted wrench at the sensor (N, N·m, frame
+  ``r_arm_ft_sensor``), included in ``/ground_truth/wrench`` (which then also applies the calibration
+  error to it): what ``measured − predicted`` estimates.
+
 ``scenario.yaml`` next to ``metadata.yaml`` records the seed, trajectory, payload (mass, time, stamp),
 every effect magnitude and the measured RMS of each part.
 """
@@ -33,6 +41,8 @@ from semiparam_ros.sim.scenario import PUBLISHED_JOINT_ORDER, SimulatedRecording
 
 __all__ = [
     "GROUND_TRUTH_ACCELERATION_TOPIC",
+    "GROUND_TRUTH_CONTACT_TOPIC",
+    "GROUND_TRUTH_EXTERNAL_WRENCH_TOPIC",
     "GROUND_TRUTH_RIGID_TOPIC",
     "GROUND_TRUTH_WRENCH_TOPIC",
     "JOINT_STATES_TOPIC",
@@ -46,6 +56,8 @@ WRENCH_TOPIC = "/wrench"
 GROUND_TRUTH_WRENCH_TOPIC = "/ground_truth/wrench"
 GROUND_TRUTH_RIGID_TOPIC = "/ground_truth/wrench/rigid_body"
 GROUND_TRUTH_ACCELERATION_TOPIC = "/ground_truth/joint_accelerations"
+GROUND_TRUTH_CONTACT_TOPIC = "/ground_truth/contact_wrench"
+GROUND_TRUTH_EXTERNAL_WRENCH_TOPIC = "/ground_truth/external_wrench"
 SCENARIO_FILE = "scenario.yaml"
 
 
@@ -100,25 +112,21 @@ def write_recording(
     n_joint = rec.joint_stamps.size
     n_wrench = rec.wrench_stamps.size
     # One merged, log-time ordered stream: (stamp, kind, index). Kinds in write order at equal stamps.
-    stamps = np.concatenate(
-        [rec.joint_stamps, rec.joint_stamps, rec.wrench_stamps, rec.wrench_stamps, rec.wrench_stamps]
-    )
-    kinds = np.repeat(np.arange(5), [n_joint, n_joint, n_wrench, n_wrench, n_wrench])
-    index = np.concatenate(
-        [
-            np.arange(n_joint),
-            np.arange(n_joint),
-            np.arange(n_wrench),
-            np.arange(n_wrench),
-            np.arange(n_wrench),
-        ]
-    )
-    order = np.lexsort((kinds, stamps))
     wrench_sets = {
-        2: (WRENCH_TOPIC, rec.measured_wrench),
-        3: (GROUND_TRUTH_WRENCH_TOPIC, rec.true_wrench),
-        4: (GROUND_TRUTH_RIGID_TOPIC, rec.rigid_wrench),
+        2: (WRENCH_TOPIC, rec.measured_wrench, SENSOR_FRAME),
+        3: (GROUND_TRUTH_WRENCH_TOPIC, rec.true_wrench, SENSOR_FRAME),
+        4: (GROUND_TRUTH_RIGID_TOPIC, rec.rigid_wrench, SENSOR_FRAME),
     }
+    if rec.contact_wrench is not None and rec.external_wrench is not None:
+        hand_frame = str(rec.info["contacts"]["frame"])
+        wrench_sets[5] = (GROUND_TRUTH_CONTACT_TOPIC, rec.contact_wrench, hand_frame)
+        wrench_sets[6] = (GROUND_TRUTH_EXTERNAL_WRENCH_TOPIC, rec.external_wrench, SENSOR_FRAME)
+    n_kinds = 2 + len(wrench_sets)
+    sizes = [n_joint, n_joint] + [n_wrench] * len(wrench_sets)
+    stamps = np.concatenate([rec.joint_stamps, rec.joint_stamps] + [rec.wrench_stamps] * len(wrench_sets))
+    kinds = np.repeat(np.arange(n_kinds), sizes)
+    index = np.concatenate([np.arange(n) for n in sizes])
+    order = np.lexsort((kinds, stamps))
     arm_names = list(rec.joint_names)
     batch = 0
     with BagWriter(path, overwrite=overwrite, compress=compress) as bag:
@@ -142,9 +150,9 @@ def write_recording(
                     rec.ddq[i],
                 )
             else:
-                topic, values = wrench_sets[kind]
+                topic, values, frame = wrench_sets[kind]
                 w = values[i]
-                bag.write_wrench(topic, WrenchData(int(rec.wrench_stamps[i]), SENSOR_FRAME, w[:3], w[3:]))
+                bag.write_wrench(topic, WrenchData(int(rec.wrench_stamps[i]), frame, w[:3], w[3:]))
             batch += 1
             if progress is not None and batch == 2000:
                 progress(batch)
@@ -177,5 +185,13 @@ def write_recording(
             "count": counts.get(GROUND_TRUTH_ACCELERATION_TOPIC, 0),
         },
     }
+    for kind in (5, 6):
+        if kind in wrench_sets:
+            topic, _, frame = wrench_sets[kind]
+            info["topics"][topic] = {
+                "type": "geometry_msgs/msg/WrenchStamped",
+                "count": counts.get(topic, 0),
+                "frame_id": frame,
+            }
     _write_yaml_atomic(path / SCENARIO_FILE, info)
     return path

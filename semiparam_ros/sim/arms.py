@@ -1,0 +1,730 @@
+"""Synthetic joint-torque recordings of URDF arms (Franka Panda, UR5): friction, payload, contacts.
+
+The measurement model, at every joint-state stamp t (s from the first stamp), joints i = 1 … n:
+
+    τ_meas(t) = Φ(q, q̇, q̈) π(t)  +  τ_f(q̇, q̈)  −  J(q)ᵀ F(t)  +  ε(t)
+    τ_f,i     = f_v,i q̇ᵢ + f_c,i tanh(q̇ᵢ / v_s) + oᵢ + aᵢ q̈ᵢ
+
+* **Trajectory**: a random multi-sine (:func:`~semiparam_ros.sim.trajectories.multisine`) inside the
+  robot's position window, with |q̇| and |q̈| bounded for all t (:class:`ArmRobot`); q, q̇, q̈ exact.
+* **True rigid-body parameters** π: the URDF's (a CAD model), perturbed once per robot and seed
+  (:class:`ParameterPerturbation`): each body's mass scaled by (1 + δ), δ uniform in ±``mass``; its centre
+  of mass shifted by up to ``com`` m per axis; its second moments of mass about the centre of mass
+  (Σ = ½ tr(I_c) 1 − I_c, positive semi-definite) scaled along their principal axes by (1 + δ), δ uniform
+  in ±``inertia``. Every body stays physically consistent. The same robot and seed give the same π in
+  every bag, so that one bag can train and another test.
+* **Payload**: a point mass attached at a point of the end-effector frame from ``payload_time`` on
+  (persistent), added to the carrying body's parameters (π(t) changes once).
+* **Friction** (:class:`JointFriction`): viscous ``f_v`` (N·m·s/rad), Coulomb ``f_c`` (N·m) with the smooth
+  sign ``tanh(q̇/v_s)`` (v_s in rad/s), a constant offset ``o`` (N·m) and an optional armature ``a``
+  (kg·m²), evaluated at the true q̇, q̈ — the convention of the learner's friction columns.
+* **Contacts** (:mod:`semiparam_ros.sim.contacts`): a force F (N, base frame) at the end-effector frame's
+  origin. The trajectory is kept (the controller compensates), so the joints carry the reaction and the
+  measured torques change by ``−J(q)ᵀ F``, J the linear Jacobian (m/rad) of that point in the base frame.
+  That change is what ``external = measured − predicted`` estimates.
+* **Noise** ε: Gaussian, per joint (N·m); the published positions and velocities carry encoder and
+  velocity noise (rad, rad/s). Nothing publishes accelerations.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from semiparam_ros.core.dynamics import (
+    RigidBodyRegressor,
+    is_physically_consistent,
+    point_mass_parameters,
+    resolve_urdf,
+)
+from semiparam_ros.sim.contacts import ContactConfig, ContactEpisode, contact_forces, draw_episodes
+from semiparam_ros.sim.ik import ArmKinematics
+from semiparam_ros.sim.scenario import DEFAULT_START_NS
+from semiparam_ros.sim.trajectories import multisine
+
+__all__ = [
+    "ARM_ROBOTS",
+    "ARM_SCENARIOS",
+    "ArmRecording",
+    "ArmRobot",
+    "ArmScenarioConfig",
+    "JointFriction",
+    "ParameterPerturbation",
+    "arm_preset_configs",
+    "arm_regressor",
+    "perturb_parameters",
+    "simulate_arm",
+]
+
+
+def _floats(values: object, n: int, what: str, *, nonneg: bool = False) -> tuple[float, ...]:
+    arr = np.asarray(values, dtype=np.float64).reshape(-1)
+    if arr.size == 1 and n > 1:
+        arr = np.full(n, float(arr[0]))
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what} must be {n} finite numbers, got {values!r}")
+    if nonneg and np.any(arr < 0):
+        raise ValueError(f"{what} must be >= 0, got {values!r}")
+    return tuple(float(v) for v in arr)
+
+
+@dataclass(frozen=True)
+class JointFriction:
+    """Per-joint friction, offset and armature: ``τ_f = f_v q̇ + f_c tanh(q̇/v_s) + o + a q̈``.
+
+    Attributes:
+        viscous: f_v per joint (N·m·s/rad).
+        coulomb: f_c per joint (N·m).
+        offset: o per joint (N·m).
+        armature: a per joint (kg·m²); zeros for none.
+        smoothing: v_s of the smooth sign (rad/s).
+    """
+
+    viscous: tuple[float, ...]
+    coulomb: tuple[float, ...]
+    offset: tuple[float, ...]
+    armature: tuple[float, ...]
+    smoothing: float = 0.05
+
+    def __post_init__(self) -> None:
+        n = len(tuple(self.viscous))
+        object.__setattr__(self, "viscous", _floats(self.viscous, n, "viscous friction", nonneg=True))
+        object.__setattr__(self, "coulomb", _floats(self.coulomb, n, "Coulomb friction", nonneg=True))
+        object.__setattr__(self, "offset", _floats(self.offset, n, "torque offset"))
+        object.__setattr__(self, "armature", _floats(self.armature, n, "armature", nonneg=True))
+        if not (np.isfinite(self.smoothing) and self.smoothing > 0):
+            raise ValueError(
+                f"friction smoothing velocity v_s must be positive (rad/s), got {self.smoothing!r}"
+            )
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints."""
+        return len(self.viscous)
+
+    def torques(self, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """Return τ_f (N·m) for velocities (k, n) in rad/s and accelerations (k, n) in rad/s²."""
+        dq = np.asarray(dq, dtype=np.float64)
+        ddq = np.asarray(ddq, dtype=np.float64)
+        return (
+            np.asarray(self.viscous) * dq
+            + np.asarray(self.coulomb) * np.tanh(dq / self.smoothing)
+            + np.asarray(self.offset)
+            + np.asarray(self.armature) * ddq
+        )
+
+    def scaled(self, factor: float) -> JointFriction:
+        """Copy with f_v, f_c, o and a multiplied by ``factor`` (≥ 0; 0 removes them)."""
+        if not (np.isfinite(factor) and factor >= 0):
+            raise ValueError(f"friction scale must be finite and >= 0, got {factor!r}")
+        return replace(
+            self,
+            viscous=tuple(factor * v for v in self.viscous),
+            coulomb=tuple(factor * v for v in self.coulomb),
+            offset=tuple(factor * v for v in self.offset),
+            armature=tuple(factor * v for v in self.armature),
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain-Python description with units in the keys (for ``scenario.yaml``)."""
+        return {
+            "model": "tau_f = viscous*dq + coulomb*tanh(dq/smoothing) + offset + armature*ddq",
+            "smoothing_velocity_rad_per_s": float(self.smoothing),
+            "viscous_Nms_per_rad": list(self.viscous),
+            "coulomb_Nm": list(self.coulomb),
+            "offset_Nm": list(self.offset),
+            "armature_kgm2": list(self.armature),
+        }
+
+
+@dataclass(frozen=True)
+class ParameterPerturbation:
+    """How far the true inertial parameters are from the URDF's (module docstring).
+
+    Attributes:
+        mass: Maximum relative change of each mass (0 ≤ mass < 1).
+        inertia: Maximum relative change of each principal second moment about the centre of mass
+            (0 ≤ inertia < 1).
+        com: Maximum shift of each centre of mass per axis (m).
+    """
+
+    mass: float = 0.15
+    inertia: float = 0.15
+    com: float = 0.01
+
+    def __post_init__(self) -> None:
+        for name in ("mass", "inertia", "com"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"perturbation {name} must be finite and >= 0, got {value!r}")
+        if self.mass >= 1 or self.inertia >= 1:
+            raise ValueError("perturbation mass and inertia must be below 1 (relative)")
+
+    def as_dict(self) -> dict[str, float]:
+        """Plain-Python description with units in the keys (for ``scenario.yaml``)."""
+        return {"mass_relative": self.mass, "inertia_relative": self.inertia, "com_m": self.com}
+
+
+def perturb_parameters(
+    params: np.ndarray, perturbation: ParameterPerturbation, rng: np.random.Generator
+) -> np.ndarray:
+    """Return physically consistent perturbed copies of full inertial parameters (10 per body).
+
+    Bodies of zero mass (frames without inertia) are left unchanged.
+
+    Args:
+        params: (10·b,) ``[m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` per body (kg, kg·m, kg·m²),
+            about each body frame's origin.
+        perturbation: Magnitudes.
+        rng: Random generator.
+
+    Returns:
+        (10·b,) perturbed parameters.
+
+    Raises:
+        ValueError: If a perturbed body is not physically consistent (a bad input body).
+    """
+    out = np.asarray(params, dtype=np.float64).copy()
+    for b in range(out.size // 10):
+        p = out[10 * b : 10 * b + 10]
+        m = p[0]
+        dm = rng.uniform(-1.0, 1.0)
+        dc = rng.uniform(-1.0, 1.0, 3)
+        ds = rng.uniform(-1.0, 1.0, 3)
+        if m <= 0.0:
+            continue
+        c = p[1:4] / m
+        I_o = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]])
+        I_c = I_o - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+        sigma = 0.5 * np.trace(I_c) * np.eye(3) - I_c  # second moments of the mass distribution (PSD)
+        w, V = np.linalg.eigh(sigma)
+        w = np.clip(w, 0.0, None) * (1.0 + perturbation.inertia * ds)
+        sigma2 = (V * w) @ V.T
+        m2 = m * (1.0 + perturbation.mass * dm)
+        sigma2 *= m2 / m  # the second moments scale with the mass
+        c2 = c + perturbation.com * dc
+        I_c2 = np.trace(sigma2) * np.eye(3) - sigma2
+        I_o2 = I_c2 + m2 * (float(c2 @ c2) * np.eye(3) - np.outer(c2, c2))
+        new = np.array(
+            [m2, *(m2 * c2), I_o2[0, 0], I_o2[0, 1], I_o2[1, 1], I_o2[0, 2], I_o2[1, 2], I_o2[2, 2]]
+        )
+        if not is_physically_consistent(new, tol=1e-12 * max(1.0, float(np.abs(new[4:]).max()))):
+            raise ValueError(f"body {b}: perturbed parameters are not physically consistent")
+        out[10 * b : 10 * b + 10] = new
+    return out
+
+
+@dataclass(frozen=True)
+class ArmRobot:
+    """A joint-torque arm preset: model, excitation bounds, friction, noise, payload.
+
+    Attributes:
+        name: Short name (``"panda"``, ``"ur5"``), the prefix of its bag names.
+        urdf: ``robot.urdf`` value (:func:`~semiparam_ros.core.dynamics.resolve_urdf`).
+        joints: The moving joints, in the published order; every other joint is locked at 0.
+        end_effector: Frame where payloads are attached and contacts act.
+        position_window: (n, 2) joint range the excitation may use (rad), inside the URDF limits.
+        max_velocity: Bound on every |q̇| of the excitation (rad/s).
+        max_acceleration: Bound on every |q̈| of the excitation (rad/s²).
+        base_period: Period of the excitation's fundamental (s).
+        friction: True friction, offsets and armature.
+        torque_noise_std: σ of the torque noise per joint (N·m).
+        position_noise_std: σ of the joint position noise (rad).
+        velocity_noise_std: σ of the joint velocity noise (rad/s).
+        payload_mass: Default payload (kg).
+        payload_point: Where the payload sits in the end-effector frame (m).
+    """
+
+    name: str
+    urdf: str
+    joints: tuple[str, ...]
+    end_effector: str
+    position_window: tuple[tuple[float, float], ...]
+    max_velocity: float
+    max_acceleration: float
+    base_period: float
+    friction: JointFriction
+    torque_noise_std: tuple[float, ...]
+    position_noise_std: float
+    velocity_noise_std: float
+    payload_mass: float
+    payload_point: tuple[float, float, float]
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain-Python description (for ``scenario.yaml``)."""
+        return {
+            "name": self.name,
+            "urdf": self.urdf,
+            "joints": list(self.joints),
+            "end_effector": self.end_effector,
+        }
+
+
+_ZEROS7 = (0.0,) * 7
+_ZEROS6 = (0.0,) * 6
+
+#: The presets. Friction magnitudes are of the order reported for these arms (Panda: link-side torque
+#: sensors, a few tenths of N·m; UR5: torques from motor currents, through the gearbox, N·m); noise of
+#: the order of their torque readings' jitter. Armature is off by default (``simulate --armature``).
+ARM_ROBOTS: dict[str, ArmRobot] = {
+    "panda": ArmRobot(
+        name="panda",
+        urdf="example-robot-data://robots/panda_description/urdf/panda.urdf",
+        joints=tuple(f"panda_joint{i}" for i in range(1, 8)),
+        end_effector="panda_hand_tcp",
+        position_window=(
+            (-2.8973, 2.8973),
+            (-1.7628, 1.7628),
+            (-2.8973, 2.8973),
+            (-3.0718, -0.0698),
+            (-2.8973, 2.8973),
+            (-0.0175, 3.7525),
+            (-2.8973, 2.8973),
+        ),
+        max_velocity=1.0,
+        max_acceleration=4.0,
+        base_period=10.0,
+        friction=JointFriction(
+            viscous=(0.40, 0.50, 0.35, 0.45, 0.20, 0.25, 0.15),
+            coulomb=(0.50, 0.70, 0.45, 0.60, 0.35, 0.40, 0.25),
+            offset=(0.15, -0.30, 0.10, 0.25, -0.08, 0.12, -0.05),
+            armature=_ZEROS7,
+            smoothing=0.05,
+        ),
+        torque_noise_std=(0.08, 0.08, 0.08, 0.08, 0.03, 0.03, 0.03),
+        position_noise_std=1e-5,
+        velocity_noise_std=1e-3,
+        payload_mass=1.0,
+        payload_point=(0.02, 0.01, 0.03),
+    ),
+    "ur5": ArmRobot(
+        name="ur5",
+        urdf="example-robot-data://robots/ur_description/urdf/ur5_robot.urdf",
+        joints=(
+            "shoulder_pan_joint",
+            "shoulder_lift_joint",
+            "elbow_joint",
+            "wrist_1_joint",
+            "wrist_2_joint",
+            "wrist_3_joint",
+        ),
+        end_effector="tool0",
+        # Arm above its mounting plane (shoulder lift in [−π, 0]), elbow folded either way.
+        position_window=((-3.1, 3.1), (-2.9, -0.25), (-2.6, 2.6), (-3.1, 3.1), (-3.1, 3.1), (-3.1, 3.1)),
+        max_velocity=1.0,
+        max_acceleration=4.0,
+        base_period=10.0,
+        friction=JointFriction(
+            viscous=(1.8, 2.0, 1.4, 0.5, 0.5, 0.4),
+            coulomb=(2.5, 3.0, 2.0, 0.9, 0.9, 0.7),
+            offset=(0.4, -0.8, 0.5, 0.15, -0.10, 0.05),
+            armature=_ZEROS6,
+            smoothing=0.05,
+        ),
+        torque_noise_std=(0.3, 0.3, 0.3, 0.1, 0.1, 0.1),
+        position_noise_std=2e-5,
+        velocity_noise_std=2e-3,
+        payload_mass=1.5,
+        payload_point=(0.02, 0.0, 0.05),
+    ),
+}
+
+#: Scenarios of :func:`arm_preset_configs`: ``excitation`` (no payload), ``payload`` (pickup at the middle),
+#: ``contacts`` (contact episodes in [0.15, 0.65]·T, then a pickup at 0.75·T; 120 s unless given).
+ARM_SCENARIOS: tuple[str, ...] = ("excitation", "payload", "contacts")
+
+_DEFAULT_PERTURBATION = ParameterPerturbation()
+
+#: Default length of the ``excitation`` and ``payload`` scenarios (s) and of the ``contacts`` one.
+_DEFAULT_DURATION = 60.0
+_CONTACTS_DURATION = 120.0
+
+
+@dataclass(frozen=True)
+class ArmScenarioConfig:
+    """One synthetic joint-torque recording of an arm.
+
+    Attributes:
+        name: Bag folder name.
+        robot: Key of :data:`ARM_ROBOTS`.
+        duration: Length (s).
+        rate: Joint-state rate (Hz).
+        seed: Seed. The true parameters depend on (robot, seed) only; trajectory and noise also on the
+            name, so that bags of one robot differ but share one physical robot.
+        payload_mass: Payload (kg); 0 for none.
+        payload_time: Pickup time (s from the start); None for the middle.
+        contacts: Contact episodes at the end effector, or None.
+        perturbation: Distance of the true parameters from the URDF's; None for the URDF's exactly.
+        friction_scale: Factor on the robot's friction, offsets and armature (0 removes them).
+        armature: If given, the armature of every joint (kg·m²), replacing the robot's (before scaling).
+        noise_scale: Factor on every noise σ (0 removes noise).
+        start_ns: First stamp (ns).
+    """
+
+    name: str
+    robot: str = "panda"
+    duration: float = _DEFAULT_DURATION
+    rate: float = 1000.0
+    seed: int = 0
+    payload_mass: float = 0.0
+    payload_time: float | None = None
+    contacts: ContactConfig | None = None
+    perturbation: ParameterPerturbation | None = field(default_factory=ParameterPerturbation)
+    friction_scale: float = 1.0
+    armature: float | None = None
+    noise_scale: float = 1.0
+    start_ns: int = DEFAULT_START_NS
+
+    def __post_init__(self) -> None:
+        if not self.name or "/" in self.name:
+            raise ValueError(f"name must be a plain folder name, got {self.name!r}")
+        if self.robot not in ARM_ROBOTS:
+            raise ValueError(f"robot must be one of {sorted(ARM_ROBOTS)}, got {self.robot!r}")
+        for attr in ("duration", "rate"):
+            value = getattr(self, attr)
+            if isinstance(value, bool) or not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{attr} must be a positive number, got {value!r}")
+        if self.rate > 10_000:
+            raise ValueError("rates above 10 kHz are not supported")
+        for attr in ("payload_mass", "friction_scale", "noise_scale"):
+            value = getattr(self, attr)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{attr} must be finite and >= 0, got {value!r}")
+        if self.armature is not None and not (np.isfinite(self.armature) and self.armature >= 0):
+            raise ValueError(f"armature must be finite and >= 0 kg·m², got {self.armature!r}")
+        if self.payload_time is not None and not (0 <= self.payload_time <= self.duration):
+            raise ValueError(f"payload_time must be within [0, duration] = [0, {self.duration}] s")
+        if int(self.seed) < 0 or int(self.start_ns) < 0:
+            raise ValueError("seed and start_ns must be >= 0")
+        if self.contacts is not None and not isinstance(self.contacts, ContactConfig):
+            raise ValueError("contacts must be a ContactConfig or None")
+
+    @property
+    def pickup_time(self) -> float | None:
+        """Pickup time (s from the start), or None without payload."""
+        if self.payload_mass <= 0:
+            return None
+        return 0.5 * self.duration if self.payload_time is None else float(self.payload_time)
+
+    def true_friction(self) -> JointFriction:
+        """Return the friction of this recording (the robot's, armature replaced if given, scaled)."""
+        fr = ARM_ROBOTS[self.robot].friction
+        if self.armature is not None:
+            fr = replace(fr, armature=(float(self.armature),) * fr.n_joints)
+        return fr.scaled(self.friction_scale)
+
+
+@dataclass(frozen=True)
+class ArmRecording:
+    """Stamped arrays of one arm recording. Joint arrays (N, n) are in the order of ``joint_names``.
+
+    Attributes:
+        config: The scenario.
+        robot: The robot preset.
+        joint_names: The moving joints.
+        stamps: (N,) stamps (ns).
+        q, dq, ddq: True positions, velocities, accelerations (rad, rad/s, rad/s²).
+        q_measured, dq_measured: Noisy positions and velocities (rad, rad/s).
+        rigid_torques: Φ(q, q̇, q̈) π(t) with the true parameters (payload after the pickup) (N·m).
+        friction_torques: τ_f at the true q̇, q̈ (N·m).
+        external_torques: Contact effect on the measured torques, ``−J(q)ᵀ F`` (N·m).
+        true_torques: Noise-free measured torques: the sum of the three above (N·m).
+        measured_torques: ``true_torques`` plus noise (N·m).
+        contact_force: (N, 3) applied force at the end effector, base frame (N).
+        contact_wrench: (N, 6) the same as ``[F, 0]`` in the end-effector frame (N).
+        parameters_urdf: The URDF's full parameters.
+        parameters_before, parameters_after: True full parameters before and after the pickup.
+        contact_episodes: The contact episodes.
+        info: Scenario description for ``scenario.yaml`` (plain Python).
+    """
+
+    config: ArmScenarioConfig
+    robot: ArmRobot
+    joint_names: tuple[str, ...]
+    stamps: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    q_measured: np.ndarray
+    dq_measured: np.ndarray
+    rigid_torques: np.ndarray
+    friction_torques: np.ndarray
+    external_torques: np.ndarray
+    true_torques: np.ndarray
+    measured_torques: np.ndarray
+    contact_force: np.ndarray
+    contact_wrench: np.ndarray
+    parameters_urdf: np.ndarray
+    parameters_before: np.ndarray
+    parameters_after: np.ndarray
+    contact_episodes: tuple[ContactEpisode, ...]
+    info: dict[str, Any]
+
+
+@lru_cache(maxsize=4)
+def arm_regressor(robot: str) -> RigidBodyRegressor:
+    """Return the joint-torque regressor of a preset robot (others locked at 0; cached, not thread-safe)."""
+    spec = ARM_ROBOTS[robot]
+    return RigidBodyRegressor.from_urdf(resolve_urdf(spec.urdf), spec.joints, output="joint_torques")
+
+
+@lru_cache(maxsize=4)
+def _kinematics(robot: str) -> ArmKinematics:
+    spec = ARM_ROBOTS[robot]
+    return ArmKinematics(resolve_urdf(spec.urdf), spec.joints, end_effector=spec.end_effector)
+
+
+def _rms(x: np.ndarray) -> list[float]:
+    return [float(v) for v in np.sqrt(np.mean(np.asarray(x) ** 2, axis=0))]
+
+
+def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
+    """Simulate one arm recording (module docstring).
+
+    Args:
+        config: The scenario.
+
+    Returns:
+        The stamped true and measured signals.
+
+    Raises:
+        ValueError: If the robot's URDF cannot be loaded or the excitation leaves the joint limits.
+    """
+    spec = ARM_ROBOTS[config.robot]
+    reg = arm_regressor(config.robot)
+    kin = _kinematics(config.robot)
+    n = len(spec.joints)
+    # Physical robot: (robot, seed). Recording: (seed, name) → trajectory, noise, contacts.
+    robot_rng = np.random.default_rng([int(config.seed), zlib.crc32(spec.name.encode())])
+    rec_seq = np.random.SeedSequence([int(config.seed), zlib.crc32(config.name.encode())])
+    rng_traj, rng_joint, rng_torque, rng_contact = (np.random.default_rng(s) for s in rec_seq.spawn(4))
+
+    window = np.asarray(spec.position_window, dtype=np.float64)
+    traj = multisine(
+        window[:, 0],
+        window[:, 1],
+        seed=int(rng_traj.integers(2**31)),
+        base_period=spec.base_period,
+        max_velocity=spec.max_velocity,
+        max_acceleration=spec.max_acceleration,
+    )
+    count = round(config.duration * config.rate)
+    stamps = config.start_ns + np.rint(np.arange(count, dtype=np.float64) * (1e9 / config.rate)).astype(
+        np.int64
+    )
+    t = (stamps - config.start_ns) * 1e-9
+    q, dq, ddq = traj.evaluate(t)
+    lower, upper = reg.position_limits()
+    margin = float(min(np.min(q - lower), np.min(upper - q)))
+    if margin < 0.0:
+        raise ValueError(f"the excitation leaves the joint limits by {-margin:.3g} rad")
+
+    params_urdf = reg.urdf_parameters()
+    params_before = (
+        params_urdf.copy()
+        if config.perturbation is None
+        else perturb_parameters(params_urdf, config.perturbation, robot_rng)
+    )
+    params_after = params_before.copy()
+    pickup = config.pickup_time
+    payload_info: dict[str, Any] | None = None
+    if pickup is not None:
+        body, T = reg.frame_in_body(spec.end_effector)
+        point = T[:3, :3] @ np.asarray(spec.payload_point) + T[:3, 3]
+        slot = reg.body_index(body)
+        params_after[10 * slot : 10 * slot + 10] += point_mass_parameters(config.payload_mass, point)
+        payload_info = {
+            "mass_kg": float(config.payload_mass),
+            "time_s": float(pickup),
+            "stamp_ns": int(config.start_ns + round(pickup * 1e9)),
+            "frame": spec.end_effector,
+            "point_in_frame_m": list(spec.payload_point),
+            "body": body,
+            "point_in_body_m": [float(v) for v in point],
+        }
+
+    rigid = np.empty((count, n))
+    after = np.zeros(count, dtype=bool) if pickup is None else t >= pickup
+    chunk = 2000
+    for start in range(0, count, chunk):
+        stop = min(start + chunk, count)
+        phi = reg.regressor(q[start:stop], dq[start:stop], ddq[start:stop])
+        rigid[start:stop] = np.where(after[start:stop, None], phi @ params_after, phi @ params_before)
+
+    friction = config.true_friction()
+    tau_f = friction.torques(dq, ddq)
+
+    episodes: tuple[ContactEpisode, ...] = ()
+    force = np.zeros((count, 3))
+    contact_wrench = np.zeros((count, 6))
+    external = np.zeros((count, n))
+    if config.contacts is not None:
+        episodes = draw_episodes(config.contacts, config.duration, rng_contact)
+        force = contact_forces(episodes, t)
+        for i in np.flatnonzero(np.any(force != 0.0, axis=1)):
+            _, J = kin.position_jacobian(q[i])
+            external[i] = -(J.T @ force[i])
+            ((R, _p),) = kin.frame_poses(q[i], [spec.end_effector])
+            contact_wrench[i, :3] = R.T @ force[i]
+
+    truth = rigid + tau_f + external
+    noise = config.noise_scale * np.asarray(spec.torque_noise_std) * rng_torque.standard_normal((count, n))
+    measured = truth + noise
+    q_meas = q + config.noise_scale * spec.position_noise_std * rng_joint.standard_normal(q.shape)
+    dq_meas = dq + config.noise_scale * spec.velocity_noise_std * rng_joint.standard_normal(dq.shape)
+
+    info: dict[str, Any] = {
+        "name": config.name,
+        "robot": spec.as_dict(),
+        "output": "joint_torques",
+        "seed": int(config.seed),
+        "duration_s": float(config.duration),
+        "start_stamp_ns": int(config.start_ns),
+        "joint_states": {"rate_hz": float(config.rate), "count": int(count)},
+        "joints": list(spec.joints),
+        "trajectory": {
+            "type": "multisine",
+            "base_period_s": traj.period,
+            "harmonics": [int(k) for k in np.flatnonzero(np.any(traj.cos_coef != 0, axis=1)) + 1],
+            "position_window_rad": [list(w) for w in spec.position_window],
+            "max_velocity_rad_per_s": spec.max_velocity,
+            "max_acceleration_rad_per_s2": spec.max_acceleration,
+        },
+        "true_parameters": {
+            "body_names": list(reg.body_names),
+            "layout": "per body [m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] about the body frame "
+            "origin (kg, kg m, kg m^2)",
+            "perturbation": None if config.perturbation is None else config.perturbation.as_dict(),
+            "urdf": [float(v) for v in params_urdf],
+            "before_payload": [float(v) for v in params_before],
+            "after_payload": [float(v) for v in params_after],
+            "base_names": list(reg.base_parameter_names),
+            "base_urdf": [float(v) for v in reg.to_base(params_urdf)],
+            "base_before_payload": [float(v) for v in reg.to_base(params_before)],
+            "base_after_payload": [float(v) for v in reg.to_base(params_after)],
+        },
+        "friction": friction.as_dict(),
+        "noise": {
+            "torque_std_Nm": [config.noise_scale * v for v in spec.torque_noise_std],
+            "position_std_rad": config.noise_scale * spec.position_noise_std,
+            "velocity_std_rad_per_s": config.noise_scale * spec.velocity_noise_std,
+        },
+        "payload": payload_info,
+        "contacts": None
+        if config.contacts is None
+        else {
+            **config.contacts.as_dict(),
+            "frame": spec.end_effector,
+            "convention": "force the environment applies to the robot at the frame origin; direction fixed "
+            "in the base frame during an episode; measured torques change by -J^T F",
+            "episodes": [e.as_dict() for e in episodes],
+        },
+        "measured_rms_Nm": {
+            "rigid": _rms(rigid),
+            "friction": _rms(tau_f),
+            "external": _rms(external),
+            "noise": _rms(noise),
+        },
+        "limits": {
+            "q_min_rad": [float(v) for v in q.min(axis=0)],
+            "q_max_rad": [float(v) for v in q.max(axis=0)],
+            "joint_lower_rad": [float(v) for v in lower],
+            "joint_upper_rad": [float(v) for v in upper],
+            "max_abs_dq_rad_per_s": [float(v) for v in np.abs(dq).max(axis=0)],
+            "max_abs_ddq_rad_per_s2": [float(v) for v in np.abs(ddq).max(axis=0)],
+            "min_joint_limit_margin_rad": margin,
+        },
+    }
+    return ArmRecording(
+        config=config,
+        robot=spec,
+        joint_names=spec.joints,
+        stamps=stamps,
+        q=q,
+        dq=dq,
+        ddq=ddq,
+        q_measured=q_meas,
+        dq_measured=dq_meas,
+        rigid_torques=rigid,
+        friction_torques=tau_f,
+        external_torques=external,
+        true_torques=truth,
+        measured_torques=measured,
+        contact_force=force,
+        contact_wrench=contact_wrench,
+        parameters_urdf=params_urdf,
+        parameters_before=params_before,
+        parameters_after=params_after,
+        contact_episodes=episodes,
+        info=info,
+    )
+
+
+def _rate_label(rate: float) -> str:
+    return f"{int(rate)}hz" if float(rate).is_integer() else f"{rate:g}hz".replace(".", "p")
+
+
+def arm_preset_configs(
+    robot: str,
+    scenarios: tuple[str, ...] = ("excitation", "payload"),
+    *,
+    rate: float = 1000.0,
+    duration: float | None = None,
+    payload_mass: float | None = None,
+    payload_time: float | None = None,
+    contacts: ContactConfig | None = None,
+    perturbation: ParameterPerturbation | None = _DEFAULT_PERTURBATION,
+    **overrides: Any,
+) -> list[ArmScenarioConfig]:
+    """Return the scenario configurations of an arm; bag names ``<robot>_<scenario>_<rate>hz``.
+
+    Args:
+        robot: Key of :data:`ARM_ROBOTS`.
+        scenarios: Any of :data:`ARM_SCENARIOS`.
+        rate: Joint-state rate (Hz).
+        duration: Length (s); default 60 s (``contacts``: 120 s).
+        payload_mass: Payload of ``payload`` and ``contacts`` (kg); default the robot's.
+        payload_time: Pickup time (s); default the middle (``contacts``: 0.75·T).
+        contacts: How ``contacts`` draws its episodes (default :class:`ContactConfig`).
+        perturbation: True parameters vs the URDF's (None: the URDF's exactly).
+        **overrides: Other :class:`ArmScenarioConfig` fields (seed, friction_scale,
+            armature, noise_scale, start_ns); None values are ignored.
+
+    Returns:
+        One configuration per scenario.
+
+    Raises:
+        ValueError: On an unknown robot or scenario, or invalid values.
+    """
+    if robot not in ARM_ROBOTS:
+        raise ValueError(f"robot must be one of {sorted(ARM_ROBOTS)}, got {robot!r}")
+    unknown = [s for s in scenarios if s not in ARM_SCENARIOS]
+    if unknown:
+        raise ValueError(f"unknown arm scenarios {unknown}; choose from {list(ARM_SCENARIOS)}")
+    mass = ARM_ROBOTS[robot].payload_mass if payload_mass is None else float(payload_mass)
+    extra = {k: v for k, v in overrides.items() if v is not None}
+    out = []
+    for scenario in scenarios:
+        kwargs: dict[str, Any] = dict(extra)
+        if scenario == "contacts":
+            length = float(duration) if duration is not None else _CONTACTS_DURATION
+            kwargs.update(
+                payload_mass=mass,
+                payload_time=0.75 * length if payload_time is None else payload_time,
+                contacts=contacts if contacts is not None else ContactConfig(),
+            )
+        else:
+            length = float(duration) if duration is not None else _DEFAULT_DURATION
+            if scenario == "payload":
+                kwargs.update(payload_mass=mass, payload_time=payload_time)
+        name = f"{robot}_{scenario}_{_rate_label(rate)}"
+        out.append(
+            ArmScenarioConfig(
+                name=name, robot=robot, duration=length, rate=float(rate), perturbation=perturbation, **kwargs
+            )
+        )
+    return out
