@@ -49,11 +49,11 @@ from scipy.linalg import solve_triangular
 
 from semiparam_ros.core._kernels import back_substitute, qr_rls_steps
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
+from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
-__all__ = ["RecursiveRLS"]
+__all__ = ["MAX_ABS_INPUT", "RecursiveRLS"]
 
-#: Largest accepted magnitude of an input entry: squares of larger values can overflow float64.
-MAX_ABS_INPUT = 1e150
 #: Blocks with more rows than this are predicted by a triangular solve (the in-rotation prediction
 #: tracks a k×k block and costs O(b·k²)).
 _MAX_TRACKED_ROWS = 32
@@ -74,7 +74,7 @@ class RecursiveRLS:
             ``False`` gives plain exponential forgetting, whose regularizer decays as λβⁿ.
 
     Raises:
-        ValueError: For b < 1, t < 1, λ ≤ 0 or non-finite, β ∉ (0, 1].
+        ConfigurationError: For b < 1, t < 1, λ ≤ 0 or non-finite, β ∉ (0, 1].
 
     Attributes:
         n_samples_seen: Number of data rows absorbed so far.
@@ -85,14 +85,14 @@ class RecursiveRLS:
         self, n_features: int, n_outputs: int, lam: float = 1.0, *, forgetting: float = 1.0,
         keep_prior: bool = True,
     ) -> None:
-        _check_int("n_features", n_features)
-        _check_int("n_outputs", n_outputs)
+        check_positive_int("n_features", n_features)
+        check_positive_int("n_outputs", n_outputs)
         lam = float(lam)
         forgetting = float(forgetting)
         if not (math.isfinite(lam) and lam > 0.0):
-            raise ValueError(f"lam must be a finite number > 0, got {lam!r}")
+            raise ConfigurationError(f"lam must be a finite number > 0, got {lam!r}")
         if not (0.0 < forgetting <= 1.0):
-            raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")
+            raise ConfigurationError(f"forgetting must be in (0, 1], got {forgetting!r}")
         self.n_features = int(n_features)
         self.n_outputs = int(n_outputs)
         self.lam = lam
@@ -157,8 +157,8 @@ class RecursiveRLS:
             U: (k, t) targets, or (t,) for one row.
 
         Raises:
-            ValueError: Wrong shapes, or non-finite / absurdly large (> 1e150) entries; the learner is
-                left unchanged.
+            RejectedSampleError: Wrong shapes, or non-finite / absurdly large (> 1e150) entries; the
+                learner is left unchanged.
         """
         Z2, U2, _ = self._check_rows(Z, U)
         self._step(Z2, U2, Z2.shape[0], self._no_pred)
@@ -177,7 +177,7 @@ class RecursiveRLS:
             The a-priori prediction, (k, t) or (t,) like U.
 
         Raises:
-            ValueError: As :meth:`update`; the learner is left unchanged.
+            RejectedSampleError: As :meth:`update`; the learner is left unchanged.
         """
         Z2, U2, single = self._check_rows(Z, U)
         P = self._predict_update_valid(Z2, U2)
@@ -215,16 +215,16 @@ class RecursiveRLS:
             (n, t) a-priori predictions if ``predict``, else None.
 
         Raises:
-            ValueError: Wrong shapes, n not a multiple of ``rows_per_step``, non-finite entries; the learner
-                is left unchanged.
+            RejectedSampleError: Wrong shapes, n not a multiple of ``rows_per_step``, non-finite entries;
+                the learner is left unchanged.
         """
-        _check_int("rows_per_step", rows_per_step)
+        check_positive_int("rows_per_step", rows_per_step)
         if predict and rows_per_step > _MAX_TRACKED_ROWS:
-            raise ValueError(f"rows_per_step must be <= {_MAX_TRACKED_ROWS} with predict=True")
+            raise ConfigurationError(f"rows_per_step must be <= {_MAX_TRACKED_ROWS} with predict=True")
         Z2, U2, _ = self._check_rows(Z, U)
         if Z2.shape[0] % rows_per_step:
-            raise ValueError(f"the number of rows ({Z2.shape[0]}) is not a multiple of rows_per_step "
-                             f"({rows_per_step})")
+            raise RejectedSampleError(f"the number of rows ({Z2.shape[0]}) is not a multiple of "
+                                      f"rows_per_step ({rows_per_step})")
         P = np.empty((Z2.shape[0], self.n_outputs)) if predict else self._no_pred
         self._step(Z2, U2, rows_per_step, P)
         return P if predict else None
@@ -261,7 +261,7 @@ class RecursiveRLS:
         j = int(qr_rls_steps(self._M, Z, U, rows_per_step, self._scale, self._reg, self._j, P, MAX_ABS_INPUT,
                              E))
         if j < 0:
-            raise ValueError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in "
+            raise RejectedSampleError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in "
                              "magnitude")
         self._W = None
         self._j = j
@@ -280,7 +280,7 @@ class RecursiveRLS:
             (k, t), or (t,) for one row.
 
         Raises:
-            ValueError: Wrong shape or non-finite entries.
+            RejectedSampleError: Wrong shape or non-finite entries.
         """
         Z2, single = self._check_features(Z)
         P = Z2 @ self.weights
@@ -299,7 +299,7 @@ class RecursiveRLS:
             (k,) non-negative values, or a float array of shape () for one row.
 
         Raises:
-            ValueError: Wrong shape or non-finite entries.
+            RejectedSampleError: Wrong shape or non-finite entries.
         """
         Z2, single = self._check_features(Z)
         V = solve_triangular(self._M[:, : self.n_features], Z2.T, trans="T", lower=False, check_finite=False)
@@ -313,12 +313,12 @@ class RecursiveRLS:
         if single:
             Z2 = Z2[None, :]
         if Z2.ndim != 2 or Z2.shape[1] != self.n_features:
-            raise ValueError(f"Z must have shape (k, {self.n_features}) or ({self.n_features},), "
+            raise RejectedSampleError(f"Z must have shape (k, {self.n_features}) or ({self.n_features},), "
                              f"got {np.shape(Z)}")
         if Z2.shape[0] == 0:
-            raise ValueError("Z has no rows")
+            raise RejectedSampleError("Z has no rows")
         if values:
-            _check_finite("Z", Z2)
+            check_finite_array("Z", Z2)
         return np.ascontiguousarray(Z2), single
 
     def _check_rows(self, Z: Any, U: Any) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -327,10 +327,10 @@ class RecursiveRLS:
         t = self.n_outputs
         if single:
             if U2.shape != (t,):
-                raise ValueError(f"U must have shape ({t},) for a single row, got {np.shape(U)}")
+                raise RejectedSampleError(f"U must have shape ({t},) for a single row, got {np.shape(U)}")
             U2 = U2[None, :]
         elif U2.shape != (Z2.shape[0], t):
-            raise ValueError(f"U must have shape ({Z2.shape[0]}, {t}), got {np.shape(U)}")
+            raise RejectedSampleError(f"U must have shape ({Z2.shape[0]}, {t}), got {np.shape(U)}")
         return Z2, np.ascontiguousarray(U2), single
 
     # ------------------------------------------------------------------ persistence
@@ -358,12 +358,12 @@ class RecursiveRLS:
         """Rebuild a learner from :meth:`state_dict` output.
 
         Raises:
-            ValueError: Missing keys, wrong version, inconsistent shapes or non-finite state.
+            CheckpointError: Missing keys, wrong version, inconsistent shapes or non-finite state.
         """
         try:
             version = int(state[f"{prefix}version"])
             if version != _STATE_VERSION:
-                raise ValueError(f"unsupported RecursiveRLS state version {version}")
+                raise CheckpointError(f"unsupported RecursiveRLS state version {version}")
             obj = cls(int(state[f"{prefix}n_features"]), int(state[f"{prefix}n_outputs"]),
                       float(state[f"{prefix}lam"]), forgetting=float(state[f"{prefix}forgetting"]),
                       keep_prior=bool(state[f"{prefix}keep_prior"]))
@@ -372,22 +372,22 @@ class RecursiveRLS:
             n_steps = int(state[f"{prefix}n_steps"])
             j = int(state[f"{prefix}j"])
         except KeyError as err:
-            raise ValueError(f"RecursiveRLS state is missing key {err}") from err
+            raise CheckpointError(f"RecursiveRLS state is missing key {err}") from err
         except (TypeError, ValueError) as err:
-            raise ValueError(f"invalid RecursiveRLS state: {err}") from err
+            raise CheckpointError(f"invalid RecursiveRLS state: {err}") from err
         if M.shape != obj._M.shape:
-            raise ValueError(f"RecursiveRLS state M has shape {M.shape}, expected {obj._M.shape}")
+            raise CheckpointError(f"RecursiveRLS state M has shape {M.shape}, expected {obj._M.shape}")
         if not np.isfinite(M).all():
-            raise ValueError("RecursiveRLS state M is not finite")
+            raise CheckpointError("RecursiveRLS state M is not finite")
         R = M[:, : obj.n_features]
         if np.any(np.tril(R, -1) != 0.0) or np.any(np.diag(R) < 0.0):
-            raise ValueError("RecursiveRLS state R is not upper triangular with a non-negative diagonal")
+            raise CheckpointError("RecursiveRLS state R is not upper triangular with a non-negative diagonal")
         if obj.keep_prior and np.any(np.diag(R) == 0.0):
             # with the prior kept A ⪰ (min over the cycle of the regularizer)·I > 0, so a zero pivot can only
             # come from a damaged file, and every later solve would fail
-            raise ValueError("RecursiveRLS state R is singular (zero on the diagonal)")
+            raise CheckpointError("RecursiveRLS state R is singular (zero on the diagonal)")
         if not (0 <= j < obj.n_features) or n_samples_seen < 0 or n_steps < 0:
-            raise ValueError("RecursiveRLS state counters are out of range")
+            raise CheckpointError("RecursiveRLS state counters are out of range")
         obj._M[:] = M
         obj.n_samples_seen, obj.n_steps, obj._j = n_samples_seen, n_steps, j
         return obj
@@ -401,7 +401,7 @@ class RecursiveRLS:
         """Read a learner written by :meth:`save`; predictions are reproduced bit for bit.
 
         Raises:
-            ValueError: Missing, corrupt or inconsistent file.
+            CheckpointError: Missing, corrupt or inconsistent file.
         """
         return cls.from_state_dict(load_npz(path))
 
@@ -409,14 +409,3 @@ class RecursiveRLS:
         return (f"RecursiveRLS(n_features={self.n_features}, n_outputs={self.n_outputs}, lam={self.lam}, "
                 f"forgetting={self.forgetting}, keep_prior={self.keep_prior}, "
                 f"n_samples_seen={self.n_samples_seen})")
-
-
-def _check_int(name: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-
-
-def _check_finite(name: str, arr: np.ndarray) -> None:
-    # One reduction catches NaN (comparison false), ±inf and values whose squares would overflow.
-    if arr.size and not (np.abs(arr).max() <= MAX_ABS_INPUT):
-        raise ValueError(f"{name} contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")

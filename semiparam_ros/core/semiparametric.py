@@ -19,8 +19,8 @@ so a checkpoint is loaded into a model built with the same regressor.
 
 Inputs: ``x = [q, q̇, q̈]`` (rad, rad/s, rad/s², joints in configured order); ``y`` the measured output
 (a wrench ``[fx, fy, fz, tx, ty, tz]`` in N and N·m in the sensor frame, or joint torques in N·m).
-Bad ``x``/``y`` (shape, NaN/inf) raise ``ValueError`` and leave the model unchanged: every check runs
-before any state is touched.
+Bad ``x``/``y`` (shape, NaN/inf) raise :class:`~semiparam_ros.errors.RejectedSampleError` and leave the
+model unchanged: every check runs before any state is touched.
 """
 
 from __future__ import annotations
@@ -35,7 +35,9 @@ import numpy as np
 
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.features import RandomFourierFeatures, Standardizer
-from semiparam_ros.core.rrls import MAX_ABS_INPUT, RecursiveRLS
+from semiparam_ros.core.rrls import RecursiveRLS
+from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = ["NonparametricModel", "ParametricModel", "Prediction", "SemiparametricModel"]
 
@@ -60,16 +62,6 @@ class Prediction:
     variance: np.ndarray | None = None
 
 
-def _check_vector(name: str, v: Any, size: int | None) -> np.ndarray:
-    a = np.asarray(v, dtype=np.float64)
-    if a.ndim != 1 or (size is not None and a.shape[0] != size) or a.shape[0] == 0:
-        want = f"({size},)" if size is not None else "a non-empty 1-D array"
-        raise ValueError(f"{name} must have shape {want}, got {np.shape(v)}")
-    if not (np.abs(a).max() <= MAX_ABS_INPUT):
-        raise ValueError(f"{name} contains NaN, inf or absurdly large entries")
-    return np.ascontiguousarray(a)
-
-
 class _Model:
     """Shared persistence plumbing; subclasses define ``_kind``, ``_components`` and ``_shape_key``."""
 
@@ -91,7 +83,7 @@ class _Model:
         """Load a checkpoint written by :meth:`save` into this model (in place); returns self.
 
         Raises:
-            ValueError: Missing/corrupt file, or a state of another kind or size (model unchanged).
+            CheckpointError: Missing/corrupt file, or a state of another kind or size (model unchanged).
         """
         self.load_state_dict(load_npz(path))
         return self
@@ -99,10 +91,10 @@ class _Model:
     def _check_kind(self, state: dict[str, np.ndarray], prefix: str) -> None:
         key = f"{prefix}kind"
         if key not in state:
-            raise ValueError(f"state is missing key {key!r}")
+            raise CheckpointError(f"state is missing key {key!r}")
         kind = str(np.asarray(state[key]))
         if kind != self._kind:
-            raise ValueError(f"state holds a {kind!r} model, not a {self._kind!r} model")
+            raise CheckpointError(f"state holds a {kind!r} model, not a {self._kind!r} model")
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -122,7 +114,7 @@ class ParametricModel(_Model):
         forgetting: β ∈ (0, 1] per sample; β < 1 forgets while keeping the prior (see ``core.rrls``).
 
     Raises:
-        ValueError: Invalid sizes or hyperparameters.
+        ConfigurationError: Invalid sizes or hyperparameters.
     """
 
     _kind = "parametric"
@@ -130,28 +122,28 @@ class ParametricModel(_Model):
     def __init__(self, regressor: Regressor, n_params: int, n_outputs: int, *, lam: float = 1.0,
                  forgetting: float = 1.0) -> None:
         if not callable(regressor):
-            raise ValueError("regressor must be callable")
+            raise ConfigurationError("regressor must be callable")
         self.regressor = regressor
         self.rls = RecursiveRLS(n_params, 1, lam, forgetting=forgetting)
         self.n_params = self.rls.n_features
         self.n_outputs = int(n_outputs)
         if self.n_outputs < 1:
-            raise ValueError(f"n_outputs must be >= 1, got {n_outputs!r}")
+            raise ConfigurationError(f"n_outputs must be >= 1, got {n_outputs!r}")
         self.n_samples_seen = 0
 
     # --- internals shared with SemiparametricModel
     def _phi(self, x: np.ndarray) -> np.ndarray:
         Phi = np.asarray(self.regressor(x), dtype=np.float64)
         if Phi.shape != (self.n_outputs, self.n_params):
-            raise ValueError(f"regressor returned shape {Phi.shape}, expected ({self.n_outputs}, "
+            raise ConfigurationError(f"regressor returned shape {Phi.shape}, expected ({self.n_outputs}, "
                              f"{self.n_params})")
         if not (np.abs(Phi).max() <= MAX_ABS_INPUT):
-            raise ValueError("regressor returned NaN, inf or absurdly large entries")
+            raise RejectedSampleError("regressor returned NaN, inf or absurdly large entries")
         return np.ascontiguousarray(Phi)
 
     def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None]:
-        xv = _check_vector("x", x, None)
-        yv = None if y is None else _check_vector("y", y, self.n_outputs)
+        xv = check_finite_array("x", x, (None,))
+        yv = None if y is None else check_finite_array("y", y, (self.n_outputs,))
         return xv, yv
 
     # --- interface
@@ -163,7 +155,7 @@ class ParametricModel(_Model):
             return_variance: Also compute ``diag(Φ A⁻¹ Φᵀ)`` (one triangular solve).
 
         Raises:
-            ValueError: Bad x or regressor output.
+            RejectedSampleError: Bad x or regressor output.
         """
         xv, _ = self._check(x)
         Phi = self._phi(xv)
@@ -175,7 +167,7 @@ class ParametricModel(_Model):
         """Update π̂ with one sample (t rows, one time step).
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         xv, yv = self._check(x, y)
         Phi = self._phi(xv)
@@ -186,7 +178,7 @@ class ParametricModel(_Model):
         """Return the a-priori prediction for x, then learn (x, y), in one pass over the factor.
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         xv, yv = self._check(x, y)
         Phi = self._phi(xv)
@@ -215,7 +207,7 @@ class ParametricModel(_Model):
         """Replace the learned state (validated completely before anything changes).
 
         Raises:
-            ValueError: Wrong kind, missing keys, or sizes that do not match this model's regressor.
+            CheckpointError: Wrong kind, missing keys, or sizes that do not match this model's regressor.
         """
         self._check_kind(state, prefix)
         rls = RecursiveRLS.from_state_dict(state, f"{prefix}rls.")
@@ -223,10 +215,10 @@ class ParametricModel(_Model):
             n_outputs = int(state[f"{prefix}n_outputs"])
             n_seen = int(state[f"{prefix}n_samples_seen"])
         except KeyError as err:
-            raise ValueError(f"state is missing key {err}") from err
+            raise CheckpointError(f"state is missing key {err}") from err
         if rls.n_features != self.n_params or rls.n_outputs != 1 or n_outputs != self.n_outputs:
-            raise ValueError(f"state is for n_params={rls.n_features}, n_outputs={n_outputs}; this model has "
-                             f"n_params={self.n_params}, n_outputs={self.n_outputs}")
+            raise CheckpointError(f"state is for n_params={rls.n_features}, n_outputs={n_outputs}; "
+                                  f"this model has n_params={self.n_params}, n_outputs={self.n_outputs}")
         self.rls, self.n_samples_seen = rls, n_seen
 
 
@@ -249,7 +241,7 @@ class NonparametricModel(_Model):
             see :class:`Standardizer`.
 
     Raises:
-        ValueError: Invalid sizes or hyperparameters, or a standardizer of the wrong size.
+        ConfigurationError: Invalid sizes or hyperparameters, or a standardizer of the wrong size.
     """
 
     _kind = "nonparametric"
@@ -294,9 +286,9 @@ class NonparametricModel(_Model):
         """Predict ``φ(s(x)) W`` (zeros during the warm-up).
 
         Raises:
-            ValueError: Bad x.
+            RejectedSampleError: Bad x.
         """
-        xv = _check_vector("x", x, self.n_inputs)
+        xv = check_finite_array("x", x, (self.n_inputs,))
         r, var = self._predict(xv, return_variance)
         return Prediction(np.zeros(self.n_outputs), r, r.copy(), var)
 
@@ -304,10 +296,10 @@ class NonparametricModel(_Model):
         """Learn one sample (during the warm-up: only feed the standardizer).
 
         Raises:
-            ValueError: Bad x or y (model unchanged).
+            RejectedSampleError: Bad x or y (model unchanged).
         """
-        xv = _check_vector("x", x, self.n_inputs)
-        yv = _check_vector("y", y, self.n_outputs)
+        xv = check_finite_array("x", x, (self.n_inputs,))
+        yv = check_finite_array("y", y, (self.n_outputs,))
         self._learn(xv, yv, False)
         self.n_samples_seen += 1
 
@@ -315,10 +307,10 @@ class NonparametricModel(_Model):
         """Return the a-priori prediction for x, then learn (x, y) (one pass over the factor).
 
         Raises:
-            ValueError: Bad x or y (model unchanged).
+            RejectedSampleError: Bad x or y (model unchanged).
         """
-        xv = _check_vector("x", x, self.n_inputs)
-        yv = _check_vector("y", y, self.n_outputs)
+        xv = check_finite_array("x", x, (self.n_inputs,))
+        yv = check_finite_array("y", y, (self.n_outputs,))
         r = self._learn(xv, yv, True)
         self.n_samples_seen += 1
         return Prediction(np.zeros(self.n_outputs), r, r.copy())
@@ -348,7 +340,7 @@ class NonparametricModel(_Model):
         """Replace the whole state (features included), validated before anything changes.
 
         Raises:
-            ValueError: Wrong kind, missing keys or sizes that do not match n_inputs / n_outputs.
+            CheckpointError: Wrong kind, missing keys or sizes that do not match n_inputs / n_outputs.
         """
         self._check_kind(state, prefix)
         rff = RandomFourierFeatures.from_state_dict(state, f"{prefix}rff.")
@@ -358,10 +350,10 @@ class NonparametricModel(_Model):
         try:
             n_seen = int(state[f"{prefix}n_samples_seen"])
         except KeyError as err:
-            raise ValueError(f"state is missing key {err}") from err
+            raise CheckpointError(f"state is missing key {err}") from err
         if (rff.n_inputs != self.n_inputs or std.n_inputs != self.n_inputs or std0.n_inputs != self.n_inputs
                 or rls.n_features != rff.n_features or rls.n_outputs != self.n_outputs):
-            raise ValueError(f"state does not fit a model with n_inputs={self.n_inputs}, "
+            raise CheckpointError(f"state does not fit a model with n_inputs={self.n_inputs}, "
                              f"n_outputs={self.n_outputs}")
         self.rff, self.standardizer, self.rls, self.n_samples_seen = rff, std, rls, n_seen
         self._initial_standardizer = std0
@@ -371,17 +363,17 @@ def _make_standardizer(n_inputs: int, standardizer: Standardizer | None, warmup:
                        min_scale: Any = 0.0) -> Standardizer:
     if standardizer is not None:
         if not isinstance(standardizer, Standardizer):
-            raise ValueError("standardizer must be a Standardizer")
+            raise ConfigurationError("standardizer must be a Standardizer")
         if standardizer.n_inputs != n_inputs:
-            raise ValueError(f"standardizer has {standardizer.n_inputs} inputs, expected {n_inputs}")
+            raise ConfigurationError(f"standardizer has {standardizer.n_inputs} inputs, expected {n_inputs}")
         if warmup:
-            raise ValueError("give either a standardizer or standardizer_warmup, not both")
+            raise ConfigurationError("give either a standardizer or standardizer_warmup, not both")
         std = standardizer.copy()
         if not std.ready and std.warmup == 0:
-            raise ValueError("the standardizer is neither fitted nor configured with a warm-up")
+            raise ConfigurationError("the standardizer is neither fitted nor configured with a warm-up")
         return std
     if isinstance(warmup, bool) or not isinstance(warmup, int | np.integer) or warmup < 0:
-        raise ValueError(f"standardizer_warmup must be an integer >= 0, got {warmup!r}")
+        raise ConfigurationError(f"standardizer_warmup must be an integer >= 0, got {warmup!r}")
     if warmup == 0:
         return Standardizer.identity(n_inputs)
     return Standardizer(n_inputs, int(warmup), min_scale=min_scale)
@@ -406,8 +398,8 @@ class _TwoStageModel(_Model):
         return self.parametric.regressor
 
     def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        xv = _check_vector("x", x, self.n_inputs)
-        yv = None if y is None else _check_vector("y", y, self.n_outputs)
+        xv = check_finite_array("x", x, (self.n_inputs,))
+        yv = None if y is None else check_finite_array("y", y, (self.n_outputs,))
         return xv, yv, self.parametric._phi(xv)
 
     @property
@@ -430,13 +422,13 @@ class _TwoStageModel(_Model):
         return state
 
     def _check_loaded(self, parametric: ParametricModel, nonparametric: NonparametricModel) -> None:
-        """Extra consistency checks of a loaded pair of learners (raise ValueError); none by default."""
+        """Extra consistency checks of a loaded pair of learners (raise CheckpointError); none by default."""
 
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
         """Replace both learners' state (validated completely before anything changes).
 
         Raises:
-            ValueError: Wrong kind, missing keys or sizes that do not match this model.
+            CheckpointError: Wrong kind, missing keys or sizes that do not match this model.
         """
         self._check_kind(state, prefix)
         p = self.parametric.copy()
@@ -447,7 +439,7 @@ class _TwoStageModel(_Model):
         try:
             n_seen = int(state[f"{prefix}n_samples_seen"])
         except KeyError as err:
-            raise ValueError(f"state is missing key {err}") from err
+            raise CheckpointError(f"state is missing key {err}") from err
         self.parametric, self.nonparametric, self.n_samples_seen = p, npm, n_seen
 
 
@@ -479,7 +471,7 @@ class SemiparametricModel(_TwoStageModel):
             a-priori ŷ itself (the behaviour before this option existed).
 
     Raises:
-        ValueError: Invalid sizes or hyperparameters.
+        ConfigurationError: Invalid sizes or hyperparameters.
 
     **Why ŷ is standardized with the measured y's statistics.** ŷ enters the residual stage as an estimate
     of y, so y's own mean and spread are its natural units, and they do not depend on the rigid-body
@@ -507,7 +499,7 @@ class SemiparametricModel(_TwoStageModel):
                  standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
                  standardizer_min_scale: Any = 0.0, yhat_statistics: str = "measured") -> None:
         if yhat_statistics not in self._YHAT_STATISTICS:
-            raise ValueError(f"yhat_statistics must be one of {self._YHAT_STATISTICS}, "
+            raise ConfigurationError(f"yhat_statistics must be one of {self._YHAT_STATISTICS}, "
                              f"got {yhat_statistics!r}")
         self.yhat_statistics = yhat_statistics
         self.parametric = ParametricModel(regressor, n_params, n_outputs, lam=lam_parametric,
@@ -526,7 +518,7 @@ class SemiparametricModel(_TwoStageModel):
         """Predict ``ŷ + Δŷ`` with both parts.
 
         Raises:
-            ValueError: Bad x or regressor output.
+            RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
         yp = self.parametric.rls.predict(Phi)[:, 0]
@@ -556,7 +548,7 @@ class SemiparametricModel(_TwoStageModel):
         """Learn one sample: parametric stage, then the residual of its a-priori prediction.
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         self._step(x, y, False)
 
@@ -564,7 +556,7 @@ class SemiparametricModel(_TwoStageModel):
         """Return the a-priori prediction (both parts), then learn (x, y); one pass per stage.
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         out = self._step(x, y, True)
         assert out is not None

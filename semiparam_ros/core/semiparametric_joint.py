@@ -60,6 +60,7 @@ from semiparam_ros.core.semiparametric import (
     Regressor,
     _TwoStageModel,
 )
+from semiparam_ros.errors import CheckpointError
 
 __all__ = ["JointSemiparametricModel"]
 
@@ -86,7 +87,7 @@ class JointSemiparametricModel(_TwoStageModel):
         standardizer_min_scale: Floor of the warm-up's scales (scalar or one per input, units of x).
 
     Raises:
-        ValueError: Invalid sizes or hyperparameters.
+        ConfigurationError: Invalid sizes or hyperparameters.
     """
 
     _kind = "semiparametric_joint"
@@ -132,7 +133,7 @@ class JointSemiparametricModel(_TwoStageModel):
                 variance of y).
 
         Raises:
-            ValueError: Bad x or regressor output.
+            RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
         pi = self.parametric.rls.weights[:, 0]
@@ -184,7 +185,7 @@ class JointSemiparametricModel(_TwoStageModel):
         """Learn one sample (x, y).
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         self._step(x, y)
 
@@ -192,7 +193,7 @@ class JointSemiparametricModel(_TwoStageModel):
         """Return the a-priori prediction (both parts), then learn (x, y); one pass per learner.
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         return self._step(x, y)
 
@@ -203,4 +204,4 @@ class JointSemiparametricModel(_TwoStageModel):
 
     def _check_loaded(self, parametric: ParametricModel, nonparametric: NonparametricModel) -> None:
         if parametric.rls.forgetting != nonparametric.rls.forgetting:
-            raise ValueError("state has different forgetting factors in its two learners")
+            raise CheckpointError("state has different forgetting factors in its two learners")
