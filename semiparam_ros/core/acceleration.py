@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from semiparam_ros.errors import ConfigurationError, RejectedSampleError
+
 __all__ = [
     "METHODS",
     "AccelerationConfig",
@@ -68,7 +70,7 @@ class AccelerationConfig:
             ``2·(window // 2)`` samples.
 
     Raises:
-        ValueError: Any setting out of range (checked on construction).
+        ConfigurationError: Any setting out of range (checked on construction).
     """
 
     method: str = "savgol"
@@ -79,20 +81,20 @@ class AccelerationConfig:
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
-            raise ValueError(f"acceleration method must be one of {METHODS}, got {self.method!r}")
+            raise ConfigurationError(f"acceleration method must be one of {METHODS}, got {self.method!r}")
         if isinstance(self.window, bool) or not isinstance(self.window, int | np.integer) or self.window < 2:
-            raise ValueError(f"acceleration window must be an integer >= 2, got {self.window!r}")
+            raise ConfigurationError(f"acceleration window must be an integer >= 2, got {self.window!r}")
         if self.method == "savgol":
             if self.window % 2 == 0 or self.window < 3:
-                raise ValueError(f"savgol window must be odd and >= 3, got {self.window}")
+                raise ConfigurationError(f"savgol window must be odd and >= 3, got {self.window}")
             if not 1 <= int(self.polyorder) < self.window:
-                raise ValueError(
+                raise ConfigurationError(
                     f"savgol polyorder must be in [1, window={self.window}), got {self.polyorder}"
                 )
         if not (self.cutoff_hz > 0):  # also rejects NaN
-            raise ValueError(f"acceleration cutoff_hz must be > 0, got {self.cutoff_hz}")
+            raise ConfigurationError(f"acceleration cutoff_hz must be > 0, got {self.cutoff_hz}")
         if self.max_gap_s is not None and not (self.max_gap_s > 0 and math.isfinite(self.max_gap_s)):
-            raise ValueError(
+            raise ConfigurationError(
                 f"acceleration max_gap_s must be a finite positive number or None, got {self.max_gap_s}"
             )
 
@@ -201,7 +203,7 @@ class AccelerationEstimator:
 
     def __init__(self, n_joints: int, config: AccelerationConfig) -> None:
         if n_joints < 1:
-            raise ValueError(f"n_joints must be >= 1, got {n_joints}")
+            raise ConfigurationError(f"n_joints must be >= 1, got {n_joints}")
         self.n_joints = int(n_joints)
         self.config = config
         self._w = int(config.window)
@@ -264,16 +266,16 @@ class AccelerationEstimator:
             a ``savgol`` window fills past its middle; several after a gap.
 
         Raises:
-            ValueError: Stamp not increasing, wrong shape or non-finite velocity (state unchanged).
+            RejectedSampleError: Stamp not increasing, wrong shape or non-finite velocity (state unchanged).
         """
         stamp_ns = int(stamp_ns)
         dq = np.asarray(dq, dtype=np.float64)
         if dq.shape != (self.n_joints,):
-            raise ValueError(f"dq must have shape ({self.n_joints},), got {dq.shape}")
+            raise RejectedSampleError(f"dq must have shape ({self.n_joints},), got {dq.shape}")
         if not np.isfinite(dq).all():
-            raise ValueError("dq contains NaN or inf")
+            raise RejectedSampleError("dq contains NaN or inf")
         if self._last_stamp is not None and stamp_ns <= self._last_stamp:
-            raise ValueError(f"stamps must increase: {stamp_ns} after {self._last_stamp}")
+            raise RejectedSampleError(f"stamps must increase: {stamp_ns} after {self._last_stamp}")
         return self.update_trusted(stamp_ns, dq)
 
     def update_trusted(self, stamp_ns: int, dq: np.ndarray) -> list[Decision]:
@@ -473,14 +475,15 @@ def estimate_accelerations(
         in rad/s², shape ``(m, n)``.
 
     Raises:
-        ValueError: Mismatched shapes, stamps not increasing, or non-finite velocities.
+        RejectedSampleError: Mismatched shapes, stamps not increasing, or non-finite velocities.
     """
     stamps = np.asarray(stamps_ns)
     vel = np.asarray(dq, dtype=np.float64)
     if vel.ndim == 1:
         vel = vel[:, None]
     if stamps.ndim != 1 or vel.ndim != 2 or vel.shape[0] != stamps.shape[0]:
-        raise ValueError(f"stamps_ns (N,) and dq (N, n) must match, got {stamps.shape} and {np.shape(dq)}")
+        raise RejectedSampleError(f"stamps_ns (N,) and dq (N, n) must match, got {stamps.shape} and "
+                                  f"{np.shape(dq)}")
     estimator = make_estimator(vel.shape[1], config)
     out_stamps: list[int] = []
     out_ddq: list[np.ndarray] = []

@@ -48,6 +48,7 @@ from numba import njit
 
 from semiparam_ros.core.acceleration import AccelerationConfig, AccelerationEstimator, make_estimator
 from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
+from semiparam_ros.errors import ConfigurationError
 
 __all__ = [
     "DROP_ACCELERATION_WARMUP",
@@ -154,7 +155,7 @@ def _bound(name: str, value: float | None) -> float:
         return _NO_BOUND
     number = isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
     if not number or not value > 0:
-        raise ValueError(f"{name} must be a number > 0 or None (no bound), got {value!r}")
+        raise ConfigurationError(f"{name} must be a number > 0 or None (no bound), got {value!r}")
     return float(value)
 
 
@@ -197,7 +198,7 @@ class SamplePipeline:
         n_restarts: Clock restarts detected.
 
     Raises:
-        ValueError: Invalid settings.
+        ConfigurationError: Invalid settings.
     """
 
     def __init__(
@@ -216,24 +217,25 @@ class SamplePipeline:
         max_abs_output: float | None = 1e4,
     ) -> None:
         if isinstance(joints, str):
-            raise ValueError("joints must be a sequence of joint names, not a single string")
+            raise ConfigurationError("joints must be a sequence of joint names, not a single string")
         joints = tuple(str(j) for j in joints)
         if not joints:
-            raise ValueError("joints must name at least one joint")
+            raise ConfigurationError("joints must name at least one joint")
         if len(set(joints)) != len(joints):
-            raise ValueError(f"joints must be unique, got {joints}")
+            raise ConfigurationError(f"joints must be unique, got {joints}")
         if output not in OUTPUTS:
-            raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
+            raise ConfigurationError(f"output must be one of {OUTPUTS}, got {output!r}")
         if not (math.isfinite(sync_tolerance) and sync_tolerance >= 0):
-            raise ValueError(f"sync_tolerance must be a finite number >= 0 (s), got {sync_tolerance}")
+            raise ConfigurationError(f"sync_tolerance must be a finite number >= 0 (s), got {sync_tolerance}")
         if not (math.isfinite(buffer_s) and buffer_s > 0):
-            raise ValueError(f"buffer_s must be a finite number > 0 (s), got {buffer_s}")
+            raise ConfigurationError(f"buffer_s must be a finite number > 0 (s), got {buffer_s}")
         if int(max_buffer) < 1:
-            raise ValueError(f"max_buffer must be >= 1, got {max_buffer}")
+            raise ConfigurationError(f"max_buffer must be >= 1, got {max_buffer}")
         if int(restart_after) < 1:
-            raise ValueError(f"restart_after must be >= 1, got {restart_after}")
+            raise ConfigurationError(f"restart_after must be >= 1, got {restart_after}")
         if acceleration is not None and not isinstance(acceleration, AccelerationConfig):
-            raise ValueError(f"acceleration must be an AccelerationConfig, got {type(acceleration).__name__}")
+            raise ConfigurationError(f"acceleration must be an AccelerationConfig, got "
+                                     f"{type(acceleration).__name__}")
         self.joints: tuple[str, ...] = joints
         self.output = output
         self.frame_id = frame_id or None
