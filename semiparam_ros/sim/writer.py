@@ -75,7 +75,7 @@ def write_recording(
         The bag folder.
 
     Raises:
-        semiparam_ros.io.errors.BagError: If the folder exists (without ``overwrite``), is not a bag
+        semiparam_ros.errors.BagError: If the folder exists (without ``overwrite``), is not a bag
             folder, or cannot be written.
     """
     path = Path(path)
