@@ -382,6 +382,7 @@ class SavitzkyGolayEstimator(AccelerationEstimator):
         return self._stamp_window()[self._m - n_pending :].tolist() if n_pending else []
 
     def _estimate(self) -> list[Decision]:
+        assert self._last_stamp is not None  # called after update() stored the stamp
         self._n_seen += 1
         if self._n_seen <= self._half:
             return [(self._last_stamp, None)]
@@ -427,6 +428,7 @@ class FiniteDifferenceEstimator(AccelerationEstimator):
 
     def _estimate(self) -> list[Decision]:
         stamp = self._last_stamp
+        assert stamp is not None  # called after update() stored the stamp
         if self._m < self._w:
             return [(stamp, None)]
         stamps = self._stamp_window()

@@ -45,7 +45,7 @@ def atomic_save_npz(path: str | os.PathLike[str], arrays: Mapping[str, np.ndarra
             raise CheckpointError(f"checkpoint array {name!r} has dtype object, which cannot be saved safely")
         converted[name] = arr
     with atomic_open(path, "wb") as fh:
-        np.savez(fh, **converted)
+        np.savez(fh, **converted)  # type: ignore[arg-type]  # numpy's stub reads ** as allow_pickle
 
 
 def load_npz(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:

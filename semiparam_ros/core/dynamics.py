@@ -117,9 +117,9 @@ def example_robot_data_path(relative: str) -> pathlib.Path:
     """
     candidates: list[pathlib.Path] = []
     for key in ("purelib", "platlib"):
-        path = sysconfig.get_paths().get(key)
-        if path:
-            candidates.append(pathlib.Path(path))
+        site_dir = sysconfig.get_paths().get(key)
+        if site_dir:
+            candidates.append(pathlib.Path(site_dir))
     try:
         candidates.extend(pathlib.Path(p) for p in site.getsitepackages())
     except AttributeError:  # pragma: no cover - virtualenvs without getsitepackages
@@ -350,7 +350,7 @@ class RigidBodyRegressor:
         # Only direct children: <transmission> blocks also contain <joint> elements.
         urdf_joints = {j.get("name"): j for j in root.findall("joint")}
         child_link = {
-            name: (j.find("child").get("link") if j.find("child") is not None else name)
+            name: (child.get("link") if (child := j.find("child")) is not None else name)
             for name, j in urdf_joints.items()
         }
 
@@ -472,7 +472,7 @@ class RigidBodyRegressor:
         self._body_jids = np.array(body_jids, dtype=int)
         cols = np.concatenate([np.arange(10 * (j - 1), 10 * j) for j in body_jids])
         self._cols = _as_slice(cols)
-        self.body_names: tuple[str, ...] = tuple(child_link[model.names[j]] for j in body_jids)
+        self.body_names: tuple[str, ...] = tuple(str(child_link[model.names[j]]) for j in body_jids)
         self.n_joints = len(joint_names)
         self.n_outputs = len(self.output_names)
         self.n_bodies = len(body_jids)

@@ -170,6 +170,7 @@ class ParametricModel(_Model):
             RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         xv, yv = self._check(x, y)
+        assert yv is not None  # _check returns y checked when it is given
         Phi = self._phi(xv)
         self.rls._update_valid(Phi, yv.reshape(-1, 1))
         self.n_samples_seen += 1
@@ -181,6 +182,7 @@ class ParametricModel(_Model):
             RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         xv, yv = self._check(x, y)
+        assert yv is not None  # _check returns y checked when it is given
         Phi = self._phi(xv)
         yp = self.rls._predict_update_valid(Phi, yv.reshape(-1, 1))[:, 0]
         self.n_samples_seen += 1
@@ -525,6 +527,7 @@ class SemiparametricModel(_TwoStageModel):
         r, var_np = self.nonparametric._predict(np.concatenate([xv, yp]), return_variance)
         var = None
         if return_variance:
+            assert var_np is not None  # _predict computes it when asked
             var = self.parametric.rls.variance(Phi) + np.nan_to_num(var_np, nan=0.0)
         return Prediction(yp, r, yp + r, var)
 

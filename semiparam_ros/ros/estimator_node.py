@@ -537,11 +537,12 @@ class EstimatorNode(Node):
         if stopping is None:
             return
         stopping.set()
-        if getattr(self, "_ckpt_thread", None) is not None:
+        thread = getattr(self, "_ckpt_thread", None)
+        if thread is not None:
             if not save:
                 self._ckpt_path = None
             self._ckpt_event.set()
-            self._ckpt_thread.join(timeout=30.0)
+            thread.join(timeout=30.0)
 
     def _learn_remaining(self, budget_s: float = _SHUTDOWN_BUDGET_S) -> int:
         """Learn the messages still queued, without publishing (the executor no longer runs).
