@@ -308,7 +308,12 @@ class EstimatorNode(Node):
 
         The executor takes one message per subscription per wait, and building its wait set costs far
         more than taking a message; when input is queued in DDS (a burst, or the learner held the GIL)
-        this catches up at the cost of a take each. Same call the executor makes.
+        this catches up at the cost of a take each.
+
+        Not public rclpy API: rclpy (Jazzy) has no public "take" on a subscription, so this makes the
+        call the executor itself makes (``sub.handle.take_message(sub.msg_type, sub.raw)``). Kept because
+        it is measured ≈ 8× cheaper per queued message than one executor wait each (bench/bench_drain.py,
+        results in bench/results/bench_drain.json); test/test_node_drain.py fails if the call changes.
         """
         sub = self._subscriptions_by_kind[kind]
         for _ in range(_MAX_DRAIN):
