@@ -24,8 +24,8 @@ and returns the :class:`~semiparam_ros.core.messages.Sample` objects they comple
    With ``output="joint_torques"`` every decided joint state gives a sample whose output is
    ``JointState.effort`` (N·m) of the configured joints; wrenches are ignored (counted).
 
-Cost: ≈10 µs per joint state + wrench pair in this module at 1 kHz (13-name joint states, 4 joints;
-``bench/bench_pipeline.py``), plus the construction of the emitted :class:`Sample`.
+Cost: O(1) per message (bounded buffers, an O(window) acceleration estimate); measured by
+``bench/bench_pipeline.py`` (``bench/results/bench_pipeline.json``).
 
 Drops never raise. Memory is bounded: joint states are kept for ``buffer_s`` seconds (and at most
 ``max_buffer`` of them), pending wrenches at most ``max_buffer``.

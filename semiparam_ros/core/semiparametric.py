@@ -479,16 +479,12 @@ class SemiparametricModel(_TwoStageModel):
     of y, so y's own mean and spread are its natural units, and they do not depend on the rigid-body
     stage's state. ŷ's own statistics over the warm-up do: the parametric stage starts from zero parameters
     (as in the paper) and is still converging while the warm-up runs, so its early a-priori predictions
-    (zeros, then overshoots) bias the mean and inflate the spread of the ŷ block — on the synthetic iCub
-    XY circles by up to a factor 2.6 on the torque components — and that mis-scaling is frozen into the
-    kernel metric for the rest of the model's life, weighting the ŷ coordinates arbitrarily against x.
+    (zeros, then overshoots) bias the mean and inflate the spread of the ŷ block, and that mis-scaling is
+    frozen into the kernel metric for the rest of the model's life, weighting the ŷ coordinates
+    arbitrarily against x.
     Once the parametric stage has converged ŷ ≈ y, so the measured statistics are what ŷ's would then be.
-    The warm-up sees y anyway (the residual target needs it), so this costs nothing. Ablation on the
-    paper's protocol (synthetic XY→XZ bags, D = 500, grid λ_NP ∈ {0.001, 0.01, 0.1} × σ ∈ {3, 4, 6, 8}):
-    SP's torque RMSE at regime relative to NP's is lower at 10 of the 12 points (e.g. 1.029 → 1.019,
-    1.102 → 1.069), its force RMSE at regime changes by less than 0.6 %, and its error over the first 3 s
-    is lower at 8 of 12 points for force and for torque. With an explicit ``standardizer`` this does not
-    apply.
+    The warm-up sees y anyway (the residual target needs it), so this costs nothing. With an explicit
+    ``standardizer`` this does not apply. The ablation behind the default is in ``docs/design-notes.md``.
     """
 
     _kind = "semiparametric"

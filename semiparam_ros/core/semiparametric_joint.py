@@ -28,18 +28,14 @@ the exact π̂ of (1); then ``Ŵ_k = R⁻¹(d_k − G_k π̂)``. The a-priori pr
 
 the rigid-body prediction where the kernel predicts nothing (``P_k = 0``) and the kernel's where ``Φ_k``
 is fully explained by it. Cost: the random-feature learner carries ``t·p`` more output columns (102 for the
-iCub wrench: +40 % flops at D = 500); the π learner is O(t·p²).
+iCub wrench); the π learner is O(t·p²).
 
-When to prefer which (measured on the synthetic iCub bags, ``docs/results.md``): on a trajectory the
-model has not seen (train XY circles, test XZ) the joint fit's error over the first 3 s is 0.77× (force)
-and 0.82× (torque) NP's, against the cascade's 1.00× and 0.84×, and at regime it ties NP; on the
-trajectory it was trained on, the cascade is ≈3 % better at regime (its ŷ input helps there). The price of
-fitting everything jointly: (1) explains the samples before a change of the inertial parameters (a
-payload) with the new π as well, so its kernel term must absorb ``Φ(π_old − π_new)`` on the old samples,
-which it cannot tell from the new ones by x alone; with forgetting β = 0.995 the joint fit recovers from a
-0.5 kg pickup in 7–10 s against the cascade's 0–4 s, and without forgetting it does not recover (the
-cascade's residual targets stay relative to the π̂ of their time, and its ŷ input moves with the payload).
-The paper's cascade therefore stays the default.
+The price of fitting everything jointly: (1) explains the samples before a change of the inertial
+parameters (a payload) with the new π as well, so its kernel term must absorb ``Φ(π_old − π_new)`` on the
+old samples, which it cannot tell from the new ones by x alone; only forgetting (β < 1) lets it recover,
+whereas the cascade's residual targets stay relative to the π̂ of their time and its ŷ input moves with the
+payload. The paper's cascade therefore stays the default; the measured comparison (first seconds on an
+unseen trajectory, regime, recovery after a pickup) is in ``docs/design-notes.md``.
 
 Parts reported in :class:`Prediction`: ``parametric = Φ(x) π̂`` (the rigid-body term of (1)),
 ``residual = total − parametric``. Units: x = [q, q̇, q̈] (rad, rad/s, rad/s²), y in N and N·m (wrench in

@@ -35,11 +35,7 @@ estimator on the queued messages (predict, publish, then learn), at most 50 per 
 services and timers get their turns in between; input keeps arriving meanwhile in the DDS history
 (depth 100) and is taken in bulk by the next subscription callback. Why not a learner thread (or a timer in a
 ``MultiThreadedExecutor``): on CPython the executor thread and a learner thread serialise on the GIL, and
-every hand-over costs. Measured side by side at 1 kHz paired input, D = 500 (bench/bench_node.py, same
-machine load): the learner thread learned 80 % of the samples with a 0.43 s median latency (queue full,
-step time doubled to 0.48 ms by GIL waits), the single thread with a timer 97.5 % with 8.9 ms; the
-single thread woken by a guard condition (this design) learns 100 % with a 4.95 ms median latency, 4 ms
-of it the acceleration estimate's centring delay (bench/results/bench_node.json, load 1).
+every hand-over costs (the measured comparison is in ``docs/design-notes.md``).
 A second thread only writes checkpoints (periodically every ``checkpoint.period`` seconds of wall time,
 on ``~/save``, on clean shutdown): it snapshots the learned state under a lock (a memory copy, ~1 ms at
 D = 500) and writes outside it, so neither callbacks nor learning ever wait for the disk. On a clean
