@@ -268,6 +268,16 @@ class OnlineEstimator:
         config: Validated configuration.
         regressor: Prebuilt regressor (to share one between estimators); built when omitted.
         kind: Learner to run; the node runs ``"SP"``, whose prediction carries all three parts.
+
+    Example:
+        >>> from semiparam_ros.core.config import EstimatorConfig
+        >>> est = OnlineEstimator(EstimatorConfig.defaults())  # iCub right arm, F/T sensor wrench
+        >>> est.regressor.n_base
+        17
+        >>> est.process_joint_state(JointStateData(10**9, ("r_elbow",), [0.1]))  # joints missing
+        []
+        >>> est.n_dropped
+        1
     """
 
     def __init__(self, config: EstimatorConfig, *, regressor: RigidBodyRegressor | None = None,

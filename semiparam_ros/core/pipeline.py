@@ -199,6 +199,19 @@ class SamplePipeline:
 
     Raises:
         ConfigurationError: Invalid settings.
+
+    Example:
+        >>> from semiparam_ros.core.messages import JointStateData
+        >>> pipe = SamplePipeline(["elbow"], output="joint_torques")
+        >>> samples = []
+        >>> for k in range(20):  # 100 Hz, q = t²/2 rad: q̇ = t rad/s, q̈ = 1 rad/s²
+        ...     t = 0.01 * k
+        ...     msg = JointStateData(10**9 + 10**7 * k, ("elbow",), [0.5 * t * t], [t], [2.0])
+        ...     samples += pipe.add_joint_state(msg)
+        >>> len(samples), pipe.drops["acceleration_warmup"]  # the rest wait for the centred window
+        (12, 4)
+        >>> samples[0].ddq, samples[0].y
+        (array([1.]), array([2.]))
     """
 
     def __init__(

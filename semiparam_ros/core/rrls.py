@@ -79,6 +79,14 @@ class RecursiveRLS:
     Attributes:
         n_samples_seen: Number of data rows absorbed so far.
         n_steps: Number of time steps (update calls, or steps of :meth:`update_steps`).
+
+    Example:
+        >>> import numpy as np
+        >>> rls = RecursiveRLS(n_features=2, n_outputs=1, lam=1e-9)
+        >>> Z = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+        >>> rls.update(Z, Z @ np.array([[2.0], [-1.0]]))  # U = Z W with W = [2, -1]ᵀ
+        >>> np.round(rls.weights.ravel(), 6)
+        array([ 2., -1.])
     """
 
     def __init__(

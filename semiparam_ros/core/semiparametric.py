@@ -115,6 +115,17 @@ class ParametricModel(_Model):
 
     Raises:
         ConfigurationError: Invalid sizes or hyperparameters.
+
+    Example:
+        >>> import numpy as np
+        >>> line = lambda x: np.array([[x[0], 1.0]])  # Φ(x) of y = a·x + b, π = [a, b]
+        >>> model = ParametricModel(line, n_params=2, n_outputs=1, lam=1e-9)
+        >>> for x in (0.0, 1.0, 2.0):
+        ...     model.learn_one([x], [3.0 * x + 1.0])
+        >>> np.round(model.parameters, 6)
+        array([3., 1.])
+        >>> round(float(model.predict_one([4.0]).total[0]), 6)
+        13.0
     """
 
     _kind = "parametric"
@@ -244,6 +255,14 @@ class NonparametricModel(_Model):
 
     Raises:
         ConfigurationError: Invalid sizes or hyperparameters, or a standardizer of the wrong size.
+
+    Example:
+        >>> import numpy as np
+        >>> model = NonparametricModel(1, 1, n_features=300, sigma=0.5, lam=1e-3, seed=0)
+        >>> for x in np.linspace(-1.0, 1.0, 400):
+        ...     model.learn_one([x], [np.sin(3.0 * x)])
+        >>> bool(abs(model.predict_one([0.3]).total[0] - np.sin(0.9)) < 0.01)
+        True
     """
 
     _kind = "nonparametric"
@@ -485,6 +504,20 @@ class SemiparametricModel(_TwoStageModel):
     Once the parametric stage has converged ŷ ≈ y, so the measured statistics are what ŷ's would then be.
     The warm-up sees y anyway (the residual target needs it), so this costs nothing. With an explicit
     ``standardizer`` this does not apply. The ablation behind the default is in ``docs/design-notes.md``.
+
+    Example:
+        >>> import numpy as np
+        >>> line = lambda x: np.array([[x[0], 1.0]])  # rigid part y = a·x + b
+        >>> model = SemiparametricModel(line, 2, 1, 1, lam_parametric=1e-9, lam_nonparametric=1e-3,
+        ...                             n_features=300, sigma=1.0)
+        >>> for x in np.linspace(-1.0, 1.0, 400):
+        ...     _ = model.predict_learn_one([x], [3.0 * x + 1.0 + 0.2 * np.sin(3.0 * x)])
+        >>> pred = model.predict_one([0.3])
+        >>> bool(np.allclose(pred.total, pred.parametric + pred.residual))
+        True
+        >>> truth = 1.9 + 0.2 * np.sin(0.9)
+        >>> bool(abs(pred.total[0] - truth) < 0.25 * abs(pred.parametric[0] - truth))  # the residual helps
+        True
     """
 
     _kind = "semiparametric"

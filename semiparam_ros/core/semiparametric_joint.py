@@ -84,6 +84,16 @@ class JointSemiparametricModel(_TwoStageModel):
 
     Raises:
         ConfigurationError: Invalid sizes or hyperparameters.
+
+    Example:
+        >>> import numpy as np
+        >>> line = lambda x: np.array([[x[0], 1.0]])
+        >>> model = JointSemiparametricModel(line, 2, 1, 1, lam_parametric=1e-9, lam_nonparametric=1e-3,
+        ...                                  n_features=300, sigma=0.5)
+        >>> for x in np.linspace(-1.0, 1.0, 400):
+        ...     model.learn_one([x], [3.0 * x + 1.0 + 0.2 * np.sin(3.0 * x)])
+        >>> bool(abs(model.predict_one([0.3]).total[0] - (1.9 + 0.2 * np.sin(0.9))) < 0.01)
+        True
     """
 
     _kind = "semiparametric_joint"
