@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.validation import check_positive_int
+from semiparam_ros.core.validation import check_positive_int, check_range
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = ["RandomFourierFeatures", "Standardizer"]
@@ -69,10 +69,7 @@ class RandomFourierFeatures:
     def __init__(self, n_inputs: int, n_features: int, sigma: float, seed: int = 0) -> None:
         self.n_inputs = check_positive_int("n_inputs", n_inputs)
         self.n_features = check_positive_int("n_features", n_features)
-        sigma = float(sigma)
-        if not (math.isfinite(sigma) and sigma > 0.0):
-            raise ConfigurationError(f"sigma must be a finite number > 0, got {sigma!r}")
-        self.sigma = sigma
+        self.sigma = check_range("sigma", sigma, 0.0, lo_inclusive=False)
         self.seed = int(seed)
         rng = np.random.default_rng(self.seed)
         self.omega_ = rng.normal(0.0, 1.0 / sigma, size=(self.n_inputs, self.n_features))

@@ -48,6 +48,7 @@ from numba import njit
 
 from semiparam_ros.core.acceleration import AccelerationConfig, AccelerationEstimator, make_estimator
 from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
+from semiparam_ros.core.validation import check_range
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = [
@@ -153,10 +154,7 @@ def _bound(name: str, value: float | None) -> float:
     """Validate a plausibility bound (> 0; ``None`` or ``inf`` = none) and return it as a float."""
     if value is None or value == math.inf:
         return _NO_BOUND
-    number = isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-    if not number or not value > 0:
-        raise ConfigurationError(f"{name} must be a number > 0 or None (no bound), got {value!r}")
-    return float(value)
+    return check_range(f"{name} (or None for no bound)", value, 0.0, lo_inclusive=False)
 
 
 class _JointEntry:
@@ -238,10 +236,8 @@ class SamplePipeline:
             raise ConfigurationError(f"joints must be unique, got {joints}")
         if output not in OUTPUTS:
             raise ConfigurationError(f"output must be one of {OUTPUTS}, got {output!r}")
-        if not (math.isfinite(sync_tolerance) and sync_tolerance >= 0):
-            raise ConfigurationError(f"sync_tolerance must be a finite number >= 0 (s), got {sync_tolerance}")
-        if not (math.isfinite(buffer_s) and buffer_s > 0):
-            raise ConfigurationError(f"buffer_s must be a finite number > 0 (s), got {buffer_s}")
+        check_range("sync_tolerance (s)", sync_tolerance, 0.0)
+        check_range("buffer_s (s)", buffer_s, 0.0, lo_inclusive=False)
         if int(max_buffer) < 1:
             raise ConfigurationError(f"max_buffer must be >= 1, got {max_buffer}")
         if int(restart_after) < 1:

@@ -49,7 +49,7 @@ from scipy.linalg import solve_triangular
 
 from semiparam_ros.core._kernels import back_substitute, qr_rls_steps
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
-from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int
+from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int, check_range
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = ["MAX_ABS_INPUT", "RecursiveRLS"]
@@ -95,12 +95,8 @@ class RecursiveRLS:
     ) -> None:
         check_positive_int("n_features", n_features)
         check_positive_int("n_outputs", n_outputs)
-        lam = float(lam)
-        forgetting = float(forgetting)
-        if not (math.isfinite(lam) and lam > 0.0):
-            raise ConfigurationError(f"lam must be a finite number > 0, got {lam!r}")
-        if not (0.0 < forgetting <= 1.0):
-            raise ConfigurationError(f"forgetting must be in (0, 1], got {forgetting!r}")
+        lam = check_range("lam", lam, 0.0, lo_inclusive=False)
+        forgetting = check_range("forgetting", forgetting, 0.0, 1.0, lo_inclusive=False)
         self.n_features = int(n_features)
         self.n_outputs = int(n_outputs)
         self.lam = lam

@@ -36,7 +36,7 @@ import numpy as np
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.features import RandomFourierFeatures, Standardizer
 from semiparam_ros.core.rrls import RecursiveRLS
-from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array
+from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = ["NonparametricModel", "ParametricModel", "Prediction", "SemiparametricModel"]
@@ -393,8 +393,7 @@ def _make_standardizer(n_inputs: int, standardizer: Standardizer | None, warmup:
         if not std.ready and std.warmup == 0:
             raise ConfigurationError("the standardizer is neither fitted nor configured with a warm-up")
         return std
-    if isinstance(warmup, bool) or not isinstance(warmup, int | np.integer) or warmup < 0:
-        raise ConfigurationError(f"standardizer_warmup must be an integer >= 0, got {warmup!r}")
+    warmup = check_positive_int("standardizer_warmup", warmup, minimum=0)
     if warmup == 0:
         return Standardizer.identity(n_inputs)
     return Standardizer(n_inputs, int(warmup), min_scale=min_scale)
