@@ -19,6 +19,7 @@ the allowed range.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +28,7 @@ from typing import Any
 
 import yaml
 
-from semiparam_ros.atomic import atomic_write_text
+from semiparam_ros.atomic import atomic_open
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = [
@@ -473,4 +474,6 @@ def write_config(config: EstimatorConfig, path: str | Path, node_name: str = "es
     text = yaml.safe_dump({node_name: {"ros__parameters": tree}}, sort_keys=False)
     if header:
         text = "".join(f"# {line}\n" for line in header.splitlines()) + text
-    atomic_write_text(path, text)
+    with atomic_open(path, "w") as fh:
+        fh.write(text)
+        os.fchmod(fh.fileno(), 0o644)  # readable like any parameter file (the temporary file is 0600)

@@ -18,6 +18,7 @@ every effect magnitude and the measured RMS of each part.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -52,6 +53,7 @@ def _write_yaml_atomic(path: Path, data: object) -> None:
     """Write YAML to ``path`` atomically (:func:`semiparam_ros.atomic.atomic_open`)."""
     with atomic_open(path, "w") as handle:
         yaml.safe_dump(data, handle, sort_keys=False, default_flow_style=None, width=110)
+        os.fchmod(handle.fileno(), 0o644)  # a bag's sidecar is as readable as the bag (mkstemp gives 0600)
 
 
 def write_recording(
