@@ -1,9 +1,10 @@
 """Atomic file writes: the one helper every writer of the package uses.
 
-A file is written to a temporary file in the destination's directory, flushed and ``fsync``-ed, then moved
-over the destination with :func:`os.replace`; the directory is ``fsync``-ed too where the platform allows,
-so a reader (or a crash, or a power cut after the call returned) sees either the old file or the new one,
-never half of one. On any exception the temporary file is removed and the destination is left as it was.
+A file is written (with the permissions the process umask gives a new file) to a temporary file in the
+destination's directory, flushed and ``fsync``-ed, then moved over the destination with
+:func:`os.replace`; the directory is ``fsync``-ed too where the platform allows, so a reader (or a crash,
+or a power cut after the call returned) sees either the old file or the new one, never half of one. On
+any exception the temporary file is removed and the destination is left as it was.
 
 >>> import tempfile, pathlib
 >>> out = pathlib.Path(tempfile.mkdtemp()) / "sub" / "hello.txt"
@@ -15,7 +16,7 @@ never half of one. On any exception the temporary file is removed and the destin
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
 from collections.abc import Iterator
 from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
@@ -46,7 +47,10 @@ def atomic_open(path: str | os.PathLike[str], mode: str = "w") -> AbstractContex
 @contextmanager
 def _atomic(path: Path, mode: str) -> Iterator[IO[Any]]:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    # Not mkstemp: its 0600 would make every written file private; O_EXCL with a random name is as safe
+    # and lets the process umask decide, as for any file the user writes.
+    tmp_name = str(path.parent / f".{path.name}.{secrets.token_hex(8)}.tmp")
+    fd = os.open(tmp_name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
         fh: IO[Any] = os.fdopen(fd, mode, encoding="utf-8") if mode == "w" else os.fdopen(fd, mode)
         with fh:

@@ -31,6 +31,7 @@ from semiparam_ros.core.estimator import (
     build_regressor,
 )
 from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
+from semiparam_ros.errors import CheckpointError, RejectedSampleError
 from semiparam_ros.io.bags import iter_samples
 
 CONFIG_PATH = Path(__file__).resolve().parents[1] / "config" / "icub_right_arm.yaml"
@@ -481,7 +482,7 @@ def test_corrupt_checkpoint_raises_value_error_and_keeps_state(config, regressor
         corrupt(good, bad)
     feed(est, rich_stream().messages[600:700])  # the live state differs from the file
     before = snapshot(est)
-    with pytest.raises(ValueError):
+    with pytest.raises(CheckpointError):
         est.load(bad)
     assert_same_state(snapshot(est), before)
 
@@ -692,11 +693,44 @@ def test_absurd_finite_values_are_counted_not_raised(config, regressor):
     assert est.n_samples_learned == len(results)
 
     est.reset()
-    # step() itself keeps its contract: a bad sample is a ValueError, state unchanged
+    # step() itself keeps its contract: a bad sample is a RejectedSampleError, state unchanged
     before = snapshot(est)
-    with pytest.raises(ValueError):
+    with pytest.raises(RejectedSampleError):
         est.step(Sample(T0_NS, np.zeros(4), np.full(4, 1e200), np.zeros(4), np.zeros(6)))
     assert_same_state(snapshot(est), before)
+
+
+@pytest.mark.parametrize("error", [TypeError, IndexError, ValueError], ids=lambda e: e.__name__)
+def test_programming_errors_propagate_and_are_not_counted_as_drops(config, regressor, monkeypatch, error):
+    """Only RejectedSampleError is a drop: a bug inside the learner (here injected) must surface, with
+    the drop counters untouched, and the estimator still works once the bug is gone."""
+    msgs = rich_stream().messages
+    est = OnlineEstimator(config, regressor=regressor)
+    feed(est, msgs[:300])
+    drops_before, learned_before = est.drops, est.n_samples_learned
+    assert learned_before > 0 and drops_before["rejected_sample"] == 0
+
+    def buggy(x, y):
+        raise error("injected bug")
+
+    monkeypatch.setattr(est.model, "predict_learn_one", buggy)
+    with pytest.raises(error, match="injected bug"):
+        feed(est, msgs[300:310])
+    assert est.drops == drops_before and est.n_samples_learned == learned_before
+
+    # the learner's own refusal, by contrast, is a counted drop and the stream goes on
+    def rejecting(x, y):
+        raise RejectedSampleError("x contains NaN")
+
+    est = OnlineEstimator(config, regressor=regressor)
+    feed(est, msgs[:300])
+    monkeypatch.setattr(est.model, "predict_learn_one", rejecting)
+    rejected = feed(est, msgs[300:330])
+    n_paired = len(pipeline_samples(config, msgs[:330])) - len(pipeline_samples(config, msgs[:300]))
+    assert rejected == [] and n_paired > 0
+    assert est.drops["rejected_sample"] == n_paired
+    assert est.n_samples_learned == learned_before
+    assert issubclass(RejectedSampleError, ValueError) and not issubclass(TypeError, RejectedSampleError)
 
 
 # ----------------------------------------------------------------------------- other outputs and options

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from semiparam_ros.errors import ConfigurationError
+from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
 __all__ = [
     "METHODS",
@@ -88,7 +88,7 @@ class AccelerationConfig:
             ``2·(window // 2)`` samples.
 
     Raises:
-        ValueError: Any setting out of range (checked on construction).
+        ConfigurationError: Any setting out of range (checked on construction).
     """
 
     method: str = "savgol"
@@ -100,28 +100,28 @@ class AccelerationConfig:
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
-            raise ValueError(f"acceleration method must be one of {METHODS}, got {self.method!r}")
+            raise ConfigurationError(f"acceleration method must be one of {METHODS}, got {self.method!r}")
         if self.window_s is not None:
             if not (isinstance(self.window_s, int | float) and math.isfinite(self.window_s)
                     and self.window_s > 0):
                 raise ConfigurationError(
                     f"acceleration window_s must be a finite number > 0 (s), got {self.window_s!r}")
             if self.method == "savgol" and not 1 <= int(self.polyorder) <= 10:
-                raise ValueError(f"savgol polyorder must be in [1, 10], got {self.polyorder}")
+                raise ConfigurationError(f"savgol polyorder must be in [1, 10], got {self.polyorder}")
         elif (isinstance(self.window, bool) or not isinstance(self.window, int | np.integer)
               or self.window < 2):
-            raise ValueError(f"acceleration window must be an integer >= 2, got {self.window!r}")
+            raise ConfigurationError(f"acceleration window must be an integer >= 2, got {self.window!r}")
         elif self.method == "savgol":
             if self.window % 2 == 0 or self.window < 3:
-                raise ValueError(f"savgol window must be odd and >= 3, got {self.window}")
+                raise ConfigurationError(f"savgol window must be odd and >= 3, got {self.window}")
             if not 1 <= int(self.polyorder) < self.window:
-                raise ValueError(
+                raise ConfigurationError(
                     f"savgol polyorder must be in [1, window={self.window}), got {self.polyorder}"
                 )
         if not (self.cutoff_hz > 0):  # also rejects NaN
-            raise ValueError(f"acceleration cutoff_hz must be > 0, got {self.cutoff_hz}")
+            raise ConfigurationError(f"acceleration cutoff_hz must be > 0, got {self.cutoff_hz}")
         if self.max_gap_s is not None and not (self.max_gap_s > 0 and math.isfinite(self.max_gap_s)):
-            raise ValueError(
+            raise ConfigurationError(
                 f"acceleration max_gap_s must be a finite positive number or None, got {self.max_gap_s}"
             )
 
@@ -230,7 +230,7 @@ class AccelerationEstimator:
 
     def __init__(self, n_joints: int, config: AccelerationConfig) -> None:
         if n_joints < 1:
-            raise ValueError(f"n_joints must be >= 1, got {n_joints}")
+            raise ConfigurationError(f"n_joints must be >= 1, got {n_joints}")
         self.n_joints = int(n_joints)
         self.config = config
         self._w = int(config.window)
@@ -293,16 +293,16 @@ class AccelerationEstimator:
             a ``savgol`` window fills past its middle; several after a gap.
 
         Raises:
-            ValueError: Stamp not increasing, wrong shape or non-finite velocity (state unchanged).
+            RejectedSampleError: Stamp not increasing, wrong shape or non-finite velocity (state unchanged).
         """
         stamp_ns = int(stamp_ns)
         dq = np.asarray(dq, dtype=np.float64)
         if dq.shape != (self.n_joints,):
-            raise ValueError(f"dq must have shape ({self.n_joints},), got {dq.shape}")
+            raise RejectedSampleError(f"dq must have shape ({self.n_joints},), got {dq.shape}")
         if not np.isfinite(dq).all():
-            raise ValueError("dq contains NaN or inf")
+            raise RejectedSampleError("dq contains NaN or inf")
         if self._last_stamp is not None and stamp_ns <= self._last_stamp:
-            raise ValueError(f"stamps must increase: {stamp_ns} after {self._last_stamp}")
+            raise RejectedSampleError(f"stamps must increase: {stamp_ns} after {self._last_stamp}")
         return self.update_trusted(stamp_ns, dq)
 
     def update_trusted(self, stamp_ns: int, dq: np.ndarray) -> list[Decision]:
@@ -414,6 +414,7 @@ class SavitzkyGolayEstimator(AccelerationEstimator):
         return self._stamp_window()[self._m - n_pending :].tolist() if n_pending else []
 
     def _estimate(self) -> list[Decision]:
+        assert self._last_stamp is not None  # called after update() stored the stamp
         self._n_seen += 1
         if self._n_seen <= self._half:
             return [(self._last_stamp, None)]
@@ -459,6 +460,7 @@ class FiniteDifferenceEstimator(AccelerationEstimator):
 
     def _estimate(self) -> list[Decision]:
         stamp = self._last_stamp
+        assert stamp is not None  # called after update() stored the stamp
         if self._m < self._w:
             return [(stamp, None)]
         stamps = self._stamp_window()
@@ -531,7 +533,7 @@ class RateAdaptiveEstimator(AccelerationEstimator):
         if config.window_s is None:
             raise ConfigurationError("RateAdaptiveEstimator needs config.window_s")
         if n_joints < 1:
-            raise ValueError(f"n_joints must be >= 1, got {n_joints}")
+            raise ConfigurationError(f"n_joints must be >= 1, got {n_joints}")
         self.n_joints = int(n_joints)
         self.config = config
         self._inner: AccelerationEstimator | None = None
@@ -561,7 +563,9 @@ class RateAdaptiveEstimator(AccelerationEstimator):
     def delay_s(self) -> float:
         """Emission delay of the inner estimator (s); before the rate is known ``window_s / 2`` (savgol)."""
         if self._inner is None:
-            return 0.5 * float(self.config.window_s) if self.config.method == "savgol" else 0.0
+            window_s = self.config.window_s
+            assert window_s is not None  # checked in __init__
+            return 0.5 * window_s if self.config.method == "savgol" else 0.0
         return self._inner.delay_s
 
     @property
@@ -575,7 +579,7 @@ class RateAdaptiveEstimator(AccelerationEstimator):
         """Forget the history; the measured window is kept (the rate does not change with a dropout)."""
         if self._inner is not None:
             return self._inner.reset()
-        held = [(s, None) for s, _ in self._held]
+        held: list[Decision] = [(s, None) for s, _ in self._held]
         self._held = []
         return held
 
@@ -584,13 +588,13 @@ class RateAdaptiveEstimator(AccelerationEstimator):
         stamp_ns = int(stamp_ns)
         dq = np.asarray(dq, dtype=np.float64)
         if dq.shape != (self.n_joints,):
-            raise ValueError(f"dq must have shape ({self.n_joints},), got {dq.shape}")
+            raise RejectedSampleError(f"dq must have shape ({self.n_joints},), got {dq.shape}")
         if not np.isfinite(dq).all():
-            raise ValueError("dq contains NaN or inf")
+            raise RejectedSampleError("dq contains NaN or inf")
         last = self._held[-1][0] if self._inner is None and self._held else (
             self._inner._last_stamp if self._inner is not None else None)
         if last is not None and stamp_ns <= last:
-            raise ValueError(f"stamps must increase: {stamp_ns} after {last}")
+            raise RejectedSampleError(f"stamps must increase: {stamp_ns} after {last}")
         return self.update_trusted(stamp_ns, dq)
 
     def update_trusted(self, stamp_ns: int, dq: np.ndarray) -> list[Decision]:
@@ -606,11 +610,12 @@ class RateAdaptiveEstimator(AccelerationEstimator):
         if gap is not None:
             dts = dts[dts <= gap]
         if dts.size == 0:  # every interval was a dropout: keep measuring on the newest sample
-            decided = [(s, None) for s, _ in self._held[:-1]]
+            decided: list[Decision] = [(s, None) for s, _ in self._held[:-1]]
             self._held = self._held[-1:]
             return decided
         cfg = self.config
-        window = samples_for_window(float(cfg.window_s), float(np.median(dts)), cfg.method, cfg.polyorder)
+        assert cfg.window_s is not None  # checked in __init__
+        window = samples_for_window(cfg.window_s, float(np.median(dts)), cfg.method, cfg.polyorder)
         sized = AccelerationConfig(method=cfg.method, window=window, polyorder=cfg.polyorder,
                                    cutoff_hz=cfg.cutoff_hz, max_gap_s=cfg.max_gap_s)
         inner = SavitzkyGolayEstimator(self.n_joints, sized) if cfg.method == "savgol" else \
@@ -640,14 +645,15 @@ def estimate_accelerations(
         in rad/s², shape ``(m, n)``.
 
     Raises:
-        ValueError: Mismatched shapes, stamps not increasing, or non-finite velocities.
+        RejectedSampleError: Mismatched shapes, stamps not increasing, or non-finite velocities.
     """
     stamps = np.asarray(stamps_ns)
     vel = np.asarray(dq, dtype=np.float64)
     if vel.ndim == 1:
         vel = vel[:, None]
     if stamps.ndim != 1 or vel.ndim != 2 or vel.shape[0] != stamps.shape[0]:
-        raise ValueError(f"stamps_ns (N,) and dq (N, n) must match, got {stamps.shape} and {np.shape(dq)}")
+        raise RejectedSampleError(f"stamps_ns (N,) and dq (N, n) must match, got {stamps.shape} and "
+                                  f"{np.shape(dq)}")
     estimator = make_estimator(vel.shape[1], config)
     out_stamps: list[int] = []
     out_ddq: list[np.ndarray] = []

@@ -27,6 +27,7 @@ from typing import Any
 
 import yaml
 
+from semiparam_ros.atomic import atomic_open
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = [
@@ -235,24 +236,24 @@ def parameter_spec(name: str) -> ParameterSpec:
         Its :class:`ParameterSpec`.
 
     Raises:
-        ValueError: If no such parameter exists.
+        ConfigurationError: If no such parameter exists.
     """
     try:
         return _SPECS[name]
     except KeyError:
-        raise ValueError(f"unknown parameter {name!r}; known: {', '.join(sorted(_SPECS))}") from None
+        raise ConfigurationError(f"unknown parameter {name!r}; known: {', '.join(sorted(_SPECS))}") from None
 
 
 def _number(name: str, value: Any, integer: bool) -> float | int:
     if isinstance(value, bool) or not isinstance(value, int | float):
         kind = "an integer" if integer else "a number"
-        raise ValueError(f"parameter {name!r} must be {kind}, got {value!r}")
+        raise ConfigurationError(f"parameter {name!r} must be {kind}, got {value!r}")
     if integer and isinstance(value, float):
         if not value.is_integer():
-            raise ValueError(f"parameter {name!r} must be an integer, got {value!r}")
+            raise ConfigurationError(f"parameter {name!r} must be an integer, got {value!r}")
         value = int(value)
     if not math.isfinite(value):
-        raise ValueError(f"parameter {name!r} must be finite, got {value!r}")
+        raise ConfigurationError(f"parameter {name!r} must be finite, got {value!r}")
     return int(value) if integer else float(value)
 
 
@@ -260,7 +261,8 @@ def _check_range(spec: ParameterSpec, value: float) -> None:
     low_bad = spec.min is not None and (value <= spec.min if spec.min_exclusive else value < spec.min)
     high_bad = spec.max is not None and value > spec.max
     if low_bad or high_bad:
-        raise ValueError(f"parameter {spec.name!r} = {value!r} is out of range: must be {spec.range_text()}")
+        raise ConfigurationError(f"parameter {spec.name!r} = {value!r} is out of range: must be "
+                                 f"{spec.range_text()}")
 
 
 def validate_value(name: str, value: Any) -> Any:
@@ -274,31 +276,32 @@ def validate_value(name: str, value: Any) -> Any:
         The normalized value.
 
     Raises:
-        ValueError: Naming the parameter and the allowed range or type when the value is invalid.
+        ConfigurationError: Naming the parameter and the allowed range or type when the value is invalid.
     """
     spec = parameter_spec(name)
     if spec.type == "string":
         if not isinstance(value, str):
-            raise ValueError(f"parameter {name!r} must be a string, got {value!r}")
+            raise ConfigurationError(f"parameter {name!r} must be a string, got {value!r}")
         if spec.choices is not None and value not in spec.choices:
-            raise ValueError(f"parameter {name!r} = {value!r} is invalid: must be {spec.range_text()}")
+            raise ConfigurationError(f"parameter {name!r} = {value!r} is invalid: must be "
+                                     f"{spec.range_text()}")
         return value
     if spec.type == "bool":
         if not isinstance(value, bool):
-            raise ValueError(f"parameter {name!r} must be true or false, got {value!r}")
+            raise ConfigurationError(f"parameter {name!r} must be true or false, got {value!r}")
         return value
     if spec.type in ("double", "integer"):
         number = _number(name, value, spec.type == "integer")
         _check_range(spec, number)
         return number
     if isinstance(value, str | bytes) or not isinstance(value, Iterable):
-        raise ValueError(f"parameter {name!r} must be a list, got {value!r}")
+        raise ConfigurationError(f"parameter {name!r} must be a list, got {value!r}")
     items = list(value)
     if spec.length is not None and len(items) != spec.length:
-        raise ValueError(f"parameter {name!r} must have {spec.length} values, got {len(items)}")
+        raise ConfigurationError(f"parameter {name!r} must have {spec.length} values, got {len(items)}")
     if spec.type == "string_array":
         if not all(isinstance(v, str) for v in items):
-            raise ValueError(f"parameter {name!r} must be a list of strings, got {value!r}")
+            raise ConfigurationError(f"parameter {name!r} must be a list of strings, got {value!r}")
         return items
     numbers = [_number(name, v, False) for v in items]
     for v in numbers:
@@ -320,41 +323,42 @@ class EstimatorConfig:
         checked = {name: validate_value(name, value) for name, value in self.values.items()}
         missing = [p.name for p in PARAMETERS if p.name not in checked]
         if missing:
-            raise ValueError(f"missing parameters: {', '.join(missing)}")
+            raise ConfigurationError(f"missing parameters: {', '.join(missing)}")
         joints = checked["robot.joints"]
         if not joints:
-            raise ValueError("parameter 'robot.joints' must name at least one joint")
+            raise ConfigurationError("parameter 'robot.joints' must name at least one joint")
         if len(set(joints)) != len(joints):
-            raise ValueError(f"parameter 'robot.joints' has duplicate names: {joints}")
+            raise ConfigurationError(f"parameter 'robot.joints' has duplicate names: {joints}")
         if len(checked["robot.locked_joints"]) != len(checked["robot.locked_positions"]):
-            raise ValueError("parameters 'robot.locked_joints' and 'robot.locked_positions' must have the "
-                             "same length")
+            raise ConfigurationError("parameters 'robot.locked_joints' and 'robot.locked_positions' must "
+                                     "have the same length")
         overlap = set(joints) & set(checked["robot.locked_joints"])
         if overlap:
-            raise ValueError(f"joints both learned and locked: {sorted(overlap)}")
+            raise ConfigurationError(f"joints both learned and locked: {sorted(overlap)}")
         if checked["robot.output"] == "wrench" and not checked["robot.ft_sensor"]:
-            raise ValueError("parameter 'robot.ft_sensor' must name the F/T sensor joint when "
-                             "robot.output is 'wrench'")
+            raise ConfigurationError("parameter 'robot.ft_sensor' must name the F/T sensor joint when "
+                                     "robot.output is 'wrench'")
         window = checked["acceleration.window"]
         if window and window < (3 if checked["acceleration.method"] == "savgol" else 2):
             raise ConfigurationError(f"parameter 'acceleration.window' = {window} is too small: 0 (use "
-                             "acceleration.window_s), or >= 3 for savgol, >= 2 for finite_difference")
+                                     "acceleration.window_s), or >= 3 for savgol, >= 2 for finite_difference")
         if window and checked["acceleration.method"] == "savgol" and window % 2 == 0:
-            raise ValueError("parameter 'acceleration.window' must be odd for the savgol method, got "
-                             f"{checked['acceleration.window']}")
+            raise ConfigurationError("parameter 'acceleration.window' must be odd for the savgol method, got "
+                                     f"{checked['acceleration.window']}")
         if window and checked["acceleration.method"] == "savgol" and (
             checked["acceleration.polyorder"] >= window
         ):
-            raise ValueError("parameter 'acceleration.polyorder' must be below 'acceleration.window' for the "
-                             f"savgol method, got {checked['acceleration.polyorder']} >= "
-                             f"{checked['acceleration.window']}")
+            raise ConfigurationError("parameter 'acceleration.polyorder' must be below "
+                                     "'acceleration.window' for the savgol method, got "
+                                     f"{checked['acceleration.polyorder']} >= "
+                                     f"{checked['acceleration.window']}")
         if checked["semiparametric.combination"] == "joint" and (
             checked["parametric.forgetting"] != checked["nonparametric.forgetting"]
         ):
             fp, fn = checked["parametric.forgetting"], checked["nonparametric.forgetting"]
-            raise ValueError("parameters 'parametric.forgetting' and 'nonparametric.forgetting' must be "
-                             "equal with semiparametric.combination 'joint' (one data weighting for both "
-                             f"terms), got {fp} and {fn}")
+            raise ConfigurationError("parameters 'parametric.forgetting' and 'nonparametric.forgetting' "
+                                     "must be equal with semiparametric.combination 'joint' (one data "
+                                     f"weighting for both terms), got {fp} and {fn}")
         object.__setattr__(self, "values", MappingProxyType(checked))
 
     @classmethod
@@ -373,7 +377,7 @@ class EstimatorConfig:
             The validated configuration.
 
         Raises:
-            ValueError: On an unknown name or an invalid value (the message names the parameter).
+            ConfigurationError: On an unknown name or an invalid value (the message names the parameter).
         """
         values = {p.name: p.default for p in PARAMETERS}
         for name, value in flat.items():
@@ -395,7 +399,7 @@ class EstimatorConfig:
             The new validated configuration.
 
         Raises:
-            ValueError: On an unknown name or an invalid value.
+            ConfigurationError: On an unknown name or an invalid value.
         """
         values = self.to_flat()
         for name, value in overrides.items():
@@ -437,12 +441,12 @@ def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 def _parameters_block(document: Any, node_name: str, path: Path) -> Mapping[str, Any]:
     if not isinstance(document, Mapping):
-        raise ValueError(f"{path}: expected a ROS 2 parameter file (a mapping at the top)")
+        raise ConfigurationError(f"{path}: expected a ROS 2 parameter file (a mapping at the top)")
     for key in (node_name, f"/{node_name}", "/**"):
         block = document.get(key)
         if isinstance(block, Mapping) and isinstance(block.get("ros__parameters"), Mapping):
             return block["ros__parameters"]
-    raise ValueError(f"{path}: no '{node_name}: ros__parameters:' (or '/**') block found")
+    raise ConfigurationError(f"{path}: no '{node_name}: ros__parameters:' (or '/**') block found")
 
 
 _ROS_ONLY = frozenset({"use_sim_time"})
@@ -459,22 +463,22 @@ def load_config(path: str | Path, node_name: str = "estimator") -> EstimatorConf
         The validated configuration (missing parameters take their defaults).
 
     Raises:
-        ValueError: If the file is missing, is not valid YAML, has no parameter block, or holds an unknown
-            parameter or an invalid value (the message names the file and the parameter).
+        ConfigurationError: If the file is missing, is not valid YAML, has no parameter block, or holds an
+            unknown parameter or an invalid value (the message names the file and the parameter).
     """
     path = Path(path)
     try:
         document = yaml.safe_load(path.read_text())
     except OSError as err:
-        raise ValueError(f"cannot read config file {path}: {err}") from err
+        raise ConfigurationError(f"cannot read config file {path}: {err}") from err
     except yaml.YAMLError as err:
-        raise ValueError(f"config file {path} is not valid YAML: {err}") from err
+        raise ConfigurationError(f"config file {path} is not valid YAML: {err}") from err
     flat = {k: v for k, v in _flatten(_parameters_block(document, node_name, path)).items()
             if k not in _ROS_ONLY}
     try:
         return EstimatorConfig.from_flat(flat)
-    except ValueError as err:
-        raise ValueError(f"{path}: {err}") from err
+    except ConfigurationError as err:
+        raise ConfigurationError(f"{path}: {err}") from err
 
 
 def write_config(config: EstimatorConfig, path: str | Path, node_name: str = "estimator",
@@ -486,6 +490,9 @@ def write_config(config: EstimatorConfig, path: str | Path, node_name: str = "es
         path: Destination YAML file (parent directories are created).
         node_name: Node name of the parameter block.
         header: Optional comment lines put at the top of the file.
+
+    Raises:
+        OSError: If the file cannot be written (written atomically: the destination is then unchanged).
     """
     tree: dict[str, Any] = {}
     for name, value in config.to_flat().items():
@@ -497,8 +504,5 @@ def write_config(config: EstimatorConfig, path: str | Path, node_name: str = "es
     text = yaml.safe_dump({node_name: {"ros__parameters": tree}}, sort_keys=False)
     if header:
         text = "".join(f"# {line}\n" for line in header.splitlines()) + text
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    with atomic_open(path, "w") as fh:
+        fh.write(text)

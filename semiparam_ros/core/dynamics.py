@@ -59,7 +59,8 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
-from semiparam_ros.errors import ConfigurationError
+from semiparam_ros.core.validation import as_float_array
+from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
 __all__ = [
     "EXTRA_COLUMN_KINDS",
@@ -134,9 +135,9 @@ def example_robot_data_path(relative: str) -> pathlib.Path:
     """
     candidates: list[pathlib.Path] = []
     for key in ("purelib", "platlib"):
-        path = sysconfig.get_paths().get(key)
-        if path:
-            candidates.append(pathlib.Path(path))
+        site_dir = sysconfig.get_paths().get(key)
+        if site_dir:
+            candidates.append(pathlib.Path(site_dir))
     try:
         candidates.extend(pathlib.Path(p) for p in site.getsitepackages())
     except AttributeError:  # pragma: no cover - virtualenvs without getsitepackages
@@ -197,16 +198,16 @@ def point_mass_parameters(mass: float, position: Sequence[float] | np.ndarray) -
         ``I = m (‖c‖² 1 − c cᵀ)`` the point's rotational inertia about the frame origin.
 
     Raises:
-        ValueError: If the mass is negative or not finite, or the position is not 3 finite numbers.
+        ConfigurationError: If the mass is negative or not finite, or the position is not 3 finite numbers.
     """
     m = float(mass)
     if not math.isfinite(m) or m < 0.0:
-        raise ValueError(f"point mass must be finite and >= 0 kg, got {mass!r}")
-    c = _as_float("point-mass position", position)
+        raise ConfigurationError(f"point mass must be finite and >= 0 kg, got {mass!r}")
+    c = as_float_array("point-mass position", position, error=ConfigurationError)
     if c.shape != (3,):
-        raise ValueError(f"point-mass position must have shape (3,), got {c.shape}")
+        raise ConfigurationError(f"point-mass position must have shape (3,), got {c.shape}")
     if not np.all(np.isfinite(c)):
-        raise ValueError(f"point-mass position must be finite, got {c}")
+        raise ConfigurationError(f"point-mass position must be finite, got {c}")
     cx, cy, cz = c
     return np.array(
         [
@@ -240,11 +241,11 @@ def is_physically_consistent(params: Sequence[float] | np.ndarray, *, tol: float
         True if the parameters are physically consistent.
 
     Raises:
-        ValueError: If ``params`` is not 10 finite numbers.
+        ConfigurationError: If ``params`` is not 10 finite numbers.
     """
-    p = _as_float("params", params)
+    p = as_float_array("params", params, error=ConfigurationError)
     if p.shape != (10,) or not np.all(np.isfinite(p)):
-        raise ValueError(f"params must be 10 finite inertial parameters, got shape {p.shape}")
+        raise ConfigurationError(f"params must be 10 finite inertial parameters, got shape {p.shape}")
     m = p[0]
     if m <= 0.0:
         return False
@@ -356,7 +357,7 @@ class RigidBodyRegressor:
         where = f" in {source}" if source else ""
 
         if output not in _OUTPUTS:
-            raise ValueError(f"output must be one of {_OUTPUTS}, got {output!r}")
+            raise ConfigurationError(f"output must be one of {_OUTPUTS}, got {output!r}")
         self.output = output
         extras = tuple(kind for kind, on in zip(
             EXTRA_COLUMN_KINDS, (friction, friction, joint_offsets, armature), strict=True) if on)
@@ -370,51 +371,53 @@ class RigidBodyRegressor:
         self.extra_kinds: tuple[str, ...] = extras
         self.coulomb_velocity = vs
         if isinstance(joints, str) or not isinstance(joints, Sequence):
-            raise ValueError(f"joints must be a sequence of joint names, got {joints!r}")
+            raise ConfigurationError(f"joints must be a sequence of joint names, got {joints!r}")
         joint_names = tuple(joints)
         self._init_args["joints"] = joint_names
         if not joint_names:
-            raise ValueError("joints is empty: give at least one moving joint")
+            raise ConfigurationError("joints is empty: give at least one moving joint")
         for name in joint_names:
             if not isinstance(name, str):
-                raise ValueError(f"joint names must be strings, got {name!r}")
+                raise ConfigurationError(f"joint names must be strings, got {name!r}")
         duplicates = sorted({n for n in joint_names if joint_names.count(n) > 1})
         if duplicates:
-            raise ValueError(f"joints lists {duplicates} more than once")
+            raise ConfigurationError(f"joints lists {duplicates} more than once")
 
         try:
             root = ET.fromstring(urdf_xml)
         except ET.ParseError as err:
-            raise ValueError(f"URDF{where} is not valid XML: {err}") from err
+            raise ConfigurationError(f"URDF{where} is not valid XML: {err}") from err
         if root.tag != "robot":
-            raise ValueError(f"URDF{where} has root element <{root.tag}>, expected <robot>")
+            raise ConfigurationError(f"URDF{where} has root element <{root.tag}>, expected <robot>")
         # Only direct children: <transmission> blocks also contain <joint> elements.
         urdf_joints = {j.get("name"): j for j in root.findall("joint")}
         child_link = {
-            name: (j.find("child").get("link") if j.find("child") is not None else name)
+            name: (child.get("link") if (child := j.find("child")) is not None else name)
             for name, j in urdf_joints.items()
         }
 
         for name in joint_names:
             if name not in urdf_joints:
-                raise ValueError(f"unknown joint {name!r}: not a joint of the URDF{where}")
+                raise ConfigurationError(f"unknown joint {name!r}: not a joint of the URDF{where}")
             jtype = urdf_joints[name].get("type")
             if jtype not in _MOVING_TYPES:
-                raise ValueError(
+                raise ConfigurationError(
                     f"joint {name!r} has type {jtype!r}; moving joints must be one of {_MOVING_TYPES}"
                 )
 
         if ft_sensor is None:
             if output == "wrench":
-                raise ValueError("output='wrench' needs ft_sensor (the name of the fixed sensor joint)")
+                raise ConfigurationError("output='wrench' needs ft_sensor (the name of the fixed sensor "
+                                         "joint)")
         else:
             if not isinstance(ft_sensor, str) or ft_sensor not in urdf_joints:
-                raise ValueError(f"unknown sensor joint {ft_sensor!r}: not a joint of the URDF{where}")
+                raise ConfigurationError(f"unknown sensor joint {ft_sensor!r}: not a joint of the "
+                                         f"URDF{where}")
             if ft_sensor in joint_names:
-                raise ValueError(f"sensor joint {ft_sensor!r} is also listed in joints")
+                raise ConfigurationError(f"sensor joint {ft_sensor!r} is also listed in joints")
             element = urdf_joints[ft_sensor]
             if element.get("type") != "fixed":
-                raise ValueError(
+                raise ConfigurationError(
                     f"sensor joint {ft_sensor!r} has type {element.get('type')!r}; an F/T sensor must be a "
                     "fixed joint"
                 )
@@ -428,26 +431,27 @@ class RigidBodyRegressor:
         locked_values: dict[str, float] = {}
         if locked is not None:
             if not isinstance(locked, Mapping):
-                raise ValueError(
+                raise ConfigurationError(
                     f"locked must be a mapping joint name -> position, got {type(locked).__name__}"
                 )
             for name, value in locked.items():
                 if name not in urdf_joints:
-                    raise ValueError(f"unknown locked joint {name!r}: not a joint of the URDF{where}")
+                    raise ConfigurationError(f"unknown locked joint {name!r}: not a joint of the URDF{where}")
                 if name in joint_names:
-                    raise ValueError(f"joint {name!r} is both moving (joints) and locked")
+                    raise ConfigurationError(f"joint {name!r} is both moving (joints) and locked")
                 if name == ft_sensor:
-                    raise ValueError(f"the sensor joint {name!r} cannot be locked")
+                    raise ConfigurationError(f"the sensor joint {name!r} cannot be locked")
                 if urdf_joints[name].get("type") not in _MOVING_TYPES:
-                    raise ValueError(
+                    raise ConfigurationError(
                         f"locked joint {name!r} has type {urdf_joints[name].get('type')!r}: no position"
                     )
                 try:
                     val = float(value)
                 except (TypeError, ValueError) as err:
-                    raise ValueError(f"locked position of {name!r} is not a number: {value!r}") from err
+                    raise ConfigurationError(
+                        f"locked position of {name!r} is not a number: {value!r}") from err
                 if not math.isfinite(val):
-                    raise ValueError(f"locked position of {name!r} is not finite: {value!r}")
+                    raise ConfigurationError(f"locked position of {name!r} is not finite: {value!r}")
                 locked_values[name] = val
         self.locked = dict(locked_values)
         self._init_args["locked"] = dict(locked_values)
@@ -457,14 +461,15 @@ class RigidBodyRegressor:
         except (TypeError, ValueError):
             g = np.array([np.nan])
         if g.shape != (3,) or not np.all(np.isfinite(g)):
-            raise ValueError(f"gravity must be 3 finite numbers (m/s²), got {gravity!r}")
+            raise ConfigurationError(f"gravity must be 3 finite numbers (m/s²), got {gravity!r}")
         self.gravity = g.copy()
         self._init_args["gravity"] = tuple(g.tolist())
 
         try:
             full = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
         except Exception as err:  # Pinocchio raises RuntimeError/ValueError with its own message
-            raise ValueError(f"Pinocchio could not build a model from the URDF{where}: {err}") from err
+            raise ConfigurationError(
+                f"Pinocchio could not build a model from the URDF{where}: {err}") from err
         q_ref = pin.neutral(full)
         for name, val in locked_values.items():
             jmodel = full.joints[full.getJointId(name)]
@@ -509,7 +514,7 @@ class RigidBodyRegressor:
         self._body_jids = np.array(body_jids, dtype=int)
         cols = np.concatenate([np.arange(10 * (j - 1), 10 * j) for j in body_jids])
         self._cols = _as_slice(cols)
-        self.body_names: tuple[str, ...] = tuple(child_link[model.names[j]] for j in body_jids)
+        self.body_names: tuple[str, ...] = tuple(str(child_link[model.names[j]]) for j in body_jids)
         self.n_joints = len(joint_names)
         self.n_outputs = len(self.output_names)
         self.n_bodies = len(body_jids)
@@ -593,7 +598,7 @@ class RigidBodyRegressor:
 
         Raises:
             FileNotFoundError: If ``urdf_path`` is not a file.
-            ValueError: For unknown or ill-typed joint/sensor names, non-finite locked positions or
+            ConfigurationError: For unknown or ill-typed joint/sensor names, non-finite locked positions or
                 gravity, an unknown output, or a URDF Pinocchio cannot load.
         """
         path = pathlib.Path(urdf_path)
@@ -628,34 +633,34 @@ class RigidBodyRegressor:
 
     # ------------------------------------------------------------------ input checks
     def _vector(self, name: str, value: Any) -> np.ndarray:
-        arr = _as_float(f"{name}", value)
+        arr = as_float_array(name, value)
         if arr.shape != (self.n_joints,):
-            raise ValueError(
+            raise RejectedSampleError(
                 f"{name} must have shape ({self.n_joints},) for joints {list(self.joint_names)}, "
                 f"got {arr.shape}"
             )
         if not np.isfinite(arr).all():
             bad = [self.joint_names[i] for i in np.flatnonzero(~np.isfinite(arr))]
-            raise ValueError(f"{name} has non-finite values at joint(s) {bad}")
+            raise RejectedSampleError(f"{name} has non-finite values at joint(s) {bad}")
         return arr
 
     def _batch(self, q: Any, dq: Any, ddq: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         arrays = []
         for name, value in (("q", q), ("dq", dq), ("ddq", ddq)):
-            arr = _as_float(f"{name}", value)
+            arr = as_float_array(name, value)
             if arr.ndim != 2 or arr.shape[1] != self.n_joints:
-                raise ValueError(
+                raise RejectedSampleError(
                     f"{name} must have shape (k, {self.n_joints}) for joints {list(self.joint_names)}, "
                     f"got {arr.shape}"
                 )
             if not np.isfinite(arr).all():
                 cols = sorted({int(c) for c in np.nonzero(~np.isfinite(arr))[1]})
-                raise ValueError(
+                raise RejectedSampleError(
                     f"{name} has non-finite values at joint(s) {[self.joint_names[c] for c in cols]}"
                 )
             arrays.append(arr)
         if not arrays[0].shape == arrays[1].shape == arrays[2].shape:
-            raise ValueError(f"q, dq, ddq have different shapes {[a.shape for a in arrays]}")
+            raise RejectedSampleError(f"q, dq, ddq have different shapes {[a.shape for a in arrays]}")
         return arrays[0], arrays[1], arrays[2]
 
     # ------------------------------------------------------------------ regressors
@@ -698,9 +703,10 @@ class RigidBodyRegressor:
             are ``[fx, fy, fz, tx, ty, tz]`` (N, N·m) of the sensor reading in the sensor frame.
 
         Raises:
-            ValueError: If a vector has the wrong length or non-finite values (named in the message).
+            RejectedSampleError: If a vector has the wrong length or non-finite values (named in the
+                message).
         """
-        q_arr = _as_float("q", q)
+        q_arr = as_float_array("q", q)
         if q_arr.ndim == 2:
             qs, dqs, ddqs = self._batch(q_arr, dq, ddq)
             out = np.zeros((qs.shape[0], self.n_outputs, self.n_params))
@@ -709,8 +715,8 @@ class RigidBodyRegressor:
                 self._rigid(out[i])
                 self._extra(out[i], dqs[i], ddqs[i])
             return out
-        dq_arr = _as_float("dq", dq)
-        ddq_arr = _as_float("ddq", ddq)
+        dq_arr = as_float_array("dq", dq)
+        ddq_arr = as_float_array("ddq", ddq)
         n = self.n_joints
         # Hot path (1 kHz): one cheap finiteness test for all three vectors (3 dots ≈ 1 µs instead of
         # 3 isfinite().all() ≈ 4 µs). The sum of squares is finite iff every entry is, except that entries
@@ -766,7 +772,8 @@ class RigidBodyRegressor:
             N·m for ``output="joint_torques"``.
 
         Raises:
-            ValueError: On bad state vectors or a parameter vector of the wrong length or non-finite.
+            RejectedSampleError: On bad state vectors.
+            ConfigurationError: On a parameter vector of the wrong length or non-finite.
         """
         pi = self.urdf_parameters() if params is None else self._params("params", params, self.n_params)
         return self.regressor(q, dq, ddq) @ pi
@@ -781,15 +788,15 @@ class RigidBodyRegressor:
         return self._urdf_params.copy()
 
     def _params(self, name: str, value: Any, n: int) -> np.ndarray:
-        arr = _as_float(f"{name}", value)
+        arr = as_float_array(name, value, error=ConfigurationError)
         if arr.shape != (n,):
-            raise ValueError(f"{name} must have shape ({n},), got {arr.shape}")
+            raise ConfigurationError(f"{name} must have shape ({n},), got {arr.shape}")
         if not np.isfinite(arr).all():
             bad = [
                 self.parameter_names[i] if n == self.n_params else i
                 for i in np.flatnonzero(~np.isfinite(arr))
             ]
-            raise ValueError(f"{name} has non-finite values at {bad}")
+            raise ConfigurationError(f"{name} has non-finite values at {bad}")
         return arr
 
     # ------------------------------------------------------------------ base parameters
@@ -812,7 +819,7 @@ class RigidBodyRegressor:
         n = self.n_params
         k = int(n_samples) if n_samples is not None else max(64, 3 * n)
         if k * self.n_outputs < n:
-            raise ValueError(f"n_samples={k} gives fewer rows than the {n} parameters")
+            raise ConfigurationError(f"n_samples={k} gives fewer rows than the {n} parameters")
         rng = np.random.default_rng(seed)
         lo = np.where(np.isfinite(self._lower), self._lower, -math.pi)
         hi = np.where(np.isfinite(self._upper), self._upper, math.pi)
@@ -889,7 +896,7 @@ class RigidBodyRegressor:
             (n_outputs, n_base), or (k, n_outputs, n_base).
 
         Raises:
-            ValueError: On bad state vectors.
+            RejectedSampleError: On bad state vectors.
         """
         return self.regressor(q, dq, ddq)[..., self._base.independent]
 
@@ -903,7 +910,7 @@ class RigidBodyRegressor:
             (n_base,) base parameters.
 
         Raises:
-            ValueError: If ``pi_full`` has the wrong length or non-finite values.
+            ConfigurationError: If ``pi_full`` has the wrong length or non-finite values.
         """
         pi = self._params("pi_full", pi_full, self.n_params)
         return pi[self._base.independent] + self._base.coefficients @ pi[self._base.dependent]
@@ -930,16 +937,16 @@ class RigidBodyRegressor:
         """Return the slot of a body: its parameters are ``π[10·i : 10·i + 10]``.
 
         Raises:
-            ValueError: If ``name`` is not one of ``body_names``.
+            ConfigurationError: If ``name`` is not one of ``body_names``.
         """
         try:
             return self.body_names.index(name)
         except ValueError:
-            raise ValueError(f"unknown body {name!r}; bodies are {list(self.body_names)}") from None
+            raise ConfigurationError(f"unknown body {name!r}; bodies are {list(self.body_names)}") from None
 
     def _frame_id(self, frame_name: str) -> int:
         if not isinstance(frame_name, str) or not self._model.existFrame(frame_name):
-            raise ValueError(f"unknown frame {frame_name!r}: not a link or joint of the URDF")
+            raise ConfigurationError(f"unknown frame {frame_name!r}: not a link or joint of the URDF")
         return int(self._model.getFrameId(frame_name))
 
     def frame_in_body(self, frame_name: str) -> tuple[str, np.ndarray]:
@@ -955,13 +962,13 @@ class RigidBodyRegressor:
             (body name, 4×4 homogeneous transform of the frame in the body frame, m).
 
         Raises:
-            ValueError: If the frame is unknown or not attached to one of ``body_names``.
+            ConfigurationError: If the frame is unknown or not attached to one of ``body_names``.
         """
         frame = self._model.frames[self._frame_id(frame_name)]
         jid = int(frame.parentJoint)
         hits = np.flatnonzero(self._body_jids == jid)
         if hits.size == 0:
-            raise ValueError(
+            raise ConfigurationError(
                 f"frame {frame_name!r} is not attached to a body of the regressor ({list(self.body_names)})"
             )
         return self.body_names[int(hits[0])], frame.placement.homogeneous.copy()
@@ -977,7 +984,8 @@ class RigidBodyRegressor:
             4×4 homogeneous transform (m).
 
         Raises:
-            ValueError: On a bad q or an unknown frame.
+            RejectedSampleError: On a bad q.
+            ConfigurationError: On an unknown frame.
         """
         fid = self._frame_id(frame_name)
         q_arr = self._vector("q", q)
@@ -996,7 +1004,8 @@ class RigidBodyRegressor:
             4×4 homogeneous transform (m).
 
         Raises:
-            ValueError: On a bad q or an unknown body.
+            RejectedSampleError: On a bad q.
+            ConfigurationError: On an unknown body.
         """
         jid = int(self._body_jids[self.body_index(body_name)])
         q_arr = self._vector("q", q)
@@ -1008,14 +1017,6 @@ class RigidBodyRegressor:
     def pinocchio_model(self) -> pin.Model:
         """The reduced Pinocchio model (read only: do not modify it)."""
         return self._model
-
-
-def _as_float(name: str, value: Any) -> np.ndarray:
-    """``np.asarray(value, dtype=float)`` with a ValueError that names the argument."""
-    try:
-        return np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name} must be numeric: {err}") from None
 
 
 def _as_slice(indices: np.ndarray) -> slice | np.ndarray:

@@ -32,6 +32,7 @@ from semiparam_ros.core.semiparametric import (
     SemiparametricModel,
 )
 from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = [
     "DROP_REJECTED_SAMPLE",
@@ -97,7 +98,7 @@ def build_regressor(config: EstimatorConfig) -> RigidBodyRegressor:
         The regressor of the F/T sensor wrench or of the joint torques.
 
     Raises:
-        ValueError: If the URDF, joints or sensor are invalid.
+        ConfigurationError: If the URDF, joints or sensor are invalid.
     """
     output = config["robot.output"]
     return RigidBodyRegressor.from_urdf(
@@ -258,10 +259,10 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
         The learner.
 
     Raises:
-        ValueError: On an unknown kind.
+        ConfigurationError: On an unknown kind.
     """
     if kind not in ("P", "NP", "SP"):
-        raise ValueError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
+        raise ConfigurationError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
     n_joints = len(config["robot.joints"])
     n_inputs = 3 * n_joints
     if kind == "NP":
@@ -339,6 +340,16 @@ class OnlineEstimator:
         config: Validated configuration.
         regressor: Prebuilt regressor (to share one between estimators); built when omitted.
         kind: Learner to run; the node runs ``"SP"``, whose prediction carries all three parts.
+
+    Example:
+        >>> from semiparam_ros.core.config import EstimatorConfig
+        >>> est = OnlineEstimator(EstimatorConfig.defaults())  # iCub right arm, F/T sensor wrench
+        >>> est.regressor.n_base
+        17
+        >>> est.process_joint_state(JointStateData(10**9, ("r_elbow",), [0.1]))  # joints missing
+        []
+        >>> est.n_dropped
+        1
     """
 
     def __init__(self, config: EstimatorConfig, *, regressor: RigidBodyRegressor | None = None,
@@ -358,7 +369,9 @@ class OnlineEstimator:
         """Feed a joint state; return the results of the samples it completed (often none or one).
 
         Never raises on bad data: the pipeline drops and counts bad messages, and a sample the learner
-        rejects is counted under ``rejected_sample`` in :attr:`drops` (the learned state is unchanged).
+        rejects (:class:`~semiparam_ros.errors.RejectedSampleError`) is counted under ``rejected_sample``
+        in :attr:`drops` (the learned state is unchanged). Any other exception is a programming error: it
+        propagates and no drop is counted.
         """
         return self._step_all(self.pipeline.add_joint_state(msg))
 
@@ -369,13 +382,14 @@ class OnlineEstimator:
     def _step_all(self, samples: list[Sample]) -> list[StepResult]:
         # The pipeline drops NaN/inf and values beyond limits.*, but those bounds can be switched off (0)
         # or be loose: a finite but absurd value (e.g. a velocity of 1e200 rad/s) then poisons the q̈
-        # window, and the learners refuse those samples with a ValueError (state untouched). Streaming
-        # must count that as a drop, not abort the message and lose the other samples it completed.
+        # window, and the learners refuse those samples with a RejectedSampleError (state untouched).
+        # Streaming counts that as a drop rather than abort the message and lose the other samples it
+        # completed. Any other exception is a bug and propagates, with the counters untouched.
         results: list[StepResult] = []
         for sample in samples:
             try:
                 results.append(self.step(sample))
-            except ValueError:
+            except RejectedSampleError:
                 self._rejected += 1
         return results
 
@@ -389,8 +403,8 @@ class OnlineEstimator:
             The a-priori prediction and the time it took.
 
         Raises:
-            ValueError: If the learner rejects the sample (wrong sizes, non-finite or absurdly large
-                values, regressor overflow); the learned state is then unchanged.
+            RejectedSampleError: If the learner rejects the sample (wrong sizes, non-finite or absurdly
+                large values, regressor overflow); the learned state is then unchanged.
         """
         start = time.perf_counter()
         if self.learning_enabled:
@@ -500,8 +514,8 @@ class OnlineEstimator:
             path: Checkpoint file.
 
         Raises:
-            ValueError: If the file is missing or corrupt, or was written for another model structure
-                (joints, output, features…); the current state is then left untouched.
+            CheckpointError: If the file is missing or corrupt, or was written for another model
+                structure (joints, output, features…); the current state is then left untouched.
         """
         state = load_npz(Path(path).expanduser())
         try:
@@ -509,22 +523,24 @@ class OnlineEstimator:
             fingerprint = _scalar(state["meta.fingerprint"], str)
             n_learned = _scalar(state["meta.n_samples_learned"], int)
         except KeyError as err:
-            raise ValueError(f"{path}: not a semiparam_ros checkpoint (missing {err})") from err
+            raise CheckpointError(f"{path}: not a semiparam_ros checkpoint (missing {err})") from err
         except (TypeError, ValueError) as err:
-            raise ValueError(f"{path}: corrupt checkpoint metadata: {err}") from err
+            raise CheckpointError(f"{path}: corrupt checkpoint metadata: {err}") from err
         if version != _CHECKPOINT_VERSION:
-            raise ValueError(f"{path}: checkpoint version {version}, expected {_CHECKPOINT_VERSION}")
+            raise CheckpointError(f"{path}: checkpoint version {version}, expected {_CHECKPOINT_VERSION}")
         if fingerprint != self._fingerprint():
-            raise ValueError(f"{path}: checkpoint was written for another model structure: "
-                             f"{_fingerprint_difference(fingerprint, self._fingerprint())}")
+            raise CheckpointError(f"{path}: checkpoint was written for another model structure: "
+                                  f"{_fingerprint_difference(fingerprint, self._fingerprint())}")
         if n_learned < 0:
-            raise ValueError(f"{path}: corrupt checkpoint: {n_learned} samples learned")
+            raise CheckpointError(f"{path}: corrupt checkpoint: {n_learned} samples learned")
         model = self.model.copy()
         try:
             model.load_state_dict(state, "model.")
-        except (TypeError, KeyError, IndexError, OverflowError) as err:
+        except CheckpointError as err:
+            raise CheckpointError(f"{path}: {err}") from err
+        except (TypeError, KeyError, IndexError, OverflowError, ValueError) as err:
             # e.g. a counter stored as a vector: the learners' checks expect scalars; still a bad file
-            raise ValueError(f"{path}: corrupt checkpoint: {type(err).__name__}: {err}") from err
+            raise CheckpointError(f"{path}: corrupt checkpoint: {type(err).__name__}: {err}") from err
         self.model = model
         self.n_samples_learned = n_learned
 

@@ -22,16 +22,13 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.validation import check_positive_int, check_range
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
+
 __all__ = ["RandomFourierFeatures", "Standardizer"]
 
 _RFF_VERSION = 1
 _STD_VERSION = 1
-
-
-def _check_positive_int(name: str, value: Any, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
 
 
 def _as_inputs(X: Any, n_inputs: int, what: str = "X") -> tuple[np.ndarray, bool]:
@@ -41,9 +38,10 @@ def _as_inputs(X: Any, n_inputs: int, what: str = "X") -> tuple[np.ndarray, bool
     if single:
         X2 = X2[None, :]
     if X2.ndim != 2 or X2.shape[1] != n_inputs:
-        raise ValueError(f"{what} must have shape (n, {n_inputs}) or ({n_inputs},), got {np.shape(X)}")
+        raise RejectedSampleError(f"{what} must have shape (n, {n_inputs}) or ({n_inputs},), "
+                                  f"got {np.shape(X)}")
     if X2.size and not np.isfinite(X2).all():
-        raise ValueError(f"{what} contains NaN or inf")
+        raise RejectedSampleError(f"{what} contains NaN or inf")
     return X2, single
 
 
@@ -57,16 +55,21 @@ class RandomFourierFeatures:
         seed: Seed of the random draw of Ω and b (the same seed gives the same map).
 
     Raises:
-        ValueError: For non-positive sizes or σ ≤ 0 / non-finite.
+        ConfigurationError: For non-positive sizes or σ ≤ 0 / non-finite.
+
+    Example:
+        >>> import numpy as np
+        >>> rff = RandomFourierFeatures(n_inputs=3, n_features=4000, sigma=1.0, seed=0)
+        >>> x, x2 = np.zeros(3), np.full(3, 0.5)
+        >>> exact = np.exp(-np.sum((x - x2) ** 2) / 2)  # Gaussian kernel, σ = 1
+        >>> bool(abs(rff.transform(x) @ rff.transform(x2) - exact) < 0.05)  # error ~ 1/√D
+        True
     """
 
     def __init__(self, n_inputs: int, n_features: int, sigma: float, seed: int = 0) -> None:
-        self.n_inputs = _check_positive_int("n_inputs", n_inputs)
-        self.n_features = _check_positive_int("n_features", n_features)
-        sigma = float(sigma)
-        if not (math.isfinite(sigma) and sigma > 0.0):
-            raise ValueError(f"sigma must be a finite number > 0, got {sigma!r}")
-        self.sigma = sigma
+        self.n_inputs = check_positive_int("n_inputs", n_inputs)
+        self.n_features = check_positive_int("n_features", n_features)
+        self.sigma = check_range("sigma", sigma, 0.0, lo_inclusive=False)
         self.seed = int(seed)
         rng = np.random.default_rng(self.seed)
         self.omega_ = rng.normal(0.0, 1.0 / sigma, size=(self.n_inputs, self.n_features))
@@ -83,7 +86,7 @@ class RandomFourierFeatures:
             (D,) for one sample, (n, D) for a batch.
 
         Raises:
-            ValueError: Wrong shape, NaN or inf.
+            RejectedSampleError: Wrong shape, NaN or inf.
         """
         X2, single = _as_inputs(X, self.n_inputs)
         F = self._map(X2)
@@ -121,26 +124,26 @@ class RandomFourierFeatures:
         """Rebuild the map from :meth:`state_dict` output.
 
         Raises:
-            ValueError: Missing keys, wrong version, inconsistent shapes or non-finite arrays.
+            CheckpointError: Missing keys, wrong version, inconsistent shapes or non-finite arrays.
         """
         try:
             if int(state[f"{prefix}version"]) != _RFF_VERSION:
-                raise ValueError("unsupported RandomFourierFeatures state version")
+                raise CheckpointError("unsupported RandomFourierFeatures state version")
             omega = np.asarray(state[f"{prefix}omega"], dtype=np.float64)
             offset = np.asarray(state[f"{prefix}offset"], dtype=np.float64)
             sigma = float(state[f"{prefix}sigma"])
             seed = int(state[f"{prefix}seed"])
         except KeyError as err:
-            raise ValueError(f"RandomFourierFeatures state is missing key {err}") from err
+            raise CheckpointError(f"RandomFourierFeatures state is missing key {err}") from err
         if omega.ndim != 2 or offset.shape != (omega.shape[1],):
-            raise ValueError(f"inconsistent RandomFourierFeatures state: omega {omega.shape}, "
+            raise CheckpointError(f"inconsistent RandomFourierFeatures state: omega {omega.shape}, "
                              f"offset {offset.shape}")
         if not (np.isfinite(omega).all() and np.isfinite(offset).all()):
-            raise ValueError("RandomFourierFeatures state is not finite")
+            raise CheckpointError("RandomFourierFeatures state is not finite")
         obj = cls.__new__(cls)
         obj.n_inputs, obj.n_features = int(omega.shape[0]), int(omega.shape[1])
         if not (math.isfinite(sigma) and sigma > 0.0):
-            raise ValueError(f"invalid sigma {sigma!r} in RandomFourierFeatures state")
+            raise CheckpointError(f"invalid sigma {sigma!r} in RandomFourierFeatures state")
         obj.sigma, obj.seed = sigma, seed
         obj.omega_, obj.offset_ = np.ascontiguousarray(omega), offset.copy()
         obj._scale = math.sqrt(2.0 / obj.n_features)
@@ -169,7 +172,13 @@ class Standardizer:
             random features carry no information; the floor keeps the scale at a physical operating range.
 
     Raises:
-        ValueError: Bad sizes, or inconsistent / non-finite / non-positive mean and scale.
+        ConfigurationError: Bad sizes, or inconsistent / non-finite / non-positive mean and scale.
+
+    Example:
+        >>> import numpy as np
+        >>> s = Standardizer(2).fit(np.array([[0.0, 10.0], [2.0, 30.0]]))  # means 1, 20; stds 1, 10
+        >>> s.transform(np.array([2.0, 10.0]))
+        array([ 1., -1.])
     """
 
     #: Relative standard deviation below which an input counts as constant (scale 1).
@@ -177,11 +186,11 @@ class Standardizer:
 
     def __init__(self, n_inputs: int, warmup: int = 0, *, mean: Any = None, scale: Any = None,
                  min_scale: Any = 0.0) -> None:
-        self.n_inputs = _check_positive_int("n_inputs", n_inputs)
-        self.warmup = _check_positive_int("warmup", warmup, minimum=0)
+        self.n_inputs = check_positive_int("n_inputs", n_inputs)
+        self.warmup = check_positive_int("warmup", warmup, minimum=0)
         floor = np.broadcast_to(np.asarray(min_scale, dtype=np.float64), (self.n_inputs,)).copy()
         if not (np.isfinite(floor).all() and (floor >= 0).all()):
-            raise ValueError(f"min_scale must be finite and >= 0, got {min_scale!r}")
+            raise ConfigurationError(f"min_scale must be finite and >= 0, got {min_scale!r}")
         self.min_scale_ = floor
         self.count_ = 0
         self._m2 = np.zeros(self.n_inputs)
@@ -189,14 +198,14 @@ class Standardizer:
         self.scale_ = np.ones(self.n_inputs)
         self._ready = False
         if (mean is None) != (scale is None):
-            raise ValueError("give both mean and scale, or neither")
+            raise ConfigurationError("give both mean and scale, or neither")
         if mean is not None:
             m = np.asarray(mean, dtype=np.float64)
             s = np.asarray(scale, dtype=np.float64)
             if m.shape != (self.n_inputs,) or s.shape != (self.n_inputs,):
-                raise ValueError(f"mean and scale must have shape ({self.n_inputs},)")
+                raise ConfigurationError(f"mean and scale must have shape ({self.n_inputs},)")
             if not (np.isfinite(m).all() and np.isfinite(s).all() and (s > 0).all()):
-                raise ValueError("mean must be finite and scale finite and > 0")
+                raise ConfigurationError("mean must be finite and scale finite and > 0")
             self.mean_, self.scale_, self._ready = m.copy(), s.copy(), True
 
     @classmethod
@@ -223,11 +232,11 @@ class Standardizer:
             self.
 
         Raises:
-            ValueError: Wrong shape, NaN/inf, or no rows.
+            RejectedSampleError: Wrong shape, NaN/inf, or no rows.
         """
         X2, _ = _as_inputs(X, self.n_inputs)
         if X2.shape[0] == 0:
-            raise ValueError("cannot fit a Standardizer on zero samples")
+            raise RejectedSampleError("cannot fit a Standardizer on zero samples")
         mean = X2.mean(axis=0)
         self._finish(mean, X2.var(axis=0))
         self.count_ = X2.shape[0]
@@ -244,7 +253,7 @@ class Standardizer:
             :attr:`ready` after the call.
 
         Raises:
-            ValueError: Wrong shape or NaN/inf (statistics unchanged).
+            RejectedSampleError: Wrong shape or NaN/inf (statistics unchanged).
         """
         X2, _ = _as_inputs(X, self.n_inputs)
         for x in X2:
@@ -262,7 +271,8 @@ class Standardizer:
         """Standardize one sample (n_inputs,) or a batch (n, n_inputs).
 
         Raises:
-            ValueError: If not :attr:`ready`, wrong shape, NaN/inf.
+            ValueError: If not :attr:`ready` (a call before the warm-up: a programming error).
+            RejectedSampleError: Wrong shape, NaN/inf.
         """
         if not self._ready:
             raise ValueError(f"Standardizer is not ready (warm-up {self.count_}/{self.warmup} samples); "
@@ -297,11 +307,11 @@ class Standardizer:
         """Rebuild a standardizer from :meth:`state_dict` output.
 
         Raises:
-            ValueError: Missing keys, wrong version, inconsistent shapes or invalid values.
+            CheckpointError: Missing keys, wrong version, inconsistent shapes or invalid values.
         """
         try:
             if int(state[f"{prefix}version"]) != _STD_VERSION:
-                raise ValueError("unsupported Standardizer state version")
+                raise CheckpointError("unsupported Standardizer state version")
             mean = np.asarray(state[f"{prefix}mean"], dtype=np.float64)
             m2 = np.asarray(state[f"{prefix}m2"], dtype=np.float64)
             scale = np.asarray(state[f"{prefix}scale"], dtype=np.float64)
@@ -310,12 +320,12 @@ class Standardizer:
             ready = bool(state[f"{prefix}ready"])
             min_scale = np.asarray(state.get(f"{prefix}min_scale", 0.0), dtype=np.float64)
         except KeyError as err:
-            raise ValueError(f"Standardizer state is missing key {err}") from err
+            raise CheckpointError(f"Standardizer state is missing key {err}") from err
         if mean.ndim != 1 or m2.shape != mean.shape or scale.shape != mean.shape or mean.size == 0:
-            raise ValueError("inconsistent Standardizer state shapes")
+            raise CheckpointError("inconsistent Standardizer state shapes")
         if not (np.isfinite(mean).all() and np.isfinite(m2).all() and np.isfinite(scale).all()
                 and (scale > 0).all() and count >= 0 and warmup >= 0):
-            raise ValueError("invalid Standardizer state values")
+            raise CheckpointError("invalid Standardizer state values")
         obj = cls(mean.size, warmup, min_scale=min_scale)
         obj.mean_, obj._m2, obj.scale_ = mean.copy(), m2.copy(), scale.copy()
         obj.count_, obj._ready = count, ready

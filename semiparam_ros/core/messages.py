@@ -198,6 +198,6 @@ def wrench_from_msg(msg: object) -> WrenchData:
     return WrenchData(
         stamp_ns=stamp_to_ns(header.stamp.sec, header.stamp.nanosec),
         frame_id=header.frame_id,
-        force=(force.x, force.y, force.z),
-        torque=(torque.x, torque.y, torque.z),
+        force=np.array((force.x, force.y, force.z), dtype=np.float64),
+        torque=np.array((torque.x, torque.y, torque.z), dtype=np.float64),
     )

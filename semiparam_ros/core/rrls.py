@@ -4,7 +4,7 @@ The learner solves ``W = argmin Σ_m β^{n−m}‖Z_m W − U_m‖² + (prior) �
 the upper-triangular factor ``R`` (``RᵀR = A``, ``R₀ = √λ·I``) and ``d = R⁻ᵀB`` (``B`` the right-hand
 side), stored side by side as ``M = [R | d]`` and rotated together: keeping ``d`` rather than ``B``
 makes ``W = R⁻¹d`` one triangular solve and is far more accurate when ``A`` is ill-conditioned
-(measured here at cond(A) ≈ 1e11: relative error of W 2e-9 through d, 5e-5 through B). A time step
+(the measurement is in ``docs/design-notes.md``). A time step
 appends its k rows with Givens rotations in O(k·b²); there is no refactorization, no explicit inverse
 and no Sherman–Morrison update. The a-priori prediction ``Z W_old``
 of the new rows falls out of the same rotations (:meth:`RecursiveRLS.predict_update`), so
@@ -49,11 +49,11 @@ from scipy.linalg import solve_triangular
 
 from semiparam_ros.core._kernels import back_substitute, qr_rls_steps
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
+from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int, check_range
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
-__all__ = ["RecursiveRLS"]
+__all__ = ["MAX_ABS_INPUT", "RecursiveRLS"]
 
-#: Largest accepted magnitude of an input entry: squares of larger values can overflow float64.
-MAX_ABS_INPUT = 1e150
 #: Blocks with more rows than this are predicted by a triangular solve (the in-rotation prediction
 #: tracks a k×k block and costs O(b·k²)).
 _MAX_TRACKED_ROWS = 32
@@ -74,25 +74,29 @@ class RecursiveRLS:
             ``False`` gives plain exponential forgetting, whose regularizer decays as λβⁿ.
 
     Raises:
-        ValueError: For b < 1, t < 1, λ ≤ 0 or non-finite, β ∉ (0, 1].
+        ConfigurationError: For b < 1, t < 1, λ ≤ 0 or non-finite, β ∉ (0, 1].
 
     Attributes:
         n_samples_seen: Number of data rows absorbed so far.
         n_steps: Number of time steps (update calls, or steps of :meth:`update_steps`).
+
+    Example:
+        >>> import numpy as np
+        >>> rls = RecursiveRLS(n_features=2, n_outputs=1, lam=1e-9)
+        >>> Z = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+        >>> rls.update(Z, Z @ np.array([[2.0], [-1.0]]))  # U = Z W with W = [2, -1]ᵀ
+        >>> np.round(rls.weights.ravel(), 6)
+        array([ 2., -1.])
     """
 
     def __init__(
         self, n_features: int, n_outputs: int, lam: float = 1.0, *, forgetting: float = 1.0,
         keep_prior: bool = True,
     ) -> None:
-        _check_int("n_features", n_features)
-        _check_int("n_outputs", n_outputs)
-        lam = float(lam)
-        forgetting = float(forgetting)
-        if not (math.isfinite(lam) and lam > 0.0):
-            raise ValueError(f"lam must be a finite number > 0, got {lam!r}")
-        if not (0.0 < forgetting <= 1.0):
-            raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")
+        check_positive_int("n_features", n_features)
+        check_positive_int("n_outputs", n_outputs)
+        lam = check_range("lam", lam, 0.0, lo_inclusive=False)
+        forgetting = check_range("forgetting", forgetting, 0.0, 1.0, lo_inclusive=False)
         self.n_features = int(n_features)
         self.n_outputs = int(n_outputs)
         self.lam = lam
@@ -157,8 +161,8 @@ class RecursiveRLS:
             U: (k, t) targets, or (t,) for one row.
 
         Raises:
-            ValueError: Wrong shapes, or non-finite / absurdly large (> 1e150) entries; the learner is
-                left unchanged.
+            RejectedSampleError: Wrong shapes, or non-finite / absurdly large (> 1e150) entries; the
+                learner is left unchanged.
         """
         Z2, U2, _ = self._check_rows(Z, U)
         self._step(Z2, U2, Z2.shape[0], self._no_pred)
@@ -177,7 +181,7 @@ class RecursiveRLS:
             The a-priori prediction, (k, t) or (t,) like U.
 
         Raises:
-            ValueError: As :meth:`update`; the learner is left unchanged.
+            RejectedSampleError: As :meth:`update`; the learner is left unchanged.
         """
         Z2, U2, single = self._check_rows(Z, U)
         P = self._predict_update_valid(Z2, U2)
@@ -215,16 +219,16 @@ class RecursiveRLS:
             (n, t) a-priori predictions if ``predict``, else None.
 
         Raises:
-            ValueError: Wrong shapes, n not a multiple of ``rows_per_step``, non-finite entries; the learner
-                is left unchanged.
+            RejectedSampleError: Wrong shapes, n not a multiple of ``rows_per_step``, non-finite entries;
+                the learner is left unchanged.
         """
-        _check_int("rows_per_step", rows_per_step)
+        check_positive_int("rows_per_step", rows_per_step)
         if predict and rows_per_step > _MAX_TRACKED_ROWS:
-            raise ValueError(f"rows_per_step must be <= {_MAX_TRACKED_ROWS} with predict=True")
+            raise ConfigurationError(f"rows_per_step must be <= {_MAX_TRACKED_ROWS} with predict=True")
         Z2, U2, _ = self._check_rows(Z, U)
         if Z2.shape[0] % rows_per_step:
-            raise ValueError(f"the number of rows ({Z2.shape[0]}) is not a multiple of rows_per_step "
-                             f"({rows_per_step})")
+            raise RejectedSampleError(f"the number of rows ({Z2.shape[0]}) is not a multiple of "
+                                      f"rows_per_step ({rows_per_step})")
         P = np.empty((Z2.shape[0], self.n_outputs)) if predict else self._no_pred
         self._step(Z2, U2, rows_per_step, P)
         return P if predict else None
@@ -261,7 +265,7 @@ class RecursiveRLS:
         j = int(qr_rls_steps(self._M, Z, U, rows_per_step, self._scale, self._reg, self._j, P, MAX_ABS_INPUT,
                              E))
         if j < 0:
-            raise ValueError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in "
+            raise RejectedSampleError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in "
                              "magnitude")
         self._W = None
         self._j = j
@@ -280,7 +284,7 @@ class RecursiveRLS:
             (k, t), or (t,) for one row.
 
         Raises:
-            ValueError: Wrong shape or non-finite entries.
+            RejectedSampleError: Wrong shape or non-finite entries.
         """
         Z2, single = self._check_features(Z)
         P = Z2 @ self.weights
@@ -299,7 +303,7 @@ class RecursiveRLS:
             (k,) non-negative values, or a float array of shape () for one row.
 
         Raises:
-            ValueError: Wrong shape or non-finite entries.
+            RejectedSampleError: Wrong shape or non-finite entries.
         """
         Z2, single = self._check_features(Z)
         V = solve_triangular(self._M[:, : self.n_features], Z2.T, trans="T", lower=False, check_finite=False)
@@ -313,12 +317,12 @@ class RecursiveRLS:
         if single:
             Z2 = Z2[None, :]
         if Z2.ndim != 2 or Z2.shape[1] != self.n_features:
-            raise ValueError(f"Z must have shape (k, {self.n_features}) or ({self.n_features},), "
+            raise RejectedSampleError(f"Z must have shape (k, {self.n_features}) or ({self.n_features},), "
                              f"got {np.shape(Z)}")
         if Z2.shape[0] == 0:
-            raise ValueError("Z has no rows")
+            raise RejectedSampleError("Z has no rows")
         if values:
-            _check_finite("Z", Z2)
+            check_finite_array("Z", Z2)
         return np.ascontiguousarray(Z2), single
 
     def _check_rows(self, Z: Any, U: Any) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -327,10 +331,10 @@ class RecursiveRLS:
         t = self.n_outputs
         if single:
             if U2.shape != (t,):
-                raise ValueError(f"U must have shape ({t},) for a single row, got {np.shape(U)}")
+                raise RejectedSampleError(f"U must have shape ({t},) for a single row, got {np.shape(U)}")
             U2 = U2[None, :]
         elif U2.shape != (Z2.shape[0], t):
-            raise ValueError(f"U must have shape ({Z2.shape[0]}, {t}), got {np.shape(U)}")
+            raise RejectedSampleError(f"U must have shape ({Z2.shape[0]}, {t}), got {np.shape(U)}")
         return Z2, np.ascontiguousarray(U2), single
 
     # ------------------------------------------------------------------ persistence
@@ -358,12 +362,12 @@ class RecursiveRLS:
         """Rebuild a learner from :meth:`state_dict` output.
 
         Raises:
-            ValueError: Missing keys, wrong version, inconsistent shapes or non-finite state.
+            CheckpointError: Missing keys, wrong version, inconsistent shapes or non-finite state.
         """
         try:
             version = int(state[f"{prefix}version"])
             if version != _STATE_VERSION:
-                raise ValueError(f"unsupported RecursiveRLS state version {version}")
+                raise CheckpointError(f"unsupported RecursiveRLS state version {version}")
             obj = cls(int(state[f"{prefix}n_features"]), int(state[f"{prefix}n_outputs"]),
                       float(state[f"{prefix}lam"]), forgetting=float(state[f"{prefix}forgetting"]),
                       keep_prior=bool(state[f"{prefix}keep_prior"]))
@@ -372,22 +376,22 @@ class RecursiveRLS:
             n_steps = int(state[f"{prefix}n_steps"])
             j = int(state[f"{prefix}j"])
         except KeyError as err:
-            raise ValueError(f"RecursiveRLS state is missing key {err}") from err
+            raise CheckpointError(f"RecursiveRLS state is missing key {err}") from err
         except (TypeError, ValueError) as err:
-            raise ValueError(f"invalid RecursiveRLS state: {err}") from err
+            raise CheckpointError(f"invalid RecursiveRLS state: {err}") from err
         if M.shape != obj._M.shape:
-            raise ValueError(f"RecursiveRLS state M has shape {M.shape}, expected {obj._M.shape}")
+            raise CheckpointError(f"RecursiveRLS state M has shape {M.shape}, expected {obj._M.shape}")
         if not np.isfinite(M).all():
-            raise ValueError("RecursiveRLS state M is not finite")
+            raise CheckpointError("RecursiveRLS state M is not finite")
         R = M[:, : obj.n_features]
         if np.any(np.tril(R, -1) != 0.0) or np.any(np.diag(R) < 0.0):
-            raise ValueError("RecursiveRLS state R is not upper triangular with a non-negative diagonal")
+            raise CheckpointError("RecursiveRLS state R is not upper triangular with a non-negative diagonal")
         if obj.keep_prior and np.any(np.diag(R) == 0.0):
             # with the prior kept A ⪰ (min over the cycle of the regularizer)·I > 0, so a zero pivot can only
             # come from a damaged file, and every later solve would fail
-            raise ValueError("RecursiveRLS state R is singular (zero on the diagonal)")
+            raise CheckpointError("RecursiveRLS state R is singular (zero on the diagonal)")
         if not (0 <= j < obj.n_features) or n_samples_seen < 0 or n_steps < 0:
-            raise ValueError("RecursiveRLS state counters are out of range")
+            raise CheckpointError("RecursiveRLS state counters are out of range")
         obj._M[:] = M
         obj.n_samples_seen, obj.n_steps, obj._j = n_samples_seen, n_steps, j
         return obj
@@ -401,7 +405,7 @@ class RecursiveRLS:
         """Read a learner written by :meth:`save`; predictions are reproduced bit for bit.
 
         Raises:
-            ValueError: Missing, corrupt or inconsistent file.
+            CheckpointError: Missing, corrupt or inconsistent file.
         """
         return cls.from_state_dict(load_npz(path))
 
@@ -409,14 +413,3 @@ class RecursiveRLS:
         return (f"RecursiveRLS(n_features={self.n_features}, n_outputs={self.n_outputs}, lam={self.lam}, "
                 f"forgetting={self.forgetting}, keep_prior={self.keep_prior}, "
                 f"n_samples_seen={self.n_samples_seen})")
-
-
-def _check_int(name: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-
-
-def _check_finite(name: str, arr: np.ndarray) -> None:
-    # One reduction catches NaN (comparison false), ±inf and values whose squares would overflow.
-    if arr.size and not (np.abs(arr).max() <= MAX_ABS_INPUT):
-        raise ValueError(f"{name} contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")

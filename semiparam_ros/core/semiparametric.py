@@ -19,8 +19,8 @@ so a checkpoint is loaded into a model built with the same regressor.
 
 Inputs: ``x = [q, q̇, q̈]`` (rad, rad/s, rad/s², joints in configured order); ``y`` the measured output
 (a wrench ``[fx, fy, fz, tx, ty, tz]`` in N and N·m in the sensor frame, or joint torques in N·m).
-Bad ``x``/``y`` (shape, NaN/inf) raise ``ValueError`` and leave the model unchanged: every check runs
-before any state is touched.
+Bad ``x``/``y`` (shape, NaN/inf) raise :class:`~semiparam_ros.errors.RejectedSampleError` and leave the
+model unchanged: every check runs before any state is touched.
 """
 
 from __future__ import annotations
@@ -35,7 +35,9 @@ import numpy as np
 
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.features import RandomFourierFeatures, Standardizer
-from semiparam_ros.core.rrls import MAX_ABS_INPUT, RecursiveRLS
+from semiparam_ros.core.rrls import RecursiveRLS
+from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = ["NonparametricModel", "ParametricModel", "Prediction", "SemiparametricModel"]
 
@@ -60,16 +62,6 @@ class Prediction:
     variance: np.ndarray | None = None
 
 
-def _check_vector(name: str, v: Any, size: int | None) -> np.ndarray:
-    a = np.asarray(v, dtype=np.float64)
-    if a.ndim != 1 or (size is not None and a.shape[0] != size) or a.shape[0] == 0:
-        want = f"({size},)" if size is not None else "a non-empty 1-D array"
-        raise ValueError(f"{name} must have shape {want}, got {np.shape(v)}")
-    if not (np.abs(a).max() <= MAX_ABS_INPUT):
-        raise ValueError(f"{name} contains NaN, inf or absurdly large entries")
-    return np.ascontiguousarray(a)
-
-
 class _Model:
     """Shared persistence plumbing; subclasses define ``_kind``, ``_components`` and ``_shape_key``."""
 
@@ -91,7 +83,7 @@ class _Model:
         """Load a checkpoint written by :meth:`save` into this model (in place); returns self.
 
         Raises:
-            ValueError: Missing/corrupt file, or a state of another kind or size (model unchanged).
+            CheckpointError: Missing/corrupt file, or a state of another kind or size (model unchanged).
         """
         self.load_state_dict(load_npz(path))
         return self
@@ -99,10 +91,10 @@ class _Model:
     def _check_kind(self, state: dict[str, np.ndarray], prefix: str) -> None:
         key = f"{prefix}kind"
         if key not in state:
-            raise ValueError(f"state is missing key {key!r}")
+            raise CheckpointError(f"state is missing key {key!r}")
         kind = str(np.asarray(state[key]))
         if kind != self._kind:
-            raise ValueError(f"state holds a {kind!r} model, not a {self._kind!r} model")
+            raise CheckpointError(f"state holds a {kind!r} model, not a {self._kind!r} model")
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -124,13 +116,24 @@ class ParametricModel(_Model):
             zero (the paper: no CAD prior).
 
     Raises:
-        ValueError: Invalid sizes or hyperparameters.
+        ConfigurationError: Invalid sizes or hyperparameters.
 
     **Prior mean.** The model solves ``π̂ = argmin Σ β^{n−m}‖y_m − Φ_m π‖² + λ‖π − π₀‖²`` by learning the
     deviation ``δ = π − π₀`` with the recursive ridge of :mod:`semiparam_ros.core.rrls` on the targets
     ``y − Φπ₀``; ``π̂ = π₀ + δ̂`` and ``ŷ = Φ(π₀ + δ̂)``. Before any data ``δ̂ = 0``, so the prediction is
     ``Φπ₀`` exactly; and bounded forgetting, which keeps the regularizer on δ at strength λ around 0, keeps
     it around π₀ — unexcited directions relax toward the prior, never toward zero.
+
+    Example:
+        >>> import numpy as np
+        >>> line = lambda x: np.array([[x[0], 1.0]])  # Φ(x) of y = a·x + b, π = [a, b]
+        >>> model = ParametricModel(line, n_params=2, n_outputs=1, lam=1e-9)
+        >>> for x in (0.0, 1.0, 2.0):
+        ...     model.learn_one([x], [3.0 * x + 1.0])
+        >>> np.round(model.parameters, 6)
+        array([3., 1.])
+        >>> round(float(model.predict_one([4.0]).total[0]), 6)
+        13.0
     """
 
     _kind = "parametric"
@@ -138,22 +141,22 @@ class ParametricModel(_Model):
     def __init__(self, regressor: Regressor, n_params: int, n_outputs: int, *, lam: float = 1.0,
                  forgetting: float = 1.0, prior: Any = None) -> None:
         if not callable(regressor):
-            raise ValueError("regressor must be callable")
+            raise ConfigurationError("regressor must be callable")
         self.regressor = regressor
         self.rls = RecursiveRLS(n_params, 1, lam, forgetting=forgetting)
         self.n_params = self.rls.n_features
         self.n_outputs = int(n_outputs)
         if self.n_outputs < 1:
-            raise ValueError(f"n_outputs must be >= 1, got {n_outputs!r}")
+            raise ConfigurationError(f"n_outputs must be >= 1, got {n_outputs!r}")
         self._set_prior(np.zeros(self.n_params) if prior is None else prior)
         self.n_samples_seen = 0
 
     def _set_prior(self, prior: Any) -> None:
         p = np.asarray(prior, dtype=np.float64)
         if p.shape != (self.n_params,):
-            raise ValueError(f"prior must have shape ({self.n_params},), got {p.shape}")
+            raise ConfigurationError(f"prior must have shape ({self.n_params},), got {p.shape}")
         if not (np.abs(p).max(initial=0.0) <= MAX_ABS_INPUT):
-            raise ValueError("prior contains NaN, inf or absurdly large entries")
+            raise ConfigurationError("prior contains NaN, inf or absurdly large entries")
         self.prior = np.ascontiguousarray(p)
         self.prior.flags.writeable = False
         self._has_prior = bool(np.any(p != 0.0))
@@ -184,15 +187,15 @@ class ParametricModel(_Model):
     def _phi(self, x: np.ndarray) -> np.ndarray:
         Phi = np.asarray(self.regressor(x), dtype=np.float64)
         if Phi.shape != (self.n_outputs, self.n_params):
-            raise ValueError(f"regressor returned shape {Phi.shape}, expected ({self.n_outputs}, "
+            raise ConfigurationError(f"regressor returned shape {Phi.shape}, expected ({self.n_outputs}, "
                              f"{self.n_params})")
         if not (np.abs(Phi).max() <= MAX_ABS_INPUT):
-            raise ValueError("regressor returned NaN, inf or absurdly large entries")
+            raise RejectedSampleError("regressor returned NaN, inf or absurdly large entries")
         return np.ascontiguousarray(Phi)
 
     def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None]:
-        xv = _check_vector("x", x, None)
-        yv = None if y is None else _check_vector("y", y, self.n_outputs)
+        xv = check_finite_array("x", x, (None,))
+        yv = None if y is None else check_finite_array("y", y, (self.n_outputs,))
         return xv, yv
 
     # --- interface
@@ -204,7 +207,7 @@ class ParametricModel(_Model):
             return_variance: Also compute ``diag(Φ A⁻¹ Φᵀ)`` (one triangular solve).
 
         Raises:
-            ValueError: Bad x or regressor output.
+            RejectedSampleError: Bad x or regressor output.
         """
         xv, _ = self._check(x)
         Phi = self._phi(xv)
@@ -216,9 +219,10 @@ class ParametricModel(_Model):
         """Update π̂ with one sample (t rows, one time step).
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         xv, yv = self._check(x, y)
+        assert yv is not None  # _check returns y checked when it is given
         Phi = self._phi(xv)
         self._update_phi(Phi, yv)
         self.n_samples_seen += 1
@@ -227,9 +231,10 @@ class ParametricModel(_Model):
         """Return the a-priori prediction for x, then learn (x, y), in one pass over the factor.
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         xv, yv = self._check(x, y)
+        assert yv is not None  # _check returns y checked when it is given
         Phi = self._phi(xv)
         yp = self._predict_update_phi(Phi, yv)
         self.n_samples_seen += 1
@@ -260,7 +265,7 @@ class ParametricModel(_Model):
         (written before priors existed) had a zero prior.
 
         Raises:
-            ValueError: Wrong kind, missing keys, or sizes that do not match this model's regressor.
+            CheckpointError: Wrong kind, missing keys, or sizes that do not match this model's regressor.
         """
         self._check_kind(state, prefix)
         rls = RecursiveRLS.from_state_dict(state, f"{prefix}rls.")
@@ -269,13 +274,13 @@ class ParametricModel(_Model):
             n_outputs = int(state[f"{prefix}n_outputs"])
             n_seen = int(state[f"{prefix}n_samples_seen"])
         except KeyError as err:
-            raise ValueError(f"state is missing key {err}") from err
+            raise CheckpointError(f"state is missing key {err}") from err
         if rls.n_features != self.n_params or rls.n_outputs != 1 or n_outputs != self.n_outputs:
-            raise ValueError(f"state is for n_params={rls.n_features}, n_outputs={n_outputs}; this model has "
-                             f"n_params={self.n_params}, n_outputs={self.n_outputs}")
+            raise CheckpointError(f"state is for n_params={rls.n_features}, n_outputs={n_outputs}; "
+                                  f"this model has n_params={self.n_params}, n_outputs={self.n_outputs}")
         if prior.shape != (self.n_params,) or not np.isfinite(prior).all():
-            raise ValueError(f"state has a prior of shape {prior.shape} or non-finite values; expected "
-                             f"({self.n_params},) finite")
+            raise CheckpointError(f"state has a prior of shape {prior.shape} or non-finite values; expected "
+                                  f"({self.n_params},) finite")
         self._set_prior(prior)
         self.rls, self.n_samples_seen = rls, n_seen
 
@@ -299,7 +304,15 @@ class NonparametricModel(_Model):
             see :class:`Standardizer`.
 
     Raises:
-        ValueError: Invalid sizes or hyperparameters, or a standardizer of the wrong size.
+        ConfigurationError: Invalid sizes or hyperparameters, or a standardizer of the wrong size.
+
+    Example:
+        >>> import numpy as np
+        >>> model = NonparametricModel(1, 1, n_features=300, sigma=0.5, lam=1e-3, seed=0)
+        >>> for x in np.linspace(-1.0, 1.0, 400):
+        ...     model.learn_one([x], [np.sin(3.0 * x)])
+        >>> bool(abs(model.predict_one([0.3]).total[0] - np.sin(0.9)) < 0.01)
+        True
     """
 
     _kind = "nonparametric"
@@ -344,9 +357,9 @@ class NonparametricModel(_Model):
         """Predict ``φ(s(x)) W`` (zeros during the warm-up).
 
         Raises:
-            ValueError: Bad x.
+            RejectedSampleError: Bad x.
         """
-        xv = _check_vector("x", x, self.n_inputs)
+        xv = check_finite_array("x", x, (self.n_inputs,))
         r, var = self._predict(xv, return_variance)
         return Prediction(np.zeros(self.n_outputs), r, r.copy(), var)
 
@@ -354,10 +367,10 @@ class NonparametricModel(_Model):
         """Learn one sample (during the warm-up: only feed the standardizer).
 
         Raises:
-            ValueError: Bad x or y (model unchanged).
+            RejectedSampleError: Bad x or y (model unchanged).
         """
-        xv = _check_vector("x", x, self.n_inputs)
-        yv = _check_vector("y", y, self.n_outputs)
+        xv = check_finite_array("x", x, (self.n_inputs,))
+        yv = check_finite_array("y", y, (self.n_outputs,))
         self._learn(xv, yv, False)
         self.n_samples_seen += 1
 
@@ -365,10 +378,10 @@ class NonparametricModel(_Model):
         """Return the a-priori prediction for x, then learn (x, y) (one pass over the factor).
 
         Raises:
-            ValueError: Bad x or y (model unchanged).
+            RejectedSampleError: Bad x or y (model unchanged).
         """
-        xv = _check_vector("x", x, self.n_inputs)
-        yv = _check_vector("y", y, self.n_outputs)
+        xv = check_finite_array("x", x, (self.n_inputs,))
+        yv = check_finite_array("y", y, (self.n_outputs,))
         r = self._learn(xv, yv, True)
         self.n_samples_seen += 1
         return Prediction(np.zeros(self.n_outputs), r, r.copy())
@@ -398,7 +411,7 @@ class NonparametricModel(_Model):
         """Replace the whole state (features included), validated before anything changes.
 
         Raises:
-            ValueError: Wrong kind, missing keys or sizes that do not match n_inputs / n_outputs.
+            CheckpointError: Wrong kind, missing keys or sizes that do not match n_inputs / n_outputs.
         """
         self._check_kind(state, prefix)
         rff = RandomFourierFeatures.from_state_dict(state, f"{prefix}rff.")
@@ -408,10 +421,10 @@ class NonparametricModel(_Model):
         try:
             n_seen = int(state[f"{prefix}n_samples_seen"])
         except KeyError as err:
-            raise ValueError(f"state is missing key {err}") from err
+            raise CheckpointError(f"state is missing key {err}") from err
         if (rff.n_inputs != self.n_inputs or std.n_inputs != self.n_inputs or std0.n_inputs != self.n_inputs
                 or rls.n_features != rff.n_features or rls.n_outputs != self.n_outputs):
-            raise ValueError(f"state does not fit a model with n_inputs={self.n_inputs}, "
+            raise CheckpointError(f"state does not fit a model with n_inputs={self.n_inputs}, "
                              f"n_outputs={self.n_outputs}")
         self.rff, self.standardizer, self.rls, self.n_samples_seen = rff, std, rls, n_seen
         self._initial_standardizer = std0
@@ -421,17 +434,16 @@ def _make_standardizer(n_inputs: int, standardizer: Standardizer | None, warmup:
                        min_scale: Any = 0.0) -> Standardizer:
     if standardizer is not None:
         if not isinstance(standardizer, Standardizer):
-            raise ValueError("standardizer must be a Standardizer")
+            raise ConfigurationError("standardizer must be a Standardizer")
         if standardizer.n_inputs != n_inputs:
-            raise ValueError(f"standardizer has {standardizer.n_inputs} inputs, expected {n_inputs}")
+            raise ConfigurationError(f"standardizer has {standardizer.n_inputs} inputs, expected {n_inputs}")
         if warmup:
-            raise ValueError("give either a standardizer or standardizer_warmup, not both")
+            raise ConfigurationError("give either a standardizer or standardizer_warmup, not both")
         std = standardizer.copy()
         if not std.ready and std.warmup == 0:
-            raise ValueError("the standardizer is neither fitted nor configured with a warm-up")
+            raise ConfigurationError("the standardizer is neither fitted nor configured with a warm-up")
         return std
-    if isinstance(warmup, bool) or not isinstance(warmup, int | np.integer) or warmup < 0:
-        raise ValueError(f"standardizer_warmup must be an integer >= 0, got {warmup!r}")
+    warmup = check_positive_int("standardizer_warmup", warmup, minimum=0)
     if warmup == 0:
         return Standardizer.identity(n_inputs)
     return Standardizer(n_inputs, int(warmup), min_scale=min_scale)
@@ -456,8 +468,8 @@ class _TwoStageModel(_Model):
         return self.parametric.regressor
 
     def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        xv = _check_vector("x", x, self.n_inputs)
-        yv = None if y is None else _check_vector("y", y, self.n_outputs)
+        xv = check_finite_array("x", x, (self.n_inputs,))
+        yv = None if y is None else check_finite_array("y", y, (self.n_outputs,))
         return xv, yv, self.parametric._phi(xv)
 
     @property
@@ -480,13 +492,13 @@ class _TwoStageModel(_Model):
         return state
 
     def _check_loaded(self, parametric: ParametricModel, nonparametric: NonparametricModel) -> None:
-        """Extra consistency checks of a loaded pair of learners (raise ValueError); none by default."""
+        """Extra consistency checks of a loaded pair of learners (raise CheckpointError); none by default."""
 
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
         """Replace both learners' state (validated completely before anything changes).
 
         Raises:
-            ValueError: Wrong kind, missing keys or sizes that do not match this model.
+            CheckpointError: Wrong kind, missing keys or sizes that do not match this model.
         """
         self._check_kind(state, prefix)
         p = self.parametric.copy()
@@ -497,7 +509,7 @@ class _TwoStageModel(_Model):
         try:
             n_seen = int(state[f"{prefix}n_samples_seen"])
         except KeyError as err:
-            raise ValueError(f"state is missing key {err}") from err
+            raise CheckpointError(f"state is missing key {err}") from err
         self.parametric, self.nonparametric, self.n_samples_seen = p, npm, n_seen
 
 
@@ -530,23 +542,32 @@ class SemiparametricModel(_TwoStageModel):
         prior: Prior mean π₀ of the parametric stage (see :class:`ParametricModel`); default zero.
 
     Raises:
-        ValueError: Invalid sizes or hyperparameters.
+        ConfigurationError: Invalid sizes or hyperparameters.
 
     **Why ŷ is standardized with the measured y's statistics.** ŷ enters the residual stage as an estimate
     of y, so y's own mean and spread are its natural units, and they do not depend on the rigid-body
     stage's state. ŷ's own statistics over the warm-up do: the parametric stage starts from its prior
     (zero in the paper, or the URDF's) and is still converging while the warm-up runs, so its early a-priori
-    predictions (zeros, then overshoots) bias the mean and inflate the spread of the ŷ block — on the
-    synthetic iCub XY circles by up to a factor 2.6 on the torque components — and that mis-scaling is
-    frozen into the kernel metric for the rest of the model's life, weighting the ŷ coordinates
-    arbitrarily against x.
+    predictions (zeros, then overshoots) bias the mean and inflate the spread of the ŷ block, and that
+    mis-scaling is frozen into the kernel metric for the rest of the model's life, weighting the ŷ
+    coordinates arbitrarily against x.
     Once the parametric stage has converged ŷ ≈ y, so the measured statistics are what ŷ's would then be.
-    The warm-up sees y anyway (the residual target needs it), so this costs nothing. Ablation on the
-    paper's protocol (synthetic XY→XZ bags, D = 500, grid λ_NP ∈ {0.001, 0.01, 0.1} × σ ∈ {3, 4, 6, 8}):
-    SP's torque RMSE at regime relative to NP's is lower at 10 of the 12 points (e.g. 1.029 → 1.019,
-    1.102 → 1.069), its force RMSE at regime changes by less than 0.6 %, and its error over the first 3 s
-    is lower at 8 of 12 points for force and for torque. With an explicit ``standardizer`` this does not
-    apply.
+    The warm-up sees y anyway (the residual target needs it), so this costs nothing. With an explicit
+    ``standardizer`` this does not apply. The ablation behind the default is in ``docs/design-notes.md``.
+
+    Example:
+        >>> import numpy as np
+        >>> line = lambda x: np.array([[x[0], 1.0]])  # rigid part y = a·x + b
+        >>> model = SemiparametricModel(line, 2, 1, 1, lam_parametric=1e-9, lam_nonparametric=1e-3,
+        ...                             n_features=300, sigma=1.0)
+        >>> for x in np.linspace(-1.0, 1.0, 400):
+        ...     _ = model.predict_learn_one([x], [3.0 * x + 1.0 + 0.2 * np.sin(3.0 * x)])
+        >>> pred = model.predict_one([0.3])
+        >>> bool(np.allclose(pred.total, pred.parametric + pred.residual))
+        True
+        >>> truth = 1.9 + 0.2 * np.sin(0.9)
+        >>> bool(abs(pred.total[0] - truth) < 0.25 * abs(pred.parametric[0] - truth))  # the residual helps
+        True
     """
 
     _kind = "semiparametric"
@@ -560,7 +581,7 @@ class SemiparametricModel(_TwoStageModel):
                  standardizer_min_scale: Any = 0.0, yhat_statistics: str = "measured",
                  prior: Any = None) -> None:
         if yhat_statistics not in self._YHAT_STATISTICS:
-            raise ValueError(f"yhat_statistics must be one of {self._YHAT_STATISTICS}, "
+            raise ConfigurationError(f"yhat_statistics must be one of {self._YHAT_STATISTICS}, "
                              f"got {yhat_statistics!r}")
         self.yhat_statistics = yhat_statistics
         self.parametric = ParametricModel(regressor, n_params, n_outputs, lam=lam_parametric,
@@ -579,13 +600,14 @@ class SemiparametricModel(_TwoStageModel):
         """Predict ``ŷ + Δŷ`` with both parts.
 
         Raises:
-            ValueError: Bad x or regressor output.
+            RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
         yp = self.parametric._predict_phi(Phi)
         r, var_np = self.nonparametric._predict(np.concatenate([xv, yp]), return_variance)
         var = None
         if return_variance:
+            assert var_np is not None  # _predict computes it when asked
             var = self.parametric.rls.variance(Phi) + np.nan_to_num(var_np, nan=0.0)
         return Prediction(yp, r, yp + r, var)
 
@@ -609,7 +631,7 @@ class SemiparametricModel(_TwoStageModel):
         """Learn one sample: parametric stage, then the residual of its a-priori prediction.
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         self._step(x, y, False)
 
@@ -617,7 +639,7 @@ class SemiparametricModel(_TwoStageModel):
         """Return the a-priori prediction (both parts), then learn (x, y); one pass per stage.
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         out = self._step(x, y, True)
         assert out is not None

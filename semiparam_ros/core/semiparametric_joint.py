@@ -28,18 +28,14 @@ the exact π̂ of (1); then ``Ŵ_k = R⁻¹(d_k − G_k π̂)``. The a-priori pr
 
 the rigid-body prediction where the kernel predicts nothing (``P_k = 0``) and the kernel's where ``Φ_k``
 is fully explained by it. Cost: the random-feature learner carries ``t·p`` more output columns (102 for the
-iCub wrench: +40 % flops at D = 500); the π learner is O(t·p²).
+iCub wrench); the π learner is O(t·p²).
 
-When to prefer which (measured on the synthetic iCub bags, ``docs/results.md``): on a trajectory the
-model has not seen (train XY circles, test XZ) the joint fit's error over the first 3 s is 0.77× (force)
-and 0.82× (torque) NP's, against the cascade's 1.00× and 0.84×, and at regime it ties NP; on the
-trajectory it was trained on, the cascade is ≈3 % better at regime (its ŷ input helps there). The price of
-fitting everything jointly: (1) explains the samples before a change of the inertial parameters (a
-payload) with the new π as well, so its kernel term must absorb ``Φ(π_old − π_new)`` on the old samples,
-which it cannot tell from the new ones by x alone; with forgetting β = 0.995 the joint fit recovers from a
-0.5 kg pickup in 7–10 s against the cascade's 0–4 s, and without forgetting it does not recover (the
-cascade's residual targets stay relative to the π̂ of their time, and its ŷ input moves with the payload).
-The paper's cascade therefore stays the default.
+The price of fitting everything jointly: (1) explains the samples before a change of the inertial
+parameters (a payload) with the new π as well, so its kernel term must absorb ``Φ(π_old − π_new)`` on the
+old samples, which it cannot tell from the new ones by x alone; only forgetting (β < 1) lets it recover,
+whereas the cascade's residual targets stay relative to the π̂ of their time and its ŷ input moves with the
+payload. The paper's cascade therefore stays the default; the measured comparison (first seconds on an
+unseen trajectory, regime, recovery after a pickup) is in ``docs/design-notes.md``.
 
 Parts reported in :class:`Prediction`: ``parametric = Φ(x) π̂`` (the rigid-body term of (1)),
 ``residual = total − parametric``. Units: x = [q, q̇, q̈] (rad, rad/s, rad/s²), y in N and N·m (wrench in
@@ -60,6 +56,7 @@ from semiparam_ros.core.semiparametric import (
     Regressor,
     _TwoStageModel,
 )
+from semiparam_ros.errors import CheckpointError
 
 __all__ = ["JointSemiparametricModel"]
 
@@ -89,7 +86,17 @@ class JointSemiparametricModel(_TwoStageModel):
             before any data the prediction is ``Φπ₀``).
 
     Raises:
-        ValueError: Invalid sizes or hyperparameters.
+        ConfigurationError: Invalid sizes or hyperparameters.
+
+    Example:
+        >>> import numpy as np
+        >>> line = lambda x: np.array([[x[0], 1.0]])
+        >>> model = JointSemiparametricModel(line, 2, 1, 1, lam_parametric=1e-9, lam_nonparametric=1e-3,
+        ...                                  n_features=300, sigma=0.5)
+        >>> for x in np.linspace(-1.0, 1.0, 400):
+        ...     model.learn_one([x], [3.0 * x + 1.0 + 0.2 * np.sin(3.0 * x)])
+        >>> bool(abs(model.predict_one([0.3]).total[0] - (1.9 + 0.2 * np.sin(0.9))) < 0.01)
+        True
     """
 
     _kind = "semiparametric_joint"
@@ -135,7 +142,7 @@ class JointSemiparametricModel(_TwoStageModel):
                 variance of y).
 
         Raises:
-            ValueError: Bad x or regressor output.
+            RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
         pi = self.parametric.rls.weights[:, 0]
@@ -197,7 +204,7 @@ class JointSemiparametricModel(_TwoStageModel):
         """Learn one sample (x, y).
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         self._step(x, y)
 
@@ -205,7 +212,7 @@ class JointSemiparametricModel(_TwoStageModel):
         """Return the a-priori prediction (both parts), then learn (x, y); one pass per learner.
 
         Raises:
-            ValueError: Bad x, y or regressor output (model unchanged).
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
         """
         return self._step(x, y)
 
@@ -216,4 +223,4 @@ class JointSemiparametricModel(_TwoStageModel):
 
     def _check_loaded(self, parametric: ParametricModel, nonparametric: NonparametricModel) -> None:
         if parametric.rls.forgetting != nonparametric.rls.forgetting:
-            raise ValueError("state has different forgetting factors in its two learners")
+            raise CheckpointError("state has different forgetting factors in its two learners")

@@ -11,14 +11,20 @@ Writing goes through :class:`rosbags.rosbag2.Writer` (rosbag2 version 9, MCAP st
 Jazzy typestore, which gives ``<folder>/<folder>.mcap`` plus ``metadata.yaml`` — the layout ``ros2 bag``
 produces, readable by ``ros2 bag play`` on a ROS machine.
 
-Every failure to read or write a bag raises :class:`~semiparam_ros.io.errors.BagError` (a
+A truncated MCAP file (no footer: the recorder was killed or the robot powered off) or one with a corrupt
+chunk is not refused: it is read by a sequential scan (:mod:`semiparam_ros.io.mcap_scan`) that recovers
+every message complete before the cut and skips chunks that do not decode, and a
+:class:`BagRecoveryWarning` says how many messages and how much log time were recovered.
+
+Every other failure to read or write a bag raises :class:`~semiparam_ros.errors.BagError` (a
 ``ValueError``) whose message names the path and, where relevant, the topic.
 """
 
 from __future__ import annotations
 
 import shutil
-from collections.abc import Iterable, Iterator, Sequence
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from semiparam_ros.core.messages import (
     JointStateData,
@@ -37,7 +43,8 @@ from semiparam_ros.core.messages import (
     stamp_to_ns,
     wrench_from_msg,
 )
-from semiparam_ros.io.errors import BagError
+from semiparam_ros.errors import BagError
+from semiparam_ros.io.mcap_scan import McapScan, ScannedChannel
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
@@ -49,6 +56,7 @@ __all__ = [
     "JOINT_TRAJECTORY_TYPE",
     "WRENCH_STAMPED_TYPE",
     "BagError",
+    "BagRecoveryWarning",
     "BagWriter",
     "TopicArrays",
     "TopicInfo",
@@ -116,21 +124,40 @@ def _open_reader(path: Path) -> AnyReader:
     return reader
 
 
-def _connections_for(reader: AnyReader, path: Path, topics: dict[str, str | None]) -> list[Connection]:
+def _mcap_file(path: Path) -> Path | None:
+    """Return the MCAP file behind a bag path (a bare ``.mcap``, or a folder's only one), else None."""
+    if path.is_file():
+        return path if path.suffix == ".mcap" else None
+    mcaps = sorted(path.glob("*.mcap")) if path.is_dir() else []
+    return mcaps[0] if len(mcaps) == 1 else None
+
+
+def _scan_or_raise(path: Path, err: BagError) -> McapScan:
+    """Start a recovery scan of a bag that AnyReader cannot read, or re-raise ``err`` if none is possible."""
+    mcap = _mcap_file(path)
+    if mcap is None:
+        raise err
+    try:
+        return McapScan(mcap)
+    except (OSError, ValueError):
+        raise err from err.__cause__
+
+
+def _connections_for(connections: Sequence[Any], path: Path, topics: dict[str, str | None]) -> list[Any]:
     """Select the connections of the requested topics, checking presence and message type.
 
     Args:
-        reader: An open reader.
+        connections: The bag's connections (objects with ``topic`` and ``msgtype``).
         path: The bag path (for messages).
         topics: Topic name -> required message type (``None``: any type).
 
     Raises:
         BagError: A topic is missing or carries another type.
     """
-    available = {c.topic: c.msgtype for c in reader.connections}
+    available = {c.topic: c.msgtype for c in connections}
     selected = []
     for topic, msgtype in topics.items():
-        conns = [c for c in reader.connections if c.topic == topic]
+        conns = [c for c in connections if c.topic == topic]
         if not conns:
             listing = ", ".join(f"{t} [{m}]" for t, m in sorted(available.items())) or "none"
             raise BagError(f"bag {str(path)!r} has no topic {topic!r} (topics: {listing})")
@@ -143,15 +170,27 @@ def _connections_for(reader: AnyReader, path: Path, topics: dict[str, str | None
     return selected
 
 
-def _stream(path: Path, topics: dict[str, str | None]) -> Iterator[tuple[AnyReader, Connection, int, bytes]]:
-    """Yield ``(reader, connection, log_time_ns, raw)`` for the topics, in log-time order.
+Decoder = Callable[[bytes, str], Any]
+"""Deserialises CDR bytes of a message type (rosbags form, e.g. ``"sensor_msgs/msg/JointState"``)."""
 
-    Opens the bag when iteration starts and closes it when the generator finishes or is closed.
-    Errors while reading (e.g. a truncated chunk) become :class:`BagError`.
+
+def _stream(path: Path, topics: dict[str, str | None]) -> Iterator[tuple[Decoder, Any, int, bytes]]:
+    """Yield ``(decode, connection, log_time_ns, raw)`` for the topics, in log-time order.
+
+    Opens the bag when iteration starts and closes it when the generator finishes or is closed. An MCAP
+    file that cannot be read whole — no footer (truncated), or a corrupt chunk met while reading — is
+    read by a sequential scan instead (:mod:`semiparam_ros.io.mcap_scan`), with a
+    :class:`BagRecoveryWarning` saying what was recovered. Other read errors become :class:`BagError`.
     """
-    reader = _open_reader(path)
     try:
-        conns = _connections_for(reader, path, topics)
+        reader = _open_reader(path)
+    except BagError as err:
+        scan = _scan_or_raise(path, err)
+        yield from _recover(scan, path, topics, resume=None, cause=err)
+        return
+    last_time, n_at_last = -1, 0  # where the reader got to: a recovery scan resumes after it
+    try:
+        conns = _connections_for(reader.connections, path, topics)
         messages = reader.messages(connections=conns)
         while True:
             try:
@@ -159,24 +198,108 @@ def _stream(path: Path, topics: dict[str, str | None]) -> Iterator[tuple[AnyRead
             except StopIteration:
                 return
             except Exception as err:
-                raise BagError(f"cannot read bag {str(path)!r}: {err}") from err
-            yield reader, conn, log_time, raw
+                failure = BagError(f"cannot read bag {str(path)!r}: {err}")
+                failure.__cause__ = err
+                scan = _scan_or_raise(path, failure)
+                yield from _recover(scan, path, topics, resume=(last_time, n_at_last), cause=failure)
+                return
+            n_at_last = n_at_last + 1 if log_time == last_time else 1
+            last_time = log_time
+            yield reader.deserialize, conn, log_time, raw
     finally:
         reader.close()
+
+
+class BagRecoveryWarning(UserWarning):
+    """A bag was read in part: the MCAP file is truncated (no footer) or has chunks that do not decode."""
+
+
+def _recover(scan: McapScan, path: Path, topics: dict[str, str | None], *, resume: tuple[int, int] | None,
+             cause: BagError) -> Iterator[tuple[Decoder, Any, int, bytes]]:
+    """Yield the messages a recovery scan finds on ``topics``.
+
+    ``resume = (t, k)``: the messages up to log time ``t`` (the first ``k`` at ``t``) were read already
+    (by AnyReader, in log-time order, before it met a damaged chunk); only later ones are yielded.
+
+    Raises:
+        BagError: ``cause`` if the scan recovers no message at all; a missing topic or wrong type.
+    """
+    store = get_typestore(Stores.ROS2_JAZZY)  # own store: schemas of the file may be registered into it
+    wanted = set(topics)
+    checked: set[int] = set()
+    last_time, n_at_last = resume if resume is not None else (-1, 0)
+    for channel, log_time, raw in scan.messages(wanted):
+        if channel.id not in checked:
+            _connections_for([channel], path, {channel.topic: topics[channel.topic]})
+            _register_schema(store, channel)
+            checked.add(channel.id)
+        if log_time < last_time:
+            continue
+        if log_time == last_time and n_at_last > 0:
+            n_at_last -= 1
+            continue
+        yield store.deserialize_cdr, channel, log_time, raw
+    rep = scan.report
+    if not scan.channels and not rep.n_messages:
+        raise cause
+    if resume is None:
+        # a topic never seen in the recovered part: the standard missing-topic message
+        _connections_for(list(scan.channels.values()), path, topics)
+    _warn_recovered(scan, path, sorted(wanted), cause)
+
+
+def _warn_recovered(scan: McapScan, path: Path, topics: list[str], cause: BagError) -> None:
+    """Issue the :class:`BagRecoveryWarning` that says what a scan recovered and what it lost."""
+    rep = scan.report
+    lost = "; ".join(f"at byte {off}: {why}" for off, why in rep.skipped[:5])
+    more = f" (+{len(rep.skipped) - 5} more)" if len(rep.skipped) > 5 else ""
+    if not rep.complete:
+        state = (f"is truncated or damaged ({rep.stop_reason}: record at byte {rep.stop_offset}, file of "
+                 f"{rep.file_size} bytes)")
+    elif rep.skipped:
+        state = "has damaged chunks"
+    else:
+        state = "has a damaged summary or footer (every data record was read)"
+    warnings.warn(
+        f"bag {str(path)!r} {state}: recovered {rep.n_messages} messages on {topics} spanning "
+        f"{rep.span_s:.3f} s of log time; skipped: {lost or 'nothing'}{more}. Cause: {cause}",
+        BagRecoveryWarning, stacklevel=4)
+
+
+def _register_schema(store: Any, channel: ScannedChannel) -> None:
+    """Add a type the Jazzy store lacks from the file's own definition (``ros2msg`` schemas)."""
+    if channel.msgtype in store.types or channel.schema_encoding != "ros2msg":
+        return
+    try:
+        store.register(get_types_from_msg(channel.schema_data, channel.msgtype))
+    except Exception:
+        pass
 
 
 def _validate_now(path: Path, topics: dict[str, str | None]) -> None:
-    """Open the bag and check the topics eagerly (cheap: reads the MCAP summary only)."""
-    reader = _open_reader(path)
+    """Open the bag and check the topics eagerly (cheap: reads the MCAP summary only).
+
+    A bag AnyReader cannot open is scanned instead (a whole pass; only damaged files take this path).
+    """
     try:
-        _connections_for(reader, path, topics)
+        reader = _open_reader(path)
+    except BagError as err:
+        scan = _scan_or_raise(path, err)
+        for _ in scan.messages(set()):
+            pass
+        if not scan.channels:
+            raise err from err.__cause__
+        _connections_for(list(scan.channels.values()), path, topics)
+        return
+    try:
+        _connections_for(reader.connections, path, topics)
     finally:
         reader.close()
 
 
-def _deserialize(reader: AnyReader, raw: bytes, conn: Connection, path: Path) -> Any:
+def _deserialize(decode: Decoder, raw: bytes, conn: Any, path: Path) -> Any:
     try:
-        return reader.deserialize(raw, conn.msgtype)
+        return decode(raw, conn.msgtype)
     except Exception as err:
         raise BagError(
             f"bag {str(path)!r}: cannot decode a {conn.msgtype!r} message on {conn.topic!r}: {err}"
@@ -190,13 +313,28 @@ def topic_info(path: str | Path) -> dict[str, TopicInfo]:
         path: Bag folder or bare ``.mcap`` file.
 
     Returns:
-        Topic name -> :class:`TopicInfo`.
+        Topic name -> :class:`TopicInfo` (for a truncated MCAP file, the counts of the recoverable
+        messages).
 
     Raises:
-        BagError: The bag cannot be opened.
+        BagError: The bag cannot be opened (nor scanned).
     """
     path = Path(path)
-    reader = _open_reader(path)
+    try:
+        reader = _open_reader(path)
+    except BagError as err:
+        scan = _scan_or_raise(path, err)
+        counts: dict[int, int] = {}
+        for channel, _, _ in scan.messages():
+            counts[channel.id] = counts.get(channel.id, 0) + 1
+        if not scan.channels:
+            raise err from err.__cause__
+        _warn_recovered(scan, path, sorted({c.topic for c in scan.channels.values()}), err)
+        out: dict[str, TopicInfo] = {}
+        for cid, channel in scan.channels.items():
+            prev = out.get(channel.topic)
+            out[channel.topic] = TopicInfo(channel.msgtype, counts.get(cid, 0) + (prev.count if prev else 0))
+        return out
     try:
         return {
             name: TopicInfo(msgtype=info.msgtype or "", count=int(info.msgcount))
@@ -227,8 +365,11 @@ def read_messages(
         An iterator of :class:`JointStateData` and :class:`WrenchData` (header stamps in ns).
 
     Raises:
-        BagError: Missing or unreadable bag, a missing topic, or a topic with another message type
-            (at call time); a truncated or corrupt chunk (during iteration).
+        BagError: Missing or unreadable bag (one that yields no message even by a scan), a missing topic,
+            or a topic with another message type (at call time).
+
+    Warns:
+        BagRecoveryWarning: At the end of iteration, if the file was truncated or had corrupt chunks.
     """
     path = Path(path)
     topics: dict[str, str | None] = {}
@@ -245,8 +386,8 @@ def read_messages(
 
 
 def _read_messages(path: Path, topics: dict[str, str | None]) -> Iterator[JointStateData | WrenchData]:
-    for reader, conn, _log_time, raw in _stream(path, topics):
-        msg = _deserialize(reader, raw, conn, path)
+    for decode, conn, _log_time, raw in _stream(path, topics):
+        msg = _deserialize(decode, raw, conn, path)
         if conn.msgtype == JOINT_STATE_TYPE:
             yield joint_state_from_msg(msg)
         else:
@@ -318,7 +459,7 @@ def iter_raw(path: str | Path, topics: Iterable[str]) -> Iterator[tuple[str, str
 
 
 def _iter_raw(path: Path, topics: dict[str, str | None]) -> Iterator[tuple[str, str, int, bytes]]:
-    for _reader, conn, log_time, raw in _stream(path, topics):
+    for _decode, conn, log_time, raw in _stream(path, topics):
         yield conn.topic, conn.msgtype, int(log_time), bytes(raw)
 
 
@@ -393,8 +534,8 @@ def read_topic_arrays(path: str | Path, topic: str, *, joints: Sequence[str] | N
     columns: dict[str, list[np.ndarray]] = {k: [] for k in _ARRAY_TYPES[msgtype]}
     names: tuple[str, ...] | None = tuple(joints) if joints is not None else None
     frame_id = ""
-    for reader, conn, log_time, raw in _stream(path, {topic: msgtype}):
-        msg = _deserialize(reader, raw, conn, path)
+    for decode, conn, log_time, raw in _stream(path, {topic: msgtype}):
+        msg = _deserialize(decode, raw, conn, path)
         if not stamps:
             frame_id = str(msg.header.frame_id)
         stamps.append(stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec))

@@ -1,14 +1,11 @@
-"""Exception types of :mod:`semiparam_ros.io`."""
+"""Exception types of :mod:`semiparam_ros.io`: the package's :class:`~semiparam_ros.errors.BagError`.
+
+Kept so that ``from semiparam_ros.io.errors import BagError`` keeps working; the class is defined once,
+in :mod:`semiparam_ros.errors`, under the package's root exception.
+"""
 
 from __future__ import annotations
 
+from semiparam_ros.errors import BagError
+
 __all__ = ["BagError"]
-
-
-class BagError(ValueError):
-    """A bag cannot be read or written as requested.
-
-    Raised for a missing path, a truncated or corrupt MCAP file, a missing topic, a topic that carries
-    an unexpected message type, or an output folder that exists already. The message names the path
-    and, where relevant, the topic; the underlying library error is chained as ``__cause__``.
-    """

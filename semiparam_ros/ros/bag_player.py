@@ -37,6 +37,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 
 from semiparam_ros.core.messages import ns_to_stamp
+from semiparam_ros.errors import BagError, ConfigurationError
 from semiparam_ros.io.bags import iter_raw, topic_info
 
 __all__ = ["PLAYER_QOS", "BagPlayer", "PlaybackReport", "RawMessage", "load_raw", "main", "message_class"]
@@ -94,17 +95,17 @@ def message_class(msgtype: str) -> type:
         The generated Python class.
 
     Raises:
-        ValueError: If the type name is malformed or its package is not installed.
+        BagError: If the type name is malformed or its package is not installed.
     """
     parts = msgtype.split("/")
     if len(parts) == 2:
         parts = [parts[0], "msg", parts[1]]
     if len(parts) != 3 or not all(parts):
-        raise ValueError(f"malformed message type {msgtype!r}, expected pkg/msg/Name")
+        raise BagError(f"malformed message type {msgtype!r}, expected pkg/msg/Name")
     try:
         return getattr(importlib.import_module(f"{parts[0]}.{parts[1]}"), parts[2])
     except (ImportError, AttributeError) as err:
-        raise ValueError(f"message type {msgtype!r} is not available: {err}") from err
+        raise BagError(f"message type {msgtype!r} is not available: {err}") from err
 
 
 def load_raw(path: str | Path, topics: Iterable[str] | None = None, *, limit: int | None = None,
@@ -208,12 +209,12 @@ class BagPlayer:
             Counts and timing of the playback.
 
         Raises:
-            ValueError: If ``rate`` or ``hz`` is not positive.
+            ConfigurationError: If ``rate`` or ``hz`` is not positive.
         """
         if hz is not None and not hz > 0:
-            raise ValueError(f"hz must be > 0, got {hz}")
+            raise ConfigurationError(f"hz must be > 0, got {hz}")
         if not rate > 0:
-            raise ValueError(f"rate must be > 0, got {rate}")
+            raise ConfigurationError(f"rate must be > 0, got {rate}")
         report = PlaybackReport()
         groups = self._groups()
         if not groups:
@@ -276,7 +277,7 @@ def main(args: list[str] | None = None) -> int:
         remap[src] = dst
     try:
         messages = load_raw(ns.bag, ns.topics)
-    except ValueError as err:
+    except BagError as err:
         print(f"bag_player: {err}", file=sys.stderr)
         return 2
     rclpy.init(args=argv)

@@ -36,11 +36,7 @@ estimator on the queued messages (predict, publish, then learn), at most 50 per 
 services and timers get their turns in between; input keeps arriving meanwhile in the DDS history
 (depth 100) and is taken in bulk by the next subscription callback. Why not a learner thread (or a timer in a
 ``MultiThreadedExecutor``): on CPython the executor thread and a learner thread serialise on the GIL, and
-every hand-over costs. Measured side by side at 1 kHz paired input, D = 500 (bench/bench_node.py, same
-machine load): the learner thread learned 80 % of the samples with a 0.43 s median latency (queue full,
-step time doubled to 0.48 ms by GIL waits), the single thread with a timer 97.5 % with 8.9 ms; the
-single thread woken by a guard condition (this design) learns 100 % with a 4.95 ms median latency, 4 ms
-of it the acceleration estimate's centring delay (bench/results/bench_node.json, load 1).
+every hand-over costs (the measured comparison is in ``docs/design-notes.md``).
 A second thread only writes checkpoints (periodically every ``checkpoint.period`` seconds of wall time,
 on ``~/save``, on clean shutdown): it snapshots the learned state under a lock (a memory copy, ~1 ms at
 D = 500) and writes outside it, so neither callbacks nor learning ever wait for the disk. On a clean
@@ -49,9 +45,11 @@ at most ``queue_size`` messages, a few hundred ms at D = 500), so the final chec
 received. A node killed with SIGKILL loses at most the samples learned since the last periodic
 checkpoint.
 
-Bad input (NaN/inf, unknown or missing joints, wrong frame, out-of-order or zero stamps, unconvertible
-messages) is dropped, counted by reason in ``/diagnostics`` and logged at most every 5 s; it never stops
-the node or reaches the model.
+Bad input (NaN/inf, unknown or missing joints, wrong frame, out-of-order or zero stamps, samples the
+learner rejects) is dropped, counted by reason in ``/diagnostics`` and logged at most every 5 s; it never
+stops the node or reaches the model. Any other exception in a callback is a programming error: it is
+logged at FATAL level, is not counted as a drop, and propagates out of ``spin``, which ends the process
+(see :func:`main`).
 """
 
 from __future__ import annotations
@@ -92,6 +90,7 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.rrls import RecursiveRLS
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 from semiparam_ros.ros.conversions import (
     joint_state_from_msg,
     joint_torques_msg,
@@ -171,13 +170,13 @@ class EstimatorNode(Node):
 
         try:
             self._estimator = OnlineEstimator(cfg)
-        except ValueError as err:
+        except (ConfigurationError, OSError) as err:
             raise StartupError(f"cannot build the estimator: {err}") from err
         self._warm_up_kernels()
         if self._ckpt_path is not None and cfg["checkpoint.load_on_start"] and self._ckpt_path.exists():
             try:
                 self._estimator.load(self._ckpt_path)
-            except ValueError as err:
+            except CheckpointError as err:
                 raise StartupError(
                     f"cannot warm start from checkpoint {self._ckpt_path}: {err}\n"
                     "Delete or move it, point checkpoint.path elsewhere, or set "
@@ -296,7 +295,7 @@ class EstimatorNode(Node):
         self._stats.count_input(kind)
         try:
             data = joint_state_from_msg(msg) if kind == "joint_states" else wrench_from_msg(msg)
-        except Exception as err:  # a malformed message must never stop the node
+        except RejectedSampleError as err:  # a message the conversion refuses: a counted drop
             self._conversion_failed(kind, err)
             return
         self._enqueue(kind, data)
@@ -306,7 +305,12 @@ class EstimatorNode(Node):
 
         The executor takes one message per subscription per wait, and building its wait set costs far
         more than taking a message; when input is queued in DDS (a burst, or the learner held the GIL)
-        this catches up at the cost of a take each. Same call the executor makes.
+        this catches up at the cost of a take each.
+
+        Not public rclpy API: rclpy (Jazzy) has no public "take" on a subscription, so this makes the
+        call the executor itself makes (``sub.handle.take_message(sub.msg_type, sub.raw)``). Kept because
+        it is measured ≈ 8× cheaper per queued message than one executor wait each (bench/bench_drain.py,
+        results in bench/results/bench_drain.json); test/test_node_drain.py fails if the call changes.
         """
         sub = self._subscriptions_by_kind[kind]
         for _ in range(_MAX_DRAIN):
@@ -450,11 +454,11 @@ class EstimatorNode(Node):
                 if any(r.learned for r in results):
                     self._version += 1
                 drop_total = est.n_dropped  # refused samples too: they must raise the level to WARN
-        except Exception as err:  # the core rejected something unexpected: count it, keep running
-            self._stats.count_drop("estimator_error")
-            self.get_logger().error(f"estimator failed on a {kind} message: {err!r}",
-                                    throttle_duration_sec=_LOG_THROTTLE_S)
-            return
+        except Exception as err:
+            # Bad input never gets here (the pipeline drops it, the estimator counts what the learner
+            # rejects): this is a bug. Say so loudly and let it propagate out of spin (see main()).
+            self.get_logger().fatal(f"programming error in the estimator on a {kind} message: {err!r}")
+            raise
         if drop_total != self._last_drop_total:
             self._stats.count_pipeline_drops(drop_total - self._last_drop_total)
             self._last_drop_total = drop_total
@@ -463,13 +467,7 @@ class EstimatorNode(Node):
         if not publish:
             return
         for result in results:
-            try:
-                self._publish_result(result)
-            except Exception as err:  # e.g. non-finite output; never stop learning
-                self._stats.count_drop("publish_error")
-                self.get_logger().error(f"cannot publish a prediction: {err!r}",
-                                        throttle_duration_sec=_LOG_THROTTLE_S)
-                continue
+            self._publish_result(result)  # a failure here is a bug too (non-finite values publish fine)
             pred = result.prediction
             self._stats.add_sample(result.latency_s, time.perf_counter() - t_recv, result.sample.y,
                                    pred.total, pred.parametric)
@@ -541,11 +539,12 @@ class EstimatorNode(Node):
         if stopping is None:
             return
         stopping.set()
-        if getattr(self, "_ckpt_thread", None) is not None:
+        thread = getattr(self, "_ckpt_thread", None)
+        if thread is not None:
             if not save:
                 self._ckpt_path = None
             self._ckpt_event.set()
-            self._ckpt_thread.join(timeout=30.0)
+            thread.join(timeout=30.0)
 
     def _learn_remaining(self, budget_s: float = _SHUTDOWN_BUDGET_S) -> int:
         """Learn the messages still queued, without publishing (the executor no longer runs).
@@ -563,6 +562,14 @@ class EstimatorNode(Node):
             self._process(kind, data, t_recv, publish=False)
             n += 1
         return n
+
+    def abort(self) -> None:
+        """Stop the checkpoint thread without learning the queue or writing a final checkpoint.
+
+        For a node whose executor stopped on a programming error: the state it would save is suspect, and
+        the last periodic checkpoint stays as it was.
+        """
+        self._stop_threads(save=False)
 
     def shutdown(self) -> None:
         """Learn what is still queued, then write the final checkpoint (if configured) and stop the threads.
@@ -604,10 +611,16 @@ def main(args: list[str] | None = None) -> int:
 
     Returns:
         Process exit code: 0 on a clean shutdown, 2 if the node could not start.
+
+    Raises:
+        Exception: A programming error inside a callback propagates out of ``spin`` (the ROS habit: the
+            process dies with the traceback, and a launch file's ``respawn`` restarts it from the last
+            periodic checkpoint); the node is destroyed without learning the queue or saving first.
     """
     rclpy.init(args=args)
     node: EstimatorNode | None = None
     code = 0
+    crashed = False
     try:
         # One BLAS/OpenMP thread: the learner's small dense operations do not profit from more, and on a
         # small machine extra threads only compete with DDS and the checkpoint writer.
@@ -621,9 +634,15 @@ def main(args: list[str] | None = None) -> int:
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except BaseException:
+        crashed = True
+        raise
     finally:
         if node is not None:
-            node.shutdown()
+            if crashed:
+                node.abort()
+            else:
+                node.shutdown()
             node.destroy_node()
         rclpy.try_shutdown()
     return code

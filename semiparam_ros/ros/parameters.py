@@ -43,6 +43,7 @@ from semiparam_ros.core.config import (
     parameter_spec,
     validate_value,
 )
+from semiparam_ros.errors import ConfigurationError
 
 __all__ = [
     "ParameterError",
@@ -66,7 +67,7 @@ _ROS_TYPES: dict[str, int] = {
 _INT_LIMIT = 2**63 - 1
 
 
-class ParameterError(ValueError):
+class ParameterError(ConfigurationError):
     """A start-up parameter value is invalid (the message names the parameter and the allowed range)."""
 
 
@@ -158,7 +159,7 @@ def declare_parameters(node: Node, specs: Iterable[ParameterSpec] = PARAMETERS) 
     flat = {spec.name: _read(node, spec) for spec in specs}
     try:
         return EstimatorConfig.from_flat(flat)
-    except ValueError as err:
+    except ConfigurationError as err:
         raise ParameterError(str(err)) from err
 
 
@@ -181,7 +182,7 @@ def make_parameter_validator(
         for param in params:
             try:
                 spec = parameter_spec(param.name)
-            except ValueError:
+            except ConfigurationError:
                 continue
             if spec.read_only:
                 return SetParametersResult(
@@ -193,12 +194,12 @@ def make_parameter_validator(
                 value = []
             try:
                 overrides[param.name] = validate_value(param.name, value)
-            except ValueError as err:
+            except ConfigurationError as err:
                 return SetParametersResult(successful=False, reason=str(err))
         if overrides:
             try:
                 current().with_overrides(overrides)
-            except ValueError as err:
+            except ConfigurationError as err:
                 return SetParametersResult(successful=False, reason=str(err))
         return SetParametersResult(successful=True)
 

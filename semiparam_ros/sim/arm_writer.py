@@ -147,5 +147,4 @@ def write_arm_recording(
     info["topics"] = topics
     sidecar = path / SCENARIO_FILE
     atomic_write_text(sidecar, yaml.safe_dump(info, sort_keys=False, default_flow_style=None, width=110))
-    sidecar.chmod(0o644)  # readable like the bag files (the temporary file was created 0600)
     return path

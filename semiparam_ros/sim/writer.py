@@ -26,14 +26,13 @@ every effect magnitude and the measured RMS of each part.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from semiparam_ros.atomic import atomic_open
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.io.bags import BagWriter
 from semiparam_ros.sim.effects import SENSOR_FRAME
@@ -62,16 +61,9 @@ SCENARIO_FILE = "scenario.yaml"
 
 
 def _write_yaml_atomic(path: Path, data: object) -> None:
-    """Write YAML to ``path`` through a temporary file in the same folder and ``os.replace``."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            yaml.safe_dump(data, handle, sort_keys=False, default_flow_style=None, width=110)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Write YAML to ``path`` atomically (:func:`semiparam_ros.atomic.atomic_open`)."""
+    with atomic_open(path, "w") as handle:
+        yaml.safe_dump(data, handle, sort_keys=False, default_flow_style=None, width=110)
 
 
 def write_recording(
@@ -95,7 +87,7 @@ def write_recording(
         The bag folder.
 
     Raises:
-        semiparam_ros.io.errors.BagError: If the folder exists (without ``overwrite``), is not a bag
+        semiparam_ros.errors.BagError: If the folder exists (without ``overwrite``), is not a bag
             folder, or cannot be written.
     """
     path = Path(path)

@@ -1,0 +1,31 @@
+"""Run the ``>>>`` examples of the public core classes and of the shared helpers (they are documentation
+that must stay true)."""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+
+import numpy as np
+import pytest
+
+MODULES = [
+    "semiparam_ros.atomic",
+    "semiparam_ros.core.estimator",
+    "semiparam_ros.core.features",
+    "semiparam_ros.core.pipeline",
+    "semiparam_ros.core.rrls",
+    "semiparam_ros.core.semiparametric",
+    "semiparam_ros.core.semiparametric_joint",
+    "semiparam_ros.core.validation",
+]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_examples_run(name):
+    module = importlib.import_module(name)
+    with np.printoptions(legacy=False):
+        result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE,
+                                 raise_on_error=False, verbose=False)
+    assert result.failed == 0, f"{result.failed} of {result.attempted} examples failed in {name}"
+    assert result.attempted > 0, f"no examples in {name}"

@@ -1,0 +1,80 @@
+"""The node's ``_drain`` takes queued messages through ``sub.handle.take_message`` (not public rclpy API;
+kept for the measured reason in its docstring). These tests fail if that call changes shape."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from ros_helpers import CONFIG, make_ros_env
+from sensor_msgs.msg import JointState
+
+from semiparam_ros.ros.estimator_node import _MAX_DRAIN, EstimatorNode
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture
+def node_and_publisher(tmp_path, monkeypatch):
+    env = make_ros_env(tmp_path, monkeypatch)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=env.domain_id)
+    node = EstimatorNode(context=context, cli_args=["--ros-args", "--params-file", str(CONFIG)],
+                         parameter_overrides=[Parameter("checkpoint.path", value="")])
+    source = rclpy.create_node("source", context=context)
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    pub = source.create_publisher(JointState, node.config["topics.joint_states"], qos)
+    try:
+        yield node, pub
+    finally:
+        source.destroy_node()
+        node.abort()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def _publish(pub, n):
+    for k in range(n):
+        msg = JointState(name=["a"], position=[0.0], velocity=[0.0], effort=[0.0])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 1, k
+        pub.publish(msg)
+
+
+def _wait_matched(pub, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert pub.get_subscription_count() > 0
+
+
+def test_take_message_returns_message_and_info_then_none(node_and_publisher):
+    node, pub = node_and_publisher
+    _wait_matched(pub)
+    _publish(pub, 1)
+    sub = node._subscriptions_by_kind["joint_states"]
+    deadline, taken = time.monotonic() + 5.0, None
+    while taken is None and time.monotonic() < deadline:
+        with sub.handle:
+            taken = sub.handle.take_message(sub.msg_type, sub.raw)
+        time.sleep(0.01)
+    assert isinstance(taken, tuple) and isinstance(taken[0], JointState)
+    assert (taken[0].header.stamp.sec, taken[0].header.stamp.nanosec) == (1, 0)
+    with sub.handle:
+        assert sub.handle.take_message(sub.msg_type, sub.raw) is None  # the history is empty now
+
+
+def test_drain_takes_every_queued_message_in_order(node_and_publisher):
+    node, pub = node_and_publisher
+    _wait_matched(pub)
+    n = _MAX_DRAIN + 10
+    _publish(pub, n)
+    time.sleep(0.5)  # let DDS deliver into the subscription's history (depth 100 > n)
+    node._drain("joint_states")
+    assert len(node._queue) == _MAX_DRAIN  # bounded per callback
+    node._drain("joint_states")
+    stamps = [item.stamp_ns for _, item, _ in node._queue]
+    assert stamps == [1_000_000_000 + k for k in range(n)]
