@@ -121,3 +121,32 @@ def test_cached_regressor_matches_the_regressor(data) -> None:
         np.testing.assert_array_equal(cached.base_regressor(q, dq, ddq), reg.base_regressor(q, dq, ddq))
         assert cached.base_regressor(q, dq, ddq) is cached.base_regressor(q, dq, ddq)
     assert cached.n_base == reg.n_base
+
+
+def test_tune_on_a_joint_torque_bag_scores_per_joint_and_parallel_equals_serial(tmp_path: Path) -> None:
+    """tune works on a 6-joint joint-torque bag (robot.output: joint_torques): the selected point is no worse
+    on hold-out than the configuration's values (independent loop), and 2 parallel jobs give exactly the
+    numbers of the serial search."""
+    from test_evaluate import UR5_JOINTS as JOINTS6
+    from test_evaluate import UR5_URDF as UR5
+    from test_evaluate import ur5_config, write_ur5_torque_bag
+
+    write_ur5_torque_bag(tmp_path / "ur5", 12.0, seed=3)
+    small = {"nonparametric.n_features": 40, "nonparametric.standardizer_warmup": 50}
+    config = ur5_config().with_overrides(small)
+    samples, _ = load_samples(tmp_path / "ur5", config)
+    grid = {"parametric.lam": [1e-4], "nonparametric.lam": [0.1, 1.0], "nonparametric.sigma": [2.0]}
+    serial = holdout_search(config, samples, grid=grid, jobs=1)
+    parallel = holdout_search(config, samples, grid=grid, jobs=2)
+    assert serial.points == parallel.points  # same values, same scores, bit for bit
+    assert set(serial.best.rmse) == {"torque"}  # one group over the joints, no "force"
+    assert serial.default.score == pytest.approx(direct_holdout_nrmse(config, samples), rel=1e-9)
+    assert direct_holdout_nrmse(serial.config, samples) <= serial.default.score * (1 + 1e-9)
+    out = tmp_path / "tuned.yaml"
+    argv = ["--train", str(tmp_path / "ur5"), "--config", str(CONFIG), "--set", f"robot.urdf={UR5}",
+            "--set", f"robot.joints=[{', '.join(JOINTS6)}]", "--set", "robot.locked_joints=[]",
+            "--set", "robot.locked_positions=[]", "--set", "robot.output=joint_torques",
+            "--n-features", "30", "--lam-p", "0.01", "--lam-np", "1", "--sigma", "2", "--out", str(out),
+            "--jobs", "1", "--no-progress"]
+    assert tune_main(argv) == 0
+    assert load_config(out)["robot.output"] == "joint_torques"
