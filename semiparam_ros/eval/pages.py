@@ -158,9 +158,10 @@ def _own_table(inputs: PageInputs) -> str:
 
 def _select_table(selection: Mapping[str, Any], kind: str) -> str:
     sel = selection["selections"][kind]
+    first = f"{selection.get('first_s', 3.0):g}"
     lines = [
-        "| λ_NP | σ | force at regime [N] | torque at regime [N·m] | force first 3 s [N] | "
-        "torque first 3 s [N·m] | score | |",
+        "| λ_NP | σ | force at regime [N] | torque at regime [N·m] | "
+        f"force first {first} s [N] | torque first {first} s [N·m] | score | |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for i, p in enumerate(sel["grid"]):

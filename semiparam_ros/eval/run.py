@@ -292,6 +292,7 @@ def run_tune(
             progress=progress,
         )
         doc = {
+            "first_s": reports[0].first_s,
             "runs": [
                 {
                     "config": {k: r.config[k] for k in TUNED_KEYS},
