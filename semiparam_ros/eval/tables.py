@@ -33,7 +33,7 @@ def fmt(value: float | None, std: float | None = None) -> str:
     return text if std is None or not math.isfinite(std) else f"{text} ± {std:.2g}"
 
 
-def _label(report: ProtocolReport, group: str) -> str:
+def _label(report: ProtocolReport, group: str) -> tuple[str, str]:
     g = report.output.groups[group]
     extra = " (mean over joints)" if report.output.kind == "joint_torques" else ""
     return f"{g.label} RMSE{extra}", g.unit
