@@ -14,6 +14,7 @@ from typing import Any
 
 from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.config import EstimatorConfig, load_config, write_config
+from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.figures import plot_adaptation, plot_protocol
 from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags, load_samples
 from semiparam_ros.eval.report import adaptation_report, protocol_report, write_json
@@ -302,7 +303,7 @@ def run_tune(
             ]
         }
     else:
-        raise ValueError(f"method must be 'holdout' or 'protocol', got {method!r}")
+        raise ConfigurationError(f"method must be 'holdout' or 'protocol', got {method!r}")
     chosen = selections[kind]
     text = ""
     for k, sel in selections.items():

@@ -33,6 +33,7 @@ import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import build_model, build_regressor
+from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse
 from semiparam_ros.eval.parallel import run_jobs
 from semiparam_ros.eval.protocol import SampleArrays, progress_enabled
@@ -185,11 +186,11 @@ def grid_axes(
     """Return the sorted values of each tuned key: the given (or default) values plus the configuration's.
 
     Raises:
-        ValueError: On a key that cannot be tuned.
+        ConfigurationError: On a key that cannot be tuned (a ``ValueError``).
     """
     unknown = set(grid or {}) - set(TUNED_KEYS)
     if unknown:
-        raise ValueError(f"cannot tune {sorted(unknown)}; tunable: {list(TUNED_KEYS)}")
+        raise ConfigurationError(f"cannot tune {sorted(unknown)}; tunable: {list(TUNED_KEYS)}")
     axes: dict[str, list[float]] = {}
     for key in keys:
         values = [*(grid or {}).get(key, DEFAULT_GRID[key]), config[key]]
