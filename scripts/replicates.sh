@@ -6,50 +6,62 @@
 # issue's criteria holds, and paired comparisons over seeds (semiparam_ros/eval/replicates.py).
 #
 #   bash scripts/replicates.sh                      # seeds 1..10 → docs/figures/replicates.json
-#   bash scripts/replicates.sh --seeds "1 2 3" --out DIR
+#   bash scripts/replicates.sh --seeds "1 2 3" --out DIR --jobs 2
 #
-# About 1 min per seed and core; two seeds run at a time. Seed 0 is the headline run of reproduce.sh and
-# is not repeated here. The per-seed bags and reports live in a temporary folder and are removed.
+# About 1 min per seed and core; --jobs seeds run at a time (default -1: all cores). Seed 0 is the headline
+# run of reproduce.sh and is not repeated here. The per-seed bags live in temporary folders and are removed.
 # Then `bash scripts/reproduce.sh` (or only its last step) adds the summary to the results page.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 seeds="1 2 3 4 5 6 7 8 9 10"
 out=docs
+jobs=-1
 while [ $# -gt 0 ]; do
   case "$1" in
     --seeds) seeds=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
-    *) echo "usage: $0 [--seeds \"S1 S2 ...\"] [--out DIR]" >&2; exit 2 ;;
+    --jobs) jobs=$2; shift 2 ;;
+    *) echo "usage: $0 [--seeds \"S1 S2 ...\"] [--out DIR] [--jobs N]" >&2; exit 2 ;;
   esac
 done
 source scripts/paper_params.sh
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
-export work config
-export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
-one_seed() {
-  local s=$1
-  .venv/bin/simulate --preset paper --seed "$s" --out "$work/s$s" --scenario xy --scenario xz --quiet > /dev/null
-  # shellcheck disable=SC2086
-  .venv/bin/evaluate --train "$work/s$s/icub_xy" --test "$work/s$s/icub_xz" --config "$config" \
-    $tuned_str --models P NP SP SPJ --splits 10 --split-size 1000 --window 3.0 \
-    --json "$work/seed_$s.json" --no-progress > /dev/null
-  rm -rf "${work:?}/s$s"
-  echo "seed $s done"
-}
-export tuned_str="${tuned[*]}"  # words without spaces: split again inside one_seed
-export -f one_seed
-printf '%s\n' $seeds | xargs -P 2 -I{} bash -c 'one_seed {}'
-.venv/bin/python -c '
-import json, sys
+# one job per seed (simulate the two logs, run the protocol, keep the scalars), on every core through
+# joblib (semiparam_ros/eval/parallel.py); each job has one BLAS thread, so the numbers do not depend on --jobs
+.venv/bin/python - "$config" "$out/figures/replicates.json" "$jobs" $seeds "--" "${tuned[@]}" <<'PY'
+import sys
+import tempfile
 from pathlib import Path
+
+from semiparam_ros.cli.evaluate import parse_overrides
+from semiparam_ros.cli.simulate import main as simulate
+from semiparam_ros.eval.parallel import run_jobs
+from semiparam_ros.eval.replay import evaluate_bags
 from semiparam_ros.eval.replicates import replicate_summary, replicates_markdown
-from semiparam_ros.eval.report import write_json
-work, out = Path(sys.argv[1]), Path(sys.argv[2])
-seeds = [int(s) for s in sys.argv[3:]]
-summary = replicate_summary([json.loads((work / f"seed_{s}.json").read_text()) for s in seeds], seeds)
+from semiparam_ros.eval.report import protocol_report, write_json
+from semiparam_ros.eval.run import load_evaluation_config
+
+config_path, out, jobs = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
+rest = sys.argv[4:]
+cut = rest.index("--")
+seeds = [int(s) for s in rest[:cut]]
+overrides = parse_overrides([v for v in rest[cut + 1:] if v != "--set"])
+
+
+def one_seed(seed: int):
+    cfg = load_evaluation_config(config_path, overrides)
+    with tempfile.TemporaryDirectory() as work:
+        if simulate(["--preset", "paper", "--seed", str(seed), "--out", work, "--scenario", "xy",
+                     "--scenario", "xz", "--quiet"]) != 0:
+            raise RuntimeError(f"simulate failed for seed {seed}")
+        result, info = evaluate_bags(Path(work, "icub_xy"), Path(work, "icub_xz"), cfg,
+                                     kinds=("P", "NP", "SP", "SPJ"), splits=10, split_size=1000, window_s=3.0)
+    print(f"seed {seed} done", flush=True)
+    return protocol_report(result, config=cfg.to_flat(), protocol=info)
+
+
+summary = replicate_summary(run_jobs(one_seed, [(s,) for s in seeds], jobs=jobs), seeds)
 write_json(summary, out)
 print(replicates_markdown(summary))
-' "$work" "$out/figures/replicates.json" $seeds
-echo "wrote $out/figures/replicates.json"
+print(f"wrote {out}")
+PY

@@ -4,21 +4,27 @@
 #
 #   bash scripts/reproduce.sh              # writes docs/results.md and docs/figures/*
 #   bash scripts/reproduce.sh --out DIR    # writes DIR/results.md and DIR/figures/* instead
+#   bash scripts/reproduce.sh --jobs 1     # grid points one at a time (default -1: all cores; same numbers)
 #
 # Steps: (1) generate the paper-preset bags (XY and XZ circles, wrench at 10 Hz, 10 000 samples each)
 # with the simulator if bags/generated/ does not hold them yet; (2) `evaluate` on them: P, NP, SP (the
 # paper's cascade) and SPJ (the joint semiparametric fit, core/semiparametric_joint.py) from zero, trained
 # on all of XY, test-then-train on 10 sequential parts of XZ; (3) `evaluate --payload` on the committed
-# payload bag: SP and SPJ with and without forgetting around the pickup; (4) the results page.
-# Deterministic: the simulator and the random features are seeded. Takes a few minutes on 2 cores.
+# payload bag: SP and SPJ with and without forgetting around the pickup; (4) the results page, the words of
+# docs/templates/results.md.in filled with the numbers of the JSON reports (semiparam_ros/eval/pages.py).
+# Hyperparameter selection on the training bag goes through `tune` (semiparam_ros/eval/selection.py), whose
+# grid points run in parallel with joblib. Deterministic: the simulator and the random features are seeded.
+# Takes about 10 minutes on 2 cores.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 out=docs
+jobs=-1
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out=$2; shift 2 ;;
-    *) echo "usage: $0 [--out DIR]" >&2; exit 2 ;;
+    --jobs) jobs=$2; shift 2 ;;
+    *) echo "usage: $0 [--out DIR] [--jobs N]" >&2; exit 2 ;;
   esac
 done
 bin=.venv/bin
@@ -43,15 +49,9 @@ fi
 echo "== selection on the training bag: the protocol within XY (train on its first 5000 samples, test-then-train"
 echo "   on 5 parts of 1000 of the rest), grid λ_NP × σ (λ_P = 0.01: insensitive, see tune below); SP selects"
 echo "   the values used; NP and SPJ, scored on the same runs, get their own selection in a second run below"
-mkdir -p "$figs/select_xy"
-for lnp in 0.001 0.01 0.1; do
-  for sigma in 3 4 6 8; do
-    "$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xy" --config "$config" "${tuned[@]}" \
-      --set nonparametric.lam=$lnp --set nonparametric.sigma=$sigma --models NP SP SPJ \
-      --train-limit 5000 --test-skip 5000 --splits 5 --split-size 1000 --window 3.0 \
-      --json "$figs/select_xy/lnp${lnp}_sigma${sigma}.json" --no-progress > /dev/null
-  done
-done
+"$bin/tune" --train "$gen/icub_xy" --config "$config" "${tuned[@]}" --method protocol --models NP SP SPJ \
+  --lam-np 0.001 0.01 0.1 --sigma 3 4 6 8 --train-n 5000 --splits 5 --split-size 1000 --window 3.0 \
+  --jobs "$jobs" --json "$figs/select_xy.json" --no-progress > /dev/null
 
 echo "== the protocol within XY at the values used: P, NP, SP, SPJ (cascade vs joint in distribution)"
 "$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xy" --config "$config" "${tuned[@]}" \
@@ -71,13 +71,11 @@ while read -r kind lnp sigma; do
     --set nonparametric.lam="$lnp" --set nonparametric.sigma="$sigma" --models "$kind" \
     --splits 10 --split-size 1000 --window 3.0 --json "$figs/own_$kind.json" --no-progress > /dev/null
 done < <("$bin/python" -c '
-import json, pathlib, sys
-from semiparam_ros.eval.selection import select
-reports = [json.loads(p.read_text()) for p in sorted(pathlib.Path(sys.argv[1]).glob("*.json"))]
-for kind in ("NP", "SP", "SPJ"):
-    best = select(reports, kind)[0]
-    print(kind, repr(best.lam), repr(best.sigma))
-' "$figs/select_xy")
+import json, sys
+doc = json.load(open(sys.argv[1]))
+for kind, sel in doc["selections"].items():
+    print(kind, repr(sel["best"]["nonparametric.lam"]), repr(sel["best"]["nonparametric.sigma"]))
+' "$figs/select_xy.json")
 
 echo "== diagnostic: SP with its rigid-body stage frozen after training (isolates the drift of that stage)"
 "$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
@@ -95,12 +93,13 @@ echo "== payload scenario: SP and SPJ with and without adaptation around the pic
 
 echo "== hold-out selection on the XY bag alone (tune), for comparison with the values used above"
 "$bin/tune" --train "$gen/icub_xy" --config "$config" --n-features 500 --holdout 0.2 \
-  --lam-p 0.01 0.1 1 --lam-np 0.001 0.01 0.1 1 --sigma 2 3 4 6 --json "$figs/tune_xy.json" --no-progress > /dev/null
+  --lam-p 0.01 0.1 1 --lam-np 0.001 0.01 0.1 1 --sigma 2 3 4 6 --jobs "$jobs" --json "$figs/tune_xy.json" \
+  --no-progress > /dev/null
 
-echo "== results page"
+echo "== results page (words: docs/templates/results.md.in; numbers: the JSON reports above)"
 "$bin/python" -c '
 import sys
-from semiparam_ros.eval.results import write_results
+from semiparam_ros.eval.pages import write_results
 write_results(sys.argv[1], sys.argv[2], sys.argv[3], command=sys.argv[4])
-' "$figs/paper.json" "$figs/payload.json" "$out/results.md" "bash scripts/reproduce.sh$([ "$out" = docs ] || echo " --out $out")"
+' "$figs" "$out/results.md" docs/templates/results.md.in "bash scripts/reproduce.sh$([ "$out" = docs ] || echo " --out $out")"
 echo "wrote $out/results.md"

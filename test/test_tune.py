@@ -11,7 +11,7 @@ from semiparam_ros.cli.tune import main as tune_main
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator import build_model
 from semiparam_ros.eval.replay import load_samples
-from semiparam_ros.eval.tuning import CachedRegressor, split_holdout, tune
+from semiparam_ros.eval.selection import CachedRegressor, holdout_search, split_holdout
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config" / "icub_right_arm.yaml"
@@ -43,16 +43,17 @@ def direct_holdout_nrmse(config, samples, holdout=0.2) -> float:
 
 def test_tuned_values_are_no_worse_than_defaults_on_holdout(data) -> None:
     config, samples = data
-    result = tune(config, samples, holdout=0.2, grid=GRID)
-    assert len(result.grid) == 3 * 3 * 3  # the configuration's own values join each axis
+    result = holdout_search(config, samples, holdout=0.2, grid=GRID)
+    assert len(result.points) == 3 * 3 * 3  # the configuration's own values join each axis
+    # rel 1e-9: the same arithmetic in the same order, so agreement is to the last bits; 1e-9 leaves room
     default_error = direct_holdout_nrmse(config, samples)
-    assert result.default["score"] == pytest.approx(default_error, rel=1e-9)
+    assert result.default.score == pytest.approx(default_error, rel=1e-9)
     tuned_error = direct_holdout_nrmse(result.config, samples)
-    assert tuned_error == pytest.approx(result.best["score"], rel=1e-9)
+    assert tuned_error == pytest.approx(result.best.score, rel=1e-9)
     assert tuned_error <= default_error
-    assert result.best["score"] == min(row["score"] for row in result.grid)
+    assert result.best.score == min(p.score for p in result.points)
     for key in ("parametric.lam", "nonparametric.lam", "nonparametric.sigma"):
-        assert result.config[key] == result.best[key]
+        assert result.config[key] == result.best.values[key]
 
 
 def test_tune_cli_writes_a_parameter_file_evaluate_accepts(tmp_path: Path, capsys) -> None:
@@ -66,7 +67,8 @@ def test_tune_cli_writes_a_parameter_file_evaluate_accepts(tmp_path: Path, capsy
     tuned = load_config(out)  # the same loader the node's parameter declaration and evaluate use
     assert tuned["nonparametric.n_features"] == 40
     assert tuned["robot.joints"] == load_config(CONFIG)["robot.joints"]
-    selected = next(line for line in printed.splitlines() if "| best" in line).split("|")
+    best_rows = ("| best |", "| best, default |")
+    selected = next(line for line in printed.splitlines() if line.rstrip().endswith(best_rows)).split("|")
     assert tuned["parametric.lam"] == float(selected[1])
     assert tuned["nonparametric.sigma"] == float(selected[3])
     from semiparam_ros.cli.evaluate import main as evaluate_main
@@ -82,16 +84,16 @@ def test_tune_spj_scores_the_joint_fit_and_selects_it(data, tmp_path: Path, caps
     samples = samples.head(500)
     joint = config.with_overrides({"semiparametric.combination": "joint"})
     grid = {key: [config[key]] for key in ("parametric.lam", "nonparametric.lam", "nonparametric.sigma")}
-    result = tune(config, samples, holdout=0.2, grid=grid, kind="SPJ")
-    assert len(result.grid) == 1 and result.config["semiparametric.combination"] == "joint"
-    assert result.default["score"] == pytest.approx(direct_holdout_nrmse(joint, samples), rel=1e-9)
-    assert result.default["score"] != pytest.approx(direct_holdout_nrmse(config, samples), rel=1e-6)
+    result = holdout_search(config, samples, holdout=0.2, grid=grid, kind="SPJ")
+    assert len(result.points) == 1 and result.config["semiparametric.combination"] == "joint"
+    assert result.default.score == pytest.approx(direct_holdout_nrmse(joint, samples), rel=1e-9)
+    assert result.default.score != pytest.approx(direct_holdout_nrmse(config, samples), rel=1e-6)
     out = tmp_path / "tuned_joint.yaml"
     argv = ["--train", str(XY), "--config", str(CONFIG), "--limit", "300", "--n-features", "30",
             "--set", "nonparametric.standardizer_warmup=50", "--lam-p", "0.01", "--lam-np", "1",
             "--sigma", "4", "--model", "SPJ", "--out", str(out), "--no-progress"]
     assert tune_main(argv) == 0
-    assert "grid search of SPJ" in capsys.readouterr().out
+    assert "holdout search of SPJ" in capsys.readouterr().out
     assert load_config(out)["semiparametric.combination"] == "joint"
 
 
@@ -100,9 +102,9 @@ def test_tune_rejects_bad_input(data) -> None:
     with pytest.raises(ValueError, match="holdout"):
         split_holdout(samples, 1.5)
     with pytest.raises(ValueError, match="cannot tune"):
-        tune(config, samples.head(100), grid={"robot.joints": [1.0]})
+        holdout_search(config, samples.head(100), grid={"robot.joints": [1.0]})
     with pytest.raises(ValueError, match="out of range"):
-        tune(config, samples.head(100), grid={"nonparametric.sigma": [-1.0]})
+        holdout_search(config, samples.head(100), grid={"nonparametric.sigma": [-1.0]})
     assert tune_main(["--train", str(tmp_missing := XY.parent / "no_such_bag"), "--no-progress"]) == 2
     assert not tmp_missing.exists()
 
@@ -119,3 +121,32 @@ def test_cached_regressor_matches_the_regressor(data) -> None:
         np.testing.assert_array_equal(cached.base_regressor(q, dq, ddq), reg.base_regressor(q, dq, ddq))
         assert cached.base_regressor(q, dq, ddq) is cached.base_regressor(q, dq, ddq)
     assert cached.n_base == reg.n_base
+
+
+def test_tune_on_a_joint_torque_bag_scores_per_joint_and_parallel_equals_serial(tmp_path: Path) -> None:
+    """tune works on a 6-joint joint-torque bag (robot.output: joint_torques): the selected point is no worse
+    on hold-out than the configuration's values (independent loop), and 2 parallel jobs give exactly the
+    numbers of the serial search."""
+    from test_evaluate import UR5_JOINTS as JOINTS6
+    from test_evaluate import UR5_URDF as UR5
+    from test_evaluate import ur5_config, write_ur5_torque_bag
+
+    write_ur5_torque_bag(tmp_path / "ur5", 12.0, seed=3)
+    small = {"nonparametric.n_features": 40, "nonparametric.standardizer_warmup": 50}
+    config = ur5_config().with_overrides(small)
+    samples, _ = load_samples(tmp_path / "ur5", config)
+    grid = {"parametric.lam": [1e-4], "nonparametric.lam": [0.1, 1.0], "nonparametric.sigma": [2.0]}
+    serial = holdout_search(config, samples, grid=grid, jobs=1)
+    parallel = holdout_search(config, samples, grid=grid, jobs=2)
+    assert serial.points == parallel.points  # same values, same scores, bit for bit
+    assert set(serial.best.rmse) == {"torque"}  # one group over the joints, no "force"
+    assert serial.default.score == pytest.approx(direct_holdout_nrmse(config, samples), rel=1e-9)
+    assert direct_holdout_nrmse(serial.config, samples) <= serial.default.score * (1 + 1e-9)
+    out = tmp_path / "tuned.yaml"
+    argv = ["--train", str(tmp_path / "ur5"), "--config", str(CONFIG), "--set", f"robot.urdf={UR5}",
+            "--set", f"robot.joints=[{', '.join(JOINTS6)}]", "--set", "robot.locked_joints=[]",
+            "--set", "robot.locked_positions=[]", "--set", "robot.output=joint_torques",
+            "--n-features", "30", "--lam-p", "0.01", "--lam-np", "1", "--sigma", "2", "--out", str(out),
+            "--jobs", "1", "--no-progress"]
+    assert tune_main(argv) == 0
+    assert load_config(out)["robot.output"] == "joint_torques"

@@ -56,10 +56,20 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     Args:
         p: The parser to extend (``evaluate``'s or ``tune``'s).
     """
-    p.add_argument("--config", type=Path, default=None,
-                   help="ROS 2 parameter file (default: the shipped config/icub_right_arm.yaml)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
-                   help="override a parameter, e.g. --set nonparametric.n_features=200 (repeatable)")
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="ROS 2 parameter file (default: the shipped config/icub_right_arm.yaml)",
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override a parameter, e.g. --set nonparametric.n_features=200 (repeatable)",
+    )
     p.add_argument("--joint-states-topic", help="JointState topic (default: /<topics.joint_states>)")
     p.add_argument("--wrench-topic", help="WrenchStamped topic (default: /<topics.wrench>)")
 
@@ -69,39 +79,81 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="evaluate",
         description="Replay bags through the estimator's pipeline and learners: the paper's protocol "
-                    "(--train/--test) or the payload adaptation scenario (--payload).")
-    p.add_argument("--train", type=Path, help="training bag (paper: the XY circles); with --payload: "
-                   "optional bag every learner is trained on first")
+        "(--train/--test) or the payload adaptation scenario (--payload).",
+    )
+    p.add_argument(
+        "--train",
+        type=Path,
+        help="training bag (paper: the XY circles); with --payload: "
+        "optional bag every learner is trained on first",
+    )
     p.add_argument("--test", type=Path, help="test bag (paper: the XZ circles)")
     p.add_argument("--payload", type=Path, help="bag with a payload pickup (adaptation scenario)")
     add_config_arguments(p)
-    p.add_argument("--models", nargs="+", choices=("P", "NP", "SP", "SPJ", "SPfrozenP"), default=None,
-                   help="learners (default: P NP SP; with --payload: SP); SPJ = the joint semiparametric fit "
-                        "(semiparametric.combination=joint whatever the configuration says; needs equal "
-                        "forgetting factors); SPfrozenP = diagnostic SP whose rigid-body stage stops "
-                        "learning after the training bag")
+    p.add_argument(
+        "--models",
+        nargs="+",
+        choices=("P", "NP", "SP", "SPJ", "SPfrozenP"),
+        default=None,
+        help="learners (default: P NP SP; with --payload: SP); SPJ = the joint semiparametric fit "
+        "(semiparametric.combination=joint whatever the configuration says; needs equal "
+        "forgetting factors); SPfrozenP = diagnostic SP whose rigid-body stage stops "
+        "learning after the training bag",
+    )
     p.add_argument("--splits", type=int, default=10, help="number of sequential test parts (default 10)")
-    p.add_argument("--split-size", type=int, default=None,
-                   help="samples per part (paper: 1000); omitted: the test bag in --splits equal parts")
+    p.add_argument(
+        "--split-size",
+        type=int,
+        default=None,
+        help="samples per part (paper: 1000); omitted: the test bag in --splits equal parts",
+    )
     p.add_argument("--window", type=float, default=3.0, help="sliding RMSE window [s] (default 3)")
+    p.add_argument(
+        "--first",
+        type=float,
+        default=3.0,
+        help="initial segment of each part reported separately [s] (default 3: *_first_3s)",
+    )
     p.add_argument("--train-limit", type=int, default=None, help="use only the first N training samples")
     p.add_argument("--test-limit", type=int, default=None, help="use only the first N test samples")
-    p.add_argument("--test-skip", type=int, default=0,
-                   help="drop the first N test samples (with --train-limit N on the same bag: the protocol "
-                        "within one bag, e.g. for hyperparameter selection on training data)")
-    p.add_argument("--pickup-time", type=float, default=None,
-                   help="payload pickup [s from the bag's first joint state]; default from the bag's "
-                        "scenario.yaml")
-    p.add_argument("--forgetting", type=float, default=0.995,
-                   help="forgetting factor per sample with adaptation on (default 0.995)")
-    p.add_argument("--forgetting-np", type=float, default=None,
-                   help="forgetting factor of the residual stage with adaptation on (default: --forgetting)")
+    p.add_argument(
+        "--test-skip",
+        type=int,
+        default=0,
+        help="drop the first N test samples (with --train-limit N on the same bag: the protocol "
+        "within one bag, e.g. for hyperparameter selection on training data)",
+    )
+    p.add_argument(
+        "--pickup-time",
+        type=float,
+        default=None,
+        help="payload pickup [s from the bag's first joint state]; default from the bag's scenario.yaml",
+    )
+    p.add_argument(
+        "--forgetting",
+        type=float,
+        default=0.995,
+        help="forgetting factor per sample with adaptation on (default 0.995)",
+    )
+    p.add_argument(
+        "--forgetting-np",
+        type=float,
+        default=None,
+        help="forgetting factor of the residual stage with adaptation on (default: --forgetting)",
+    )
     p.add_argument("--json", type=Path, help="write the JSON report here")
     p.add_argument("--plot", type=Path, help="write the figure (PNG) here")
-    p.add_argument("--plot-truth", type=Path,
-                   help="also plot the errors against the noise-free wrench (simulated bags) here")
+    p.add_argument(
+        "--plot-truth",
+        type=Path,
+        help="also plot the errors against the noise-free wrench (simulated bags) here",
+    )
     p.add_argument("--markdown", type=Path, help="write the markdown table here")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress bar (one is drawn only when stderr is a terminal anyway)",
+    )
     return p
 
 
@@ -124,16 +176,30 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         text = run_evaluate(
-            train=args.train, test=args.test, payload=args.payload, config=args.config,
-            overrides=parse_overrides(args.overrides), joint_states_topic=args.joint_states_topic,
-            wrench_topic=args.wrench_topic, models=args.models, splits=args.splits,
+            train=args.train,
+            test=args.test,
+            payload=args.payload,
+            config=args.config,
+            overrides=parse_overrides(args.overrides),
+            joint_states_topic=args.joint_states_topic,
+            wrench_topic=args.wrench_topic,
+            models=args.models,
+            splits=args.splits,
             split_size=args.split_size,
-            window_s=args.window, train_limit=args.train_limit, test_limit=args.test_limit,
+            window_s=args.window,
+            first_s=args.first,
+            train_limit=args.train_limit,
+            test_limit=args.test_limit,
             test_skip=args.test_skip,
-            pickup_time_s=args.pickup_time, forgetting=args.forgetting,
-            forgetting_nonparametric=args.forgetting_np, json_path=args.json,
-            plot_path=args.plot, plot_truth_path=args.plot_truth, markdown_path=args.markdown,
-            progress=not args.no_progress)
+            pickup_time_s=args.pickup_time,
+            forgetting=args.forgetting,
+            forgetting_nonparametric=args.forgetting_np,
+            json_path=args.json,
+            plot_path=args.plot,
+            plot_truth_path=args.plot_truth,
+            markdown_path=args.markdown,
+            progress=not args.no_progress,
+        )
     except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created
         return error_exit("evaluate", err)
     print(text, end="")

@@ -19,22 +19,87 @@ they are equal.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy import stats
 
-from semiparam_ros.eval.metrics import GROUP_UNITS
-from semiparam_ros.eval.report import first_key
-
-__all__ = ["DEFAULT_PAIRS", "compare_pair", "comparison_markdown", "format_p", "paired_comparisons"]
+__all__ = ["DEFAULT_PAIRS", "Comparison", "PairStats", "compare_pair", "format_p"]
 
 #: Pairs compared by default when both learners are in a report: each semiparametric model against NP.
 DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("SP", "NP"), ("SPJ", "NP"), ("SPJ", "SP"))
 
 
-def compare_pair(a: Sequence[float], b: Sequence[float]) -> dict[str, Any]:
+@dataclass(frozen=True)
+class PairStats:
+    """Paired statistics of per-part (or per-seed) RMSEs of learners A and B (N or N·m).
+
+    Attributes:
+        n: Number of pairs.
+        ratio: ``mean(A) / mean(B)``.
+        diff_mean: Mean of ``A − B``.
+        diff_sem: Its standard error ``std(ddof=1)/√n``; ``None`` with one pair.
+        wins: Pairs where A is below B.
+        ties: Pairs where A equals B.
+        p_t: Two-sided paired t-test p-value; ``None`` with one pair or all differences equal.
+        p_sign: Two-sided exact sign test p-value (ties dropped).
+    """
+
+    n: int
+    ratio: float
+    diff_mean: float
+    diff_sem: float | None
+    wins: int
+    ties: int
+    p_t: float | None
+    p_sign: float
+
+    def direction(self, alpha: float = 0.05) -> str:
+        """Return ``"ahead"`` (A significantly lower, paired t), ``"behind"`` or ``"tie"``."""
+        if self.p_t is not None and self.p_t < alpha:
+            return "ahead" if self.diff_mean < 0 else "behind"
+        return "tie"
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One paired comparison of learner A with learner B.
+
+    Attributes:
+        a: Learner A.
+        b: Learner B.
+        group: ``force`` or ``torque``.
+        segment: ``regime`` or ``first``.
+        truth: Against the noise-free outputs (else the measured ones).
+        level: ``parts`` (the test parts of one run), ``seeds`` (per-seed means of replicates) or
+            ``pooled`` (all parts of all replicates).
+        stats: The statistics.
+    """
+
+    a: str
+    b: str
+    group: str
+    segment: str
+    truth: bool
+    level: str
+    stats: PairStats
+
+    def to_json(self) -> dict[str, Any]:
+        """Return the flat JSON row (``a``, ``b``, ``group``, ``segment``, ``truth``, ``level``, stats)."""
+        return {"a": self.a, "b": self.b, "group": self.group, "segment": self.segment, "truth": self.truth,
+                "level": self.level, **self.stats.__dict__}
+
+    @classmethod
+    def from_json(cls, row: dict[str, Any]) -> Comparison:
+        """Read a row written by :meth:`to_json`."""
+        fields = PairStats.__dataclass_fields__
+        return cls(row["a"], row["b"], row["group"], row["segment"], bool(row["truth"]),
+                   row.get("level", "parts"), PairStats(**{k: row[k] for k in fields}))
+
+
+def compare_pair(a: Sequence[float], b: Sequence[float]) -> PairStats:
     """Paired statistics of per-part RMSEs ``a`` and ``b`` (same parts, same order).
 
     Args:
@@ -42,8 +107,7 @@ def compare_pair(a: Sequence[float], b: Sequence[float]) -> dict[str, Any]:
         b: RMSE of learner B per part.
 
     Returns:
-        ``{"n", "ratio", "diff_mean", "diff_sem", "wins", "ties", "p_t", "p_sign"}``; ``diff_sem`` is None
-        with one part, ``p_t`` None with one part or when all differences are equal (JSON has no NaN).
+        The :class:`PairStats`.
 
     Raises:
         ValueError: Different lengths, no parts, or non-finite values.
@@ -64,73 +128,10 @@ def compare_pair(a: Sequence[float], b: Sequence[float]) -> dict[str, Any]:
     ties = int(np.sum(d == 0))
     decided = n - ties
     p_sign = float(stats.binomtest(wins, decided, 0.5).pvalue) if decided else 1.0
-    return {"n": n, "ratio": float(np.mean(av) / np.mean(bv)), "diff_mean": float(np.mean(d)),
-            "diff_sem": sem, "wins": wins, "ties": ties, "p_t": p_t, "p_sign": p_sign}
-
-
-def paired_comparisons(report: Mapping[str, Any], pairs: Sequence[tuple[str, str]] = DEFAULT_PAIRS,
-                       first_s: float | None = None) -> list[dict[str, Any]]:
-    """Compare learners pairwise on the per-part RMSEs stored in a protocol report.
-
-    Args:
-        report: Output of :func:`~semiparam_ros.eval.report.protocol_report` (needs the ``*_splits`` lists).
-        pairs: ``(A, B)`` pairs; a pair with a learner missing from the report is skipped.
-        first_s: Length of the initial segment [s]; default: the report's.
-
-    Returns:
-        One dict per pair, group, segment and target: ``{"a", "b", "group", "segment", "truth", **stats}``
-        with ``segment`` ``"regime"`` or ``"first"`` and ``truth`` whether against the noise-free outputs.
-    """
-    models = report["models"]
-    first_s = report["protocol"].get("first_s", 3.0) if first_s is None else first_s
-    first = f"_{first_key(first_s)}"
-    out: list[dict[str, Any]] = []
-    for a, b in pairs:
-        if a not in models or b not in models:
-            continue
-        for truth in (False, True):
-            sa = models[a].get("ground_truth") if truth else models[a]
-            sb = models[b].get("ground_truth") if truth else models[b]
-            if sa is None or sb is None:
-                continue
-            for group in ("force", "torque"):
-                for segment, suffix in (("regime", ""), ("first", first)):
-                    key = f"{group}_rmse{suffix}_splits"
-                    if key not in sa or key not in sb:
-                        continue
-                    out.append({"a": a, "b": b, "group": group, "segment": segment, "truth": truth,
-                                **compare_pair(sa[key], sb[key])})
-    return out
+    return PairStats(n=n, ratio=float(np.mean(av) / np.mean(bv)), diff_mean=float(np.mean(d)), diff_sem=sem,
+                     wins=wins, ties=ties, p_t=p_t, p_sign=p_sign)
 
 
 def format_p(value: float | None) -> str:
     """Format a p-value for a table: two significant digits, ``< 0.001`` below that, ``n/a`` for None."""
     return "n/a" if value is None else (f"{value:.2g}" if value >= 0.001 else "< 0.001")
-
-
-def _p_or(value: float | None) -> str:
-    return "n/a" if value is None else f"{value:.2g}"
-
-
-def comparison_markdown(rows: Sequence[Mapping[str, Any]], first_s: float = 3.0) -> str:
-    """Markdown table of :func:`paired_comparisons` rows.
-
-    Args:
-        rows: The comparisons.
-        first_s: Length of the initial segment [s] (for the labels).
-
-    Returns:
-        The table with a trailing newline (empty string for no rows).
-    """
-    if not rows:
-        return ""
-    lines = ["| A vs B | target | group | segment | mean ratio | mean A − B ± s.e. | A better in "
-             "| p (paired t) | p (sign) |", "|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        seg = "at regime" if r["segment"] == "regime" else f"first {first_s:g} s"
-        unit = GROUP_UNITS.get(r["group"], "")
-        lines.append(
-            f"| {r['a']} vs {r['b']} | {'noise-free' if r['truth'] else 'measured'} | {r['group']} | {seg} "
-            f"| {r['ratio']:.4f} | {r['diff_mean']:+.2g} ± {_p_or(r['diff_sem'])} {unit} "
-            f"| {r['wins']} of {r['n']} | {format_p(r['p_t'])} | {format_p(r['p_sign'])} |")
-    return "\n".join(lines) + "\n"

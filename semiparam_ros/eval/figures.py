@@ -5,12 +5,12 @@ time from the start of each test split on a log axis, mean over splits as a line
 deviation shaded, P green, NP red, SP blue (and SPJ, the joint semiparametric fit, purple, labelled
 "SP joint"). :func:`plot_adaptation` draws the payload scenario: windowed
 force and torque RMSE against the time from the pickup, one line per model (with and without adaptation),
-the pre-pickup level and the recovery tolerance band.
+the pre-pickup level and the recovery tolerance band. Groups, units and axis labels come from the report's
+output kind (``robot.output``): force and torque for a wrench, joint torque (mean over joints) otherwise.
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -22,7 +22,8 @@ matplotlib.use("Agg")  # before pyplot: headless, deterministic PNGs
 import matplotlib.pyplot as plt
 import numpy as np
 
-from semiparam_ros.eval.metrics import GROUP_UNITS
+from semiparam_ros.atomic import atomic_open
+from semiparam_ros.eval.report import AdaptationReport, ProtocolReport
 
 __all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_protocol"]
 
@@ -53,25 +54,29 @@ def _label(kind: str) -> str:
     return kind if key is None else LABELS[key] + kind[len(key):]
 
 
+def _ylabel(report: ProtocolReport | AdaptationReport, group: str) -> str:
+    g = report.output.groups[group]
+    mean = " (mean over joints)" if report.output.kind == "joint_torques" else ""
+    return f"{g.label} RMSE{mean} [{g.unit}]"
+
+
 def _save(fig: Any, path: str | Path, dpi: int) -> Path:
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.png")
     try:
-        fig.savefig(tmp, dpi=dpi, format="png")
-        os.replace(tmp, path)
+        with atomic_open(path, "wb") as fh:
+            fig.savefig(fh, dpi=dpi, format="png")
     finally:
         plt.close(fig)
-        tmp.unlink(missing_ok=True)
     return path
 
 
-def plot_protocol(report: Mapping[str, Any], path: str | Path, *, truth: bool = False,
+def plot_protocol(report: ProtocolReport, path: str | Path, *, truth: bool = False,
                   title: str | None = None, dpi: int = 120) -> Path:
     """Draw the paper's Fig. 3 from a protocol report and write it as PNG (atomically).
 
     Args:
-        report: Output of :func:`~semiparam_ros.eval.report.protocol_report` (uses ``curves``).
+        report: Output of :func:`~semiparam_ros.eval.report.protocol_report` (uses ``curves``; groups, units
+            and labels from its output kind).
         path: Destination ``.png``.
         truth: Plot the errors against the noise-free outputs (requires them in the report).
         title: Figure title.
@@ -83,7 +88,7 @@ def plot_protocol(report: Mapping[str, Any], path: str | Path, *, truth: bool = 
     Raises:
         ValueError: If the report has no curves (or no ground-truth curves when ``truth``).
     """
-    curves = report.get("curves")
+    curves = report.curves
     if not curves:
         raise ValueError("the report has no curves")
     time_s = np.asarray(curves["time_s"])
@@ -91,31 +96,31 @@ def plot_protocol(report: Mapping[str, Any], path: str | Path, *, truth: bool = 
                                                      ("time_s", "ground_truth")}
     if not source:
         raise ValueError("the report has no ground-truth curves")
-    groups = [g for g in ("force", "torque") if f"{g}_mean" in next(iter(source.values()))]
+    groups = list(report.output.groups.values())
     fig, axes = plt.subplots(len(groups), 1, figsize=(6.4, 2.6 * len(groups) + 0.6), sharex=True,
                              squeeze=False)
     for ax, group in zip(axes[:, 0], groups, strict=True):
         for i, (kind, entry) in enumerate(source.items()):
-            mean = np.asarray(entry[f"{group}_mean"])
-            std = np.asarray(entry[f"{group}_std"])
+            mean = np.asarray(entry[f"{group.name}_mean"])
+            std = np.asarray(entry[f"{group.name}_std"])
             color = _color(kind, i)
             ax.plot(time_s, mean, color=color, lw=1.4, label=_label(kind))
             ax.fill_between(time_s, mean - std, mean + std, color=color, alpha=0.2, lw=0)
         ax.set_xscale("log")
-        ax.set_ylabel(f"{group} RMSE [{GROUP_UNITS[group]}]")
+        ax.set_ylabel(_ylabel(report, group.name))
         ax.grid(True, which="both", alpha=0.3)
         ax.set_ylim(bottom=0)
     axes[0, 0].legend(loc="upper right")
-    window = report.get("protocol", {}).get("window_s")
+    window = report.protocol.get("window_s", float("nan"))
     axes[-1, 0].set_xlabel("time from split start [s] (log scale)")
-    splits = report.get("splits")
-    fig.suptitle(title or (f"windowed RMSE ({window:.3g} s window), mean ± std over {splits} splits"
-                           + (" — vs noise-free wrench" if truth else "")), fontsize=10)
+    target = "wrench" if report.output.kind == "wrench" else "joint torques"
+    fig.suptitle(title or (f"windowed RMSE ({window:.3g} s window), mean ± std over {report.splits} splits"
+                           + (f" — vs noise-free {target}" if truth else "")), fontsize=10)
     fig.tight_layout()
     return _save(fig, path, dpi)
 
 
-def plot_adaptation(report: Mapping[str, Any], path: str | Path, *, title: str | None = None,
+def plot_adaptation(report: AdaptationReport, path: str | Path, *, title: str | None = None,
                     dpi: int = 120, xlim: tuple[float, float] | None = None) -> Path:
     """Draw the payload scenario (error vs time around the change) and write it as PNG (atomically).
 
@@ -132,16 +137,16 @@ def plot_adaptation(report: Mapping[str, Any], path: str | Path, *, title: str |
     Raises:
         ValueError: If the report has no curves.
     """
-    curves = report.get("curves")
+    curves = report.curves
     if not curves:
         raise ValueError("the report has no curves")
     time_s = np.asarray(curves["time_s"])
     models = {k: v for k, v in curves.items() if k != "time_s"}
-    groups = [g for g in ("force", "torque") if g in next(iter(models.values()))]
+    groups = list(report.output.groups)
     fig, axes = plt.subplots(len(groups), 1, figsize=(6.4, 2.6 * len(groups) + 0.6), sharex=True,
                              squeeze=False)
-    tol = report.get("tolerance", 1.5)
-    deadline = report.get("deadline_s", 10.0)
+    tol = report.tolerance
+    deadline = report.deadline_s
     styles = ("-", "--", ":", "-.")
     for ax, group in zip(axes[:, 0], groups, strict=True):
         for i, (kind, entry) in enumerate(models.items()):
@@ -150,12 +155,12 @@ def plot_adaptation(report: Mapping[str, Any], path: str | Path, *, title: str |
             style = ("--" if "no adaptation" in kind else "-" if "adaptive" in kind
                      else styles[i % len(styles)])
             ax.plot(time_s, entry[group], color=color, ls=style, lw=1.3, label=_label(kind))
-            pre = report["summary"][kind][group]["pre_rmse"]
+            pre = report.summary[kind][group].pre_rmse
             ax.axhline(tol * pre, color=color, ls=style, lw=0.7, alpha=0.6)
         ax.axvline(0.0, color="k", lw=0.8)
         ax.axvspan(0.0, deadline, color="0.85", alpha=0.5, lw=0)
         ax.set_yscale("log")
-        ax.set_ylabel(f"{group} RMSE [{GROUP_UNITS[group]}]")
+        ax.set_ylabel(_ylabel(report, group))
         ax.grid(True, which="both", alpha=0.3)
         if xlim is not None:
             ax.set_xlim(*xlim)

@@ -7,47 +7,140 @@ the components of the group. The window is trailing (causal: the value at sample
 ``max(0, i - w + 1) .. i``), so during the first ``w - 1`` samples of a split it covers every sample seen
 so far — the initial transient the paper's log-time axis shows.
 
-Units follow the errors: N for forces, N·m for torques.
+Which components form a group is decided by the configured output kind (:class:`OutputSpec`, from
+``robot.output``), never by the number of outputs: a 6-joint arm's joint torques are six torques, not a
+wrench. Units follow the errors: N for forces, N·m for torques (wrench torques and joint torques).
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 __all__ = [
     "GROUP_UNITS",
-    "WRENCH_GROUPS",
+    "OUTPUT_KINDS",
+    "WRENCH_COMPONENTS",
+    "Group",
+    "OutputSpec",
     "component_rmse",
     "group_rmse",
-    "groups_for",
     "window_samples",
     "windowed_rmse",
 ]
 
-#: Component groups of a wrench ``[fx, fy, fz, tx, ty, tz]``: force (N) and torque (N·m).
-WRENCH_GROUPS: dict[str, slice] = {"force": slice(0, 3), "torque": slice(3, 6)}
+#: Component names of a wrench ``[fx, fy, fz, tx, ty, tz]`` (N, N·m), in the order of the output vector.
+WRENCH_COMPONENTS: tuple[str, ...] = ("fx", "fy", "fz", "tx", "ty", "tz")
 
-#: Unit of each group's errors, for tables and axis labels.
-GROUP_UNITS: dict[str, str] = {"force": "N", "torque": "N·m"}
+#: The two output kinds of ``robot.output``.
+OUTPUT_KINDS: tuple[str, ...] = ("wrench", "joint_torques")
 
 
-def groups_for(n_outputs: int) -> dict[str, slice]:
-    """Return the component groups evaluated for an output of ``n_outputs`` components.
+@dataclass(frozen=True)
+class Group:
+    """A group of output components whose errors are averaged together.
 
-    Args:
-        n_outputs: 6 for an F/T-sensor wrench, n for joint torques.
+    Attributes:
+        name: Group name used in report fields (``force``, ``torque``).
+        unit: Unit of the components' errors (``N`` or ``N·m``).
+        columns: Indices of the group's components in the output vector.
+        label: Human name for tables and axis labels (e.g. ``joint torque``).
+    """
 
-    Returns:
-        ``{"force": 0:3, "torque": 3:6}`` for a wrench, ``{"torque": all}`` otherwise.
+    name: str
+    unit: str
+    columns: tuple[int, ...]
+    label: str
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    """What the learned output is, decided by ``robot.output`` (never by the number of outputs).
+
+    A wrench ``[fx, fy, fz, tx, ty, tz]`` has the groups ``force`` [N] (columns 0–2) and ``torque`` [N·m]
+    (columns 3–5) and one component per axis. Joint torques have one group, ``torque`` [N·m] over all
+    joints (its RMSE is the mean over joints of each joint's RMSE), and one component per joint.
+
+    Attributes:
+        kind: ``"wrench"`` or ``"joint_torques"``.
+        components: Component names: the wrench axes or the joint names, in output order.
 
     Raises:
-        ValueError: If ``n_outputs < 1``.
+        ValueError: On an unknown kind, no component, or a wrench without exactly six components.
     """
-    if n_outputs < 1:
-        raise ValueError(f"n_outputs must be >= 1, got {n_outputs}")
-    if n_outputs == 6:
-        return dict(WRENCH_GROUPS)
-    return {"torque": slice(0, n_outputs)}
+
+    kind: str
+    components: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        if self.kind not in OUTPUT_KINDS:
+            raise ValueError(f"output kind must be one of {OUTPUT_KINDS}, got {self.kind!r}")
+        if not self.components:
+            raise ValueError("an output needs at least one component")
+        if self.kind == "wrench" and tuple(self.components) != WRENCH_COMPONENTS:
+            raise ValueError(f"a wrench has the components {WRENCH_COMPONENTS}, got {self.components}")
+        object.__setattr__(self, "components", tuple(self.components))
+
+    @classmethod
+    def wrench(cls) -> OutputSpec:
+        """Return the F/T-sensor wrench output."""
+        return cls("wrench", WRENCH_COMPONENTS)
+
+    @classmethod
+    def joint_torques(cls, joints: Sequence[str]) -> OutputSpec:
+        """Return the joint-torque output of the given joints (N·m each)."""
+        return cls("joint_torques", tuple(joints))
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any]) -> OutputSpec:
+        """Return the output of an estimator configuration (``robot.output``, ``robot.joints``).
+
+        Args:
+            config: An :class:`~semiparam_ros.core.config.EstimatorConfig` or a flat mapping of it.
+
+        Returns:
+            The output specification.
+
+        Raises:
+            ValueError: If ``robot.output`` is not a known kind.
+        """
+        kind = config["robot.output"]
+        return cls.wrench() if kind == "wrench" else cls.joint_torques(tuple(config["robot.joints"]))
+
+    @property
+    def n_outputs(self) -> int:
+        """Number of output components t."""
+        return len(self.components)
+
+    @property
+    def groups(self) -> dict[str, Group]:
+        """The component groups, by name, in report order."""
+        if self.kind == "wrench":
+            return {"force": Group("force", "N", (0, 1, 2), "force"),
+                    "torque": Group("torque", "N·m", (3, 4, 5), "torque")}
+        return {"torque": Group("torque", "N·m", tuple(range(self.n_outputs)), "joint torque")}
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """Unit of each component's errors, in output order."""
+        units = [""] * self.n_outputs
+        for group in self.groups.values():
+            for c in group.columns:
+                units[c] = group.unit
+        return tuple(units)
+
+    def check(self, n_outputs: int) -> None:
+        """Raise ``ValueError`` if a stream with ``n_outputs`` components does not fit this output."""
+        if n_outputs != self.n_outputs:
+            raise ValueError(f"the {self.kind} output has {self.n_outputs} components "
+                             f"({', '.join(self.components)}), the samples have {n_outputs}")
+
+
+#: Unit of each wrench group's errors, for tables and axis labels.
+GROUP_UNITS: dict[str, str] = {g.name: g.unit for g in OutputSpec.wrench().groups.values()}
 
 
 def _as_errors(errors: np.ndarray) -> np.ndarray:

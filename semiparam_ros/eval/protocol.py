@@ -9,30 +9,37 @@ component-averaged RMSE of forces and torques over a sliding window.
 This module works on plain arrays (:class:`SampleArrays`) and on any object with the online-model
 interface of :mod:`semiparam_ros.core.semiparametric` (``predict_learn_one(x, y)`` returning a prediction
 with a ``total`` attribute or an array, and ``copy()``), so it is tested against hand-written loops on toy
-models and used unchanged on bags by :mod:`semiparam_ros.eval.evaluate`.
+models and used unchanged on bags by :mod:`semiparam_ros.eval.replay`. What the outputs are (a wrench or
+joint torques, hence the groups and units) is given by an :class:`~semiparam_ros.eval.metrics.OutputSpec`.
 
 A second protocol, :func:`run_adaptation`, follows one stream through an abrupt change (a payload picked
 up at a known time) and measures how fast each model's error returns to its pre-change level.
 
 Units: time in s (stamps in int ns), errors in N (forces) and N·m (torques), update times in µs.
+
+The results are arrays (:class:`ProtocolResult`, :class:`AdaptationResult`); the typed report built once
+from them is :func:`semiparam_ros.eval.report.protocol_report`.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 
-from semiparam_ros.eval.metrics import group_rmse, groups_for, window_samples, windowed_rmse
+from semiparam_ros.eval.metrics import OutputSpec, component_rmse, group_rmse, window_samples, windowed_rmse
 
 __all__ = [
     "AdaptationResult",
     "OnlineModel",
     "ProtocolResult",
+    "Recovery",
     "SampleArrays",
+    "progress_enabled",
     "run_adaptation",
     "run_protocol",
     "split_bounds",
@@ -253,7 +260,8 @@ class ProtocolResult:
         update_ns: Per model, wall time of each test ``predict_learn_one`` [ns], ``(splits, split_size)``.
         train_ns: Per model, total training wall time [ns].
         samples_train: Number of training samples.
-        groups: Component groups (``{"force": 0:3, "torque": 3:6}`` for a wrench).
+        first_s: Length of the initial segment [s].
+        output: What the outputs are (groups, components, units).
     """
 
     kinds: tuple[str, ...]
@@ -268,8 +276,8 @@ class ProtocolResult:
     update_ns: dict[str, np.ndarray]
     train_ns: dict[str, int]
     samples_train: int
-    first_s: float = 3.0
-    groups: dict[str, slice] = field(default_factory=dict)
+    first_s: float
+    output: OutputSpec
 
     @property
     def samples_test(self) -> int:
@@ -292,9 +300,28 @@ class ProtocolResult:
             return self.predictions[kind] - self.targets_true
         return self.predictions[kind] - self.targets
 
+    def _columns(self, group: str) -> list[int]:
+        return list(self.output.groups[group].columns)
+
+    def segment(self, segment: str) -> slice:
+        """Sample range of a segment within each split.
+
+        Args:
+            segment: ``"regime"`` (second half of each split) or ``"first"`` (the first ``first_s``).
+
+        Raises:
+            ValueError: On another name.
+        """
+        length = self.targets.shape[1]
+        if segment == "regime":
+            return slice(length // 2, length)
+        if segment == "first":
+            return slice(0, self.first)
+        raise ValueError(f"segment must be 'regime' or 'first', got {segment!r}")
+
     def curves(self, kind: str, group: str, truth: bool = False) -> np.ndarray:
         """Windowed component-averaged RMSE of each split, shape ``(splits, split_size)``."""
-        err = self.errors(kind, truth)[:, :, self.groups[group]]
+        err = self.errors(kind, truth)[:, :, self._columns(group)]
         return np.stack([windowed_rmse(e, self.window) for e in err])
 
     def segment_rmse(self, kind: str, group: str, segment: str, truth: bool = False) -> np.ndarray:
@@ -302,18 +329,34 @@ class ProtocolResult:
 
         Args:
             kind: Model name.
-            group: ``"force"`` or ``"torque"``.
+            group: A group of :attr:`output` (``"force"`` or ``"torque"``).
             segment: ``"regime"`` (second half of each split) or ``"first"`` (first seconds).
             truth: Against the noise-free outputs.
         """
-        err = self.errors(kind, truth)[:, :, self.groups[group]]
-        length = err.shape[1]
-        part = slice(length // 2, length) if segment == "regime" else slice(0, self.first)
-        return np.array([group_rmse(e[part]) for e in err])
+        err = self.errors(kind, truth)[:, self.segment(segment)][:, :, self._columns(group)]
+        return np.array([group_rmse(e) for e in err])
+
+    def component_rmse(self, kind: str, segment: str, truth: bool = False) -> np.ndarray:
+        """RMSE of every output component in each split over a segment, shape ``(splits, t)``."""
+        err = self.errors(kind, truth)[:, self.segment(segment)]
+        return np.stack([component_rmse(e) for e in err])
+
+    def component_nmse(self, kind: str, segment: str, truth: bool = False) -> np.ndarray:
+        """Return the normalized MSE of each output component over a segment, pooled over splits, ``(t,)``.
+
+        ``nMSE_c = mean(e_c²) / var(y_c)`` over the segment's samples of all splits, with ``y`` the measured
+        output (also when ``truth``: the normalization is the signal's spread, not the reference's). A
+        component with zero measured variance gets ``inf`` (or ``nan`` with zero error).
+        """
+        part = self.segment(segment)
+        err = self.errors(kind, truth)[:, part].reshape(-1, self.targets.shape[2])
+        var = np.var(self.targets[:, part].reshape(-1, self.targets.shape[2]), axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.mean(err * err, axis=0) / var
 
 
 def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, test_data: SampleArrays, *,
-                 splits: int = 10, split_size: int | None = None, window_s: float = 3.0,
+                 output: OutputSpec, splits: int = 10, split_size: int | None = None, window_s: float = 3.0,
                  first_s: float = 3.0, progress: bool | Progress = False) -> ProtocolResult:
     """Run the paper's protocol: train every model on the whole train stream, then test-and-update.
 
@@ -324,23 +367,26 @@ def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, te
         models: Fresh models by name (the paper: P, NP, SP with zero parameters). Trained in place.
         train_data: Training stream (the XY log).
         test_data: Test stream (the XZ log).
+        output: What the outputs are (``OutputSpec.from_config(config)``): groups and units of the report.
         splits: Number of sequential test parts.
         split_size: Samples per part; ``None`` = equal parts.
         window_s: Sliding-window length [s], converted to samples at the test stream's sample rate.
-        first_s: Length of the initial segment reported as ``*_first_3s`` [s].
-        progress: ``True`` for a tqdm bar on stderr, or a callable receiving processed-sample counts.
+        first_s: Length of the initial segment reported separately [s] (``*_first_<first_s>s`` in the JSON).
+        progress: ``True`` for a progress bar on stderr (shown only when stderr is a terminal), or a
+            callable receiving processed-sample counts.
 
     Returns:
         The :class:`ProtocolResult`.
 
     Raises:
-        ValueError: If no model is given, the streams disagree in output size, or the test stream is too
-            short for the split request.
+        ValueError: If no model is given, the streams disagree in output size or with ``output``, or the
+            test stream is too short for the split request.
     """
     if not models:
         raise ValueError("no models to evaluate")
     if train_data.n_outputs != test_data.n_outputs or train_data.X.shape[1] != test_data.X.shape[1]:
         raise ValueError("train and test streams differ in input or output size")
+    output.check(test_data.n_outputs)
     bounds = split_bounds(len(test_data), splits, split_size)
     length = bounds[0][1] - bounds[0][0]
     period = test_data.sample_period_s
@@ -375,12 +421,21 @@ def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, te
     return ProtocolResult(kinds=kinds, bounds=bounds, predictions=predictions, targets=targets,
                           targets_true=targets_true, time_s=time_s, sample_period_s=period, window=window,
                           first=first, first_s=first_s, update_ns=update_ns, train_ns=train_ns,
-                          samples_train=len(train_data),
-                          groups=groups_for(test_data.n_outputs))
+                          samples_train=len(train_data), output=output)
+
+
+def progress_enabled(requested: bool) -> bool:
+    """Whether to draw a progress bar: only when asked for and stderr is a terminal.
+
+    A bar redrawn with carriage returns into a log file or a pipe leaves thousands of frames in it.
+    """
+    return bool(requested) and sys.stderr.isatty()
 
 
 def _progress(progress: bool | Progress, total: int) -> tuple[Any, Progress | None]:
     if progress is True:
+        if not progress_enabled(True):
+            return None, None
         from tqdm import tqdm
 
         bar = tqdm(total=total, unit="sample", dynamic_ncols=True, smoothing=0.05)
@@ -401,12 +456,7 @@ class AdaptationResult:
         errors_true: Per model, errors against the noise-free outputs, or ``None``.
         window: Sliding-window length [samples].
         curves: Per model and group, windowed component-averaged RMSE, shape ``(n,)``.
-        summary: Per model and group: ``pre_rmse`` (RMSE over ``pre_s`` before the change),
-            ``peak`` (largest windowed RMSE after it), ``recovery_time_s`` (first time after the change from
-            which the windowed RMSE stays within ``tolerance × pre_rmse`` to the end of the stream, ``None``
-            if never), ``level_at_deadline`` (windowed RMSE at ``deadline_s``, ratio to ``pre_rmse`` in
-            ``ratio_at_deadline``), ``post_rmse`` (RMSE from ``deadline_s`` to the end), ``recovered``
-            (``recovery_time_s <= deadline_s``).
+        summary: Per model and group, the :class:`Recovery`.
         change_s: Time of the change from the stream's first stamp [s].
         tolerance: Recovery tolerance (ratio to the pre-change level).
         deadline_s: Recovery deadline after the change [s].
@@ -419,16 +469,41 @@ class AdaptationResult:
     errors_true: dict[str, np.ndarray] | None
     window: int
     curves: dict[str, dict[str, np.ndarray]]
-    summary: dict[str, dict[str, dict[str, Any]]]
+    summary: dict[str, dict[str, Recovery]]
     change_s: float
     tolerance: float
     deadline_s: float
     pre_s: float
+    output: OutputSpec
+
+
+@dataclass(frozen=True)
+class Recovery:
+    """How one model's error in one group went through the change (errors in N or N·m, times in s).
+
+    Attributes:
+        pre_rmse: Component-averaged RMSE over ``pre_s`` before the change.
+        peak: Largest windowed RMSE after the change.
+        recovery_time_s: First time after the change from which the windowed RMSE stays within
+            ``tolerance × pre_rmse`` to the end of the stream; ``None`` if never.
+        level_at_deadline: Windowed RMSE at ``deadline_s`` after the change.
+        ratio_at_deadline: ``level_at_deadline / pre_rmse``.
+        post_rmse: Component-averaged RMSE from ``deadline_s`` to the end (``nan`` if no sample).
+        recovered: ``recovery_time_s <= deadline_s``.
+    """
+
+    pre_rmse: float
+    peak: float
+    recovery_time_s: float | None
+    level_at_deadline: float
+    ratio_at_deadline: float
+    post_rmse: float
+    recovered: bool
 
 
 def run_adaptation(models: Mapping[str, OnlineModel], stream: SampleArrays, change_s: float, *,
-                   pretrain: SampleArrays | None = None, window_s: float = 3.0, pre_s: float = 10.0,
-                   deadline_s: float = 10.0, tolerance: float = 1.5,
+                   output: OutputSpec, pretrain: SampleArrays | None = None, window_s: float = 3.0,
+                   pre_s: float = 10.0, deadline_s: float = 10.0, tolerance: float = 1.5,
                    progress: bool | Progress = False) -> AdaptationResult:
     """Follow a stream through an abrupt change (e.g. a payload picked up) with test-then-train.
 
@@ -441,6 +516,7 @@ def run_adaptation(models: Mapping[str, OnlineModel], stream: SampleArrays, chan
         models: Models by name (e.g. ``{"SP adaptive": ..., "SP": ...}``), updated in place.
         stream: The stream containing the change.
         change_s: Time of the change from the stream's first stamp [s].
+        output: What the outputs are (groups and units).
         pretrain: Optional stream each model learns first.
         window_s: Sliding-window length [s].
         pre_s: Length of the pre-change reference segment [s].
@@ -456,6 +532,7 @@ def run_adaptation(models: Mapping[str, OnlineModel], stream: SampleArrays, chan
     """
     if not models:
         raise ValueError("no models to evaluate")
+    output.check(stream.n_outputs)
     t = (stream.stamps_ns - stream.stamps_ns[0]) * _NS - change_s
     if not (t[0] <= -pre_s + 1e-9 and t[-1] > 0):
         raise ValueError(f"the change at {change_s:g} s needs {pre_s:g} s of data before it and some after "
@@ -477,25 +554,25 @@ def run_adaptation(models: Mapping[str, OnlineModel], stream: SampleArrays, chan
     errors_true = None
     if stream.Y_true is not None:
         errors_true = {k: e + stream.Y - stream.Y_true for k, e in errors.items()}
-    groups = groups_for(stream.n_outputs)
+    groups = {name: list(g.columns) for name, g in output.groups.items()}
     pre = (t >= -pre_s) & (t < 0)
     after = t >= 0
     curves: dict[str, dict[str, np.ndarray]] = {}
-    summary: dict[str, dict[str, dict[str, Any]]] = {}
+    summary: dict[str, dict[str, Recovery]] = {}
     for kind, err in errors.items():
         curves[kind], summary[kind] = {}, {}
         for group, cols in groups.items():
             curve = windowed_rmse(err[:, cols], window)
             curves[kind][group] = curve
-            pre_rmse = group_rmse(err[pre, cols])
+            pre_rmse = group_rmse(err[pre][:, cols])
             summary[kind][group] = _recovery(t, curve, err[:, cols], pre_rmse, after, tolerance, deadline_s)
     return AdaptationResult(kinds=tuple(models), time_s=t, errors=errors, errors_true=errors_true,
                             window=window, curves=curves, summary=summary, change_s=change_s,
-                            tolerance=tolerance, deadline_s=deadline_s, pre_s=pre_s)
+                            tolerance=tolerance, deadline_s=deadline_s, pre_s=pre_s, output=output)
 
 
 def _recovery(t: np.ndarray, curve: np.ndarray, err: np.ndarray, pre_rmse: float, after: np.ndarray,
-              tolerance: float, deadline_s: float) -> dict[str, Any]:
+              tolerance: float, deadline_s: float) -> Recovery:
     limit = tolerance * pre_rmse
     idx_after = np.flatnonzero(after)
     bad_after = idx_after[curve[idx_after] > limit]
@@ -508,13 +585,9 @@ def _recovery(t: np.ndarray, curve: np.ndarray, err: np.ndarray, pre_rmse: float
     at_deadline = int(np.searchsorted(t, deadline_s, side="right")) - 1
     post = t >= deadline_s
     level = float(curve[at_deadline]) if at_deadline >= 0 else float("nan")
-    return {
-        "pre_rmse": pre_rmse,
-        "peak": float(np.max(curve[idx_after])),
-        "recovery_time_s": recovery,
-        "level_at_deadline": level,
-        "ratio_at_deadline": level / pre_rmse if pre_rmse > 0 else float("inf"),
-        "post_rmse": group_rmse(err[post]) if np.any(post) else float("nan"),
-        "recovered": recovery is not None and recovery <= deadline_s,
-    }
+    return Recovery(pre_rmse=pre_rmse, peak=float(np.max(curve[idx_after])), recovery_time_s=recovery,
+                    level_at_deadline=level,
+                    ratio_at_deadline=level / pre_rmse if pre_rmse > 0 else float("inf"),
+                    post_rmse=group_rmse(err[post]) if np.any(post) else float("nan"),
+                    recovered=recovery is not None and recovery <= deadline_s)
 

@@ -22,6 +22,7 @@ import yaml
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import build_model, build_pipeline, build_regressor
 from semiparam_ros.eval.diagnostics import FrozenParametricSP
+from semiparam_ros.eval.metrics import OutputSpec
 from semiparam_ros.eval.protocol import (
     AdaptationResult,
     ProtocolResult,
@@ -196,7 +197,7 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         test_limit: Use only the first samples of the test bag (counted before ``test_skip``).
         test_skip: Drop this many samples at the start of the test bag (e.g. to run the protocol within one
             bag: ``train_limit = test_skip = n`` trains on its first n samples and tests on the rest).
-        progress: Show a tqdm progress bar.
+        progress: Show a progress bar (only when stderr is a terminal).
 
     Returns:
         ``(result, info)`` where ``info`` records the bags, topics, limits and pipeline drops.
@@ -214,8 +215,8 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
             raise ValueError(f"test_skip = {test_skip} leaves no test sample (the bag has {len(test_data)})")
         test_data = test_data.slice(test_skip, len(test_data))
     models = build_models(config, kinds, n_train=len(train_data))
-    result = run_protocol(models, train_data, test_data, splits=splits, split_size=split_size,
-                          window_s=window_s, first_s=first_s, progress=progress)
+    result = run_protocol(models, train_data, test_data, output=OutputSpec.from_config(config), splits=splits,
+                          split_size=split_size, window_s=window_s, first_s=first_s, progress=progress)
     info = {
         "train_bag": str(train_path), "test_bag": str(test_path),
         "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench,
@@ -335,7 +336,8 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
     for kind in kinds:
         models[f"{kind} adaptive ({label})"] = build_models(configs["on"], [kind])[kind]
         models[f"{kind} no adaptation"] = build_models(configs["off"], [kind])[kind]
-    result = run_adaptation(models, stream, change_from_first, pretrain=pretrain, window_s=window_s,
+    result = run_adaptation(models, stream, change_from_first, output=OutputSpec.from_config(config),
+                            pretrain=pretrain, window_s=window_s,
                             pre_s=pre_s, deadline_s=deadline_s, tolerance=tolerance, progress=progress)
     info = {"bag": str(bag), "pretrain_bag": None if pretrain_path is None else str(pretrain_path),
             "forgetting": forgetting, "forgetting_nonparametric": beta_np, "pickup_time_s": change_s,

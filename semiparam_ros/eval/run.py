@@ -12,22 +12,22 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.config import EstimatorConfig, load_config, write_config
-from semiparam_ros.eval.compare import comparison_markdown, paired_comparisons
+from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.figures import plot_adaptation, plot_protocol
 from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags, load_samples
-from semiparam_ros.eval.report import (
-    CHECKED_SP_KINDS,
-    adaptation_markdown,
-    adaptation_report,
-    paper_checks,
-    protocol_markdown,
-    protocol_report,
-    write_json,
+from semiparam_ros.eval.report import adaptation_report, protocol_report, write_json
+from semiparam_ros.eval.selection import TUNED_KEYS, grid_table, holdout_search, protocol_search
+from semiparam_ros.eval.tables import (
+    adaptation_table,
+    checks_table,
+    comparisons_table,
+    components_table,
+    protocol_table,
 )
-from semiparam_ros.eval.tuning import TUNED_KEYS, grid_markdown, tune
 
-__all__ = ["checks_markdown", "default_config_path", "load_evaluation_config", "run_evaluate", "run_tune"]
+__all__ = ["default_config_path", "evaluation_text", "load_evaluation_config", "run_evaluate", "run_tune"]
 
 
 def default_config_path() -> Path | None:
@@ -36,13 +36,16 @@ def default_config_path() -> Path | None:
     Returns:
         The path, or ``None`` when neither exists (the parameter defaults are then used).
     """
-    candidates = [Path(__file__).resolve().parents[2] / "config" / "icub_right_arm.yaml",
-                  Path(sys.prefix) / "share" / "semiparam_ros" / "config" / "icub_right_arm.yaml"]
+    candidates = [
+        Path(__file__).resolve().parents[2] / "config" / "icub_right_arm.yaml",
+        Path(sys.prefix) / "share" / "semiparam_ros" / "config" / "icub_right_arm.yaml",
+    ]
     return next((c for c in candidates if c.is_file()), None)
 
 
-def load_evaluation_config(path: str | Path | None, overrides: Mapping[str, Any] | None = None
-                           ) -> EstimatorConfig:
+def load_evaluation_config(
+    path: str | Path | None, overrides: Mapping[str, Any] | None = None
+) -> EstimatorConfig:
     """Load a parameter file and apply overrides.
 
     Args:
@@ -62,30 +65,59 @@ def load_evaluation_config(path: str | Path | None, overrides: Mapping[str, Any]
     return config.with_overrides(dict(overrides)) if overrides else config
 
 
-def checks_markdown(checks: Sequence[Mapping[str, Any]]) -> str:
-    """Markdown table of :func:`~semiparam_ros.eval.report.paper_checks` results.
+def evaluation_text(report: Any) -> str:
+    """Return the tables ``evaluate`` prints for a protocol report.
 
-    One row per criterion; the criteria of SP and of SPJ (the joint fit) are separate rows named by their
-    model.
+    Args:
+        report: A :class:`~semiparam_ros.eval.report.ProtocolReport`.
+
+    Returns:
+        Markdown: the group table (measured and, when known, noise-free), the per-component table (RMSE and
+        nMSE per wrench axis or joint), the paper's criteria and the paired comparisons.
     """
-    lines = ["| criterion | value | limit | |", "|---|---|---|---|"]
-    for c in checks:
-        op = "<" if "first" in c["check"] else "≤"
-        lines.append(f"| {c['check']} | {c['value']:.3f} | {op} {c['limit']:g} | "
-                     f"{'pass' if c['passed'] else 'FAIL'} |")
-    return "\n".join(lines) + "\n"
+    text = protocol_table(report)
+    if report.noise is not None:
+        text += "\nAgainst the noise-free outputs:\n\n" + protocol_table(report, truth=True)
+        text += (
+            "\nSensor noise (measured − noise-free): "
+            + ", ".join(f"{g} {v:.3g} {report.output.groups[g].unit}" for g, v in report.noise.items())
+            + "\n"
+        )
+    per = "joint" if report.output.kind == "joint_torques" else "axis"
+    text += f"\nPer {per}, at regime:\n\n" + components_table(report)
+    if report.checks:
+        text += "\n" + checks_table(report.checks, report.first_s)
+    if report.comparisons:
+        text += "\nPaired over the test parts:\n\n" + comparisons_table(report.comparisons, report.first_s)
+    return text
 
 
-def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None, config: Path | None,
-                 overrides: Mapping[str, Any] | None = None, joint_states_topic: str | None = None,
-                 wrench_topic: str | None = None, models: Sequence[str] | None = None, splits: int = 10,
-                 split_size: int | None = None, window_s: float = 3.0, train_limit: int | None = None,
-                 test_limit: int | None = None, test_skip: int = 0, pickup_time_s: float | None = None,
-                 forgetting: float = 0.995,
-                 forgetting_nonparametric: float | None = None,
-                 json_path: Path | None = None, plot_path: Path | None = None,
-                 plot_truth_path: Path | None = None, markdown_path: Path | None = None,
-                 progress: bool = True) -> str:
+def run_evaluate(
+    *,
+    train: Path | None,
+    test: Path | None,
+    payload: Path | None,
+    config: Path | None,
+    overrides: Mapping[str, Any] | None = None,
+    joint_states_topic: str | None = None,
+    wrench_topic: str | None = None,
+    models: Sequence[str] | None = None,
+    splits: int = 10,
+    split_size: int | None = None,
+    window_s: float = 3.0,
+    first_s: float = 3.0,
+    train_limit: int | None = None,
+    test_limit: int | None = None,
+    test_skip: int = 0,
+    pickup_time_s: float | None = None,
+    forgetting: float = 0.995,
+    forgetting_nonparametric: float | None = None,
+    json_path: Path | None = None,
+    plot_path: Path | None = None,
+    plot_truth_path: Path | None = None,
+    markdown_path: Path | None = None,
+    progress: bool = True,
+) -> str:
     """Run an evaluation and write its outputs.
 
     Args:
@@ -102,6 +134,7 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
         splits: Number of test parts.
         split_size: Samples per part (``None``: equal parts).
         window_s: Sliding window [s].
+        first_s: Initial segment reported separately [s].
         train_limit: Use only the first training samples.
         test_limit: Use only the first test samples.
         test_skip: Drop this many samples at the start of the test bag.
@@ -112,7 +145,7 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
         plot_path: Figure destination.
         plot_truth_path: Figure against the noise-free wrench (paper protocol, simulated bags).
         markdown_path: Markdown table destination.
-        progress: Show a progress bar.
+        progress: Show a progress bar (only when stderr is a terminal).
 
     Returns:
         The text to print (markdown tables).
@@ -123,36 +156,44 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
     cfg = load_evaluation_config(config, overrides)
     topics = Topics.from_config(cfg, joint_states_topic, wrench_topic)
     if payload is not None:
-        result, info = evaluate_adaptation(payload, cfg, forgetting=forgetting,
-                                           forgetting_nonparametric=forgetting_nonparametric,
-                                           change_s=pickup_time_s,
-                                           pretrain_path=train, topics=topics, kinds=models or ("SP",),
-                                           window_s=window_s, progress=progress)
+        result, info = evaluate_adaptation(
+            payload,
+            cfg,
+            forgetting=forgetting,
+            forgetting_nonparametric=forgetting_nonparametric,
+            change_s=pickup_time_s,
+            pretrain_path=train,
+            topics=topics,
+            kinds=models or ("SP",),
+            window_s=window_s,
+            progress=progress,
+        )
         stride = max(1, len(result.time_s) // 2000)  # ≤ 2000 curve points in the JSON; summaries use all
-        report = adaptation_report(result, config=cfg.to_flat(), protocol=info, stride=stride)
-        text = adaptation_markdown(report)
+        adaptation = adaptation_report(result, config=cfg.to_flat(), protocol=info, stride=stride)
+        text = adaptation_table(adaptation)
         if plot_path is not None:
-            plot_adaptation(report, plot_path)
+            plot_adaptation(adaptation, plot_path)
+        report: Any = adaptation
     else:
         if train is None or test is None:
             raise ValueError("the paper protocol needs --train and --test")
-        result, info = evaluate_bags(train, test, cfg, topics=topics, kinds=models or KINDS, splits=splits,
-                                     split_size=split_size, window_s=window_s, train_limit=train_limit,
-                                     test_limit=test_limit, test_skip=test_skip, progress=progress)
+        result, info = evaluate_bags(
+            train,
+            test,
+            cfg,
+            topics=topics,
+            kinds=models or KINDS,
+            splits=splits,
+            split_size=split_size,
+            window_s=window_s,
+            first_s=first_s,
+            train_limit=train_limit,
+            test_limit=test_limit,
+            test_skip=test_skip,
+            progress=progress,
+        )
         report = protocol_report(result, config=cfg.to_flat(), protocol=info)
-        text = protocol_markdown(report)
-        if "ground_truth" in next(iter(report["models"].values())):
-            text += "\nAgainst the noise-free wrench:\n\n" + protocol_markdown(report, truth=True)
-            text += (f"\nSensor noise (measured − noise-free): force {report['noise']['force_rmse']:.3g} N, "
-                     f"torque {report['noise']['torque_rmse']:.3g} N·m\n")
-        names = set(report["models"])
-        if ({"P", "NP"} <= names and names & set(CHECKED_SP_KINDS)
-                and "force_rmse" in report["models"]["P"]):
-            report["checks"] = paper_checks(report)
-            text += "\n" + checks_markdown(report["checks"])
-        report["comparisons"] = paired_comparisons(report)
-        if report["comparisons"]:
-            text += "\nPaired over the test parts:\n\n" + comparison_markdown(report["comparisons"])
+        text = evaluation_text(report)
         if plot_path is not None:
             plot_protocol(report, plot_path)
         if plot_truth_path is not None:
@@ -160,34 +201,58 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
     if json_path is not None:
         write_json(report, json_path)
     if markdown_path is not None:
-        markdown_path.parent.mkdir(parents=True, exist_ok=True)
-        markdown_path.write_text(text)
+        atomic_write_text(markdown_path, text)
     return text
 
 
-def run_tune(*, train: Path, config: Path | None, overrides: Mapping[str, Any] | None = None,
-             joint_states_topic: str | None = None, wrench_topic: str | None = None,
-             n_features: int | None = None, holdout: float = 0.2,
-             grid: Mapping[str, Sequence[float]] | None = None, limit: int | None = None,
-             out: Path | None = None,
-             json_path: Path | None = None, progress: bool = True, kind: str = "SP") -> str:
-    """Run the hold-out grid search on a bag and write the tuned parameter file.
+def run_tune(
+    *,
+    train: Path,
+    config: Path | None,
+    overrides: Mapping[str, Any] | None = None,
+    joint_states_topic: str | None = None,
+    wrench_topic: str | None = None,
+    n_features: int | None = None,
+    holdout: float = 0.2,
+    grid: Mapping[str, Sequence[float]] | None = None,
+    limit: int | None = None,
+    out: Path | None = None,
+    json_path: Path | None = None,
+    progress: bool = True,
+    kind: str = "SP",
+    method: str = "holdout",
+    kinds: Sequence[str] | None = None,
+    train_n: int | None = None,
+    splits: int = 5,
+    split_size: int | None = None,
+    window_s: float = 3.0,
+    jobs: int = 1,
+) -> str:
+    """Select hyperparameters on a training bag and write the tuned parameter file.
 
     Args:
-        train: Training bag (its last ``holdout`` fraction is held out).
+        train: Training bag.
         config: Parameter file (``None``: the shipped one).
         overrides: Parameter overrides applied before tuning.
         joint_states_topic: JointState topic (default from the configuration).
         wrench_topic: WrenchStamped topic (default from the configuration).
         n_features: D (default: the configuration's).
-        holdout: Held-out fraction.
-        grid: Values per tuned key (default: :data:`~semiparam_ros.eval.tuning.DEFAULT_GRID`).
+        holdout: Held-out fraction (hold-out method).
+        grid: Values per tuned key (hold-out: :data:`~semiparam_ros.eval.selection.DEFAULT_GRID` for missing
+            keys; protocol: the configuration's value for missing keys).
         limit: Use only the first samples of the bag.
-        out: Destination of the tuned ROS 2 parameter file.
-        json_path: Destination of the grid as JSON.
-        progress: Show a progress bar.
-        kind: Learner to tune: ``"SP"`` (as configured) or ``"SPJ"`` (the joint fit; the written file then
-            selects ``semiparametric.combination: joint``).
+        out: Destination of the tuned ROS 2 parameter file (for ``kind``).
+        json_path: Destination of the search as JSON (the selection per learner; protocol: the runs' scalars).
+        progress: Show a progress bar (only when stderr is a terminal).
+        kind: Learner whose selection is written to ``out``: ``"SP"`` (as configured) or ``"SPJ"`` (the joint
+            fit; the written file then selects ``semiparametric.combination: joint``).
+        method: ``"holdout"`` or ``"protocol"`` (:mod:`semiparam_ros.eval.selection`).
+        kinds: Protocol method: learners run at every grid point (default: ``kind`` only).
+        train_n: Protocol method: training samples (default: half the stream).
+        splits: Protocol method: test parts.
+        split_size: Protocol method: samples per part.
+        window_s: Protocol method: sliding window [s].
+        jobs: Parallel jobs (-1: all cores); the numbers do not depend on it.
 
     Returns:
         The text to print (the grid and the selection).
@@ -198,22 +263,79 @@ def run_tune(*, train: Path, config: Path | None, overrides: Mapping[str, Any] |
     cfg = load_evaluation_config(config, overrides)
     topics = Topics.from_config(cfg, joint_states_topic, wrench_topic)
     data, drops = load_samples(train, cfg, topics, limit=limit)
-    result = tune(cfg, data, holdout=holdout, n_features=n_features, grid=grid, kind=kind,
-                  progress=progress)
-    chosen = ", ".join(f"{k} = {result.best[k]:g}" for k in TUNED_KEYS)
-    text = (f"hold-out grid search of {kind} on {train}: {result.n_train} samples learned, "
-            f"{result.n_holdout} held out, "
-            f"D = {result.config['nonparametric.n_features']}\n\n" + grid_markdown(result)
-            + f"\nselected: {chosen} (hold-out nRMSE {result.best['score']:.4f}; "
-            f"the configuration's values: {result.default['score']:.4f})\n")
+    if method == "holdout":
+        selections = {
+            kind: holdout_search(
+                cfg,
+                data,
+                kind=kind,
+                holdout=holdout,
+                n_features=n_features,
+                grid=grid,
+                jobs=jobs,
+                progress=progress,
+            )
+        }
+        doc: dict[str, Any] = {}
+    elif method == "protocol":
+        run_kinds = list(dict.fromkeys([*(kinds or ()), kind])) if kinds else [kind]
+        selections, reports = protocol_search(
+            cfg,
+            data,
+            kinds=run_kinds,
+            train_n=len(data) // 2 if train_n is None else train_n,
+            splits=splits,
+            split_size=split_size,
+            window_s=window_s,
+            n_features=n_features,
+            grid=grid,
+            jobs=jobs,
+            progress=progress,
+        )
+        doc = {
+            "first_s": reports[0].first_s,
+            "runs": [
+                {
+                    "config": {k: r.config[k] for k in TUNED_KEYS},
+                    "models": {k: {g: m.rmse(g) for g in r.groups} for k, m in r.models.items()},
+                }
+                for r in reports
+            ]
+        }
+    else:
+        raise ConfigurationError(f"method must be 'holdout' or 'protocol', got {method!r}")
+    chosen = selections[kind]
+    text = ""
+    for k, sel in selections.items():
+        text += (
+            f"{method} search of {k} on {train}: {sel.n_train} samples learned, {sel.n_test} scored, "
+            f"D = {sel.config['nonparametric.n_features']}\n\n" + grid_table(sel) + "\n"
+        )
+    values = ", ".join(f"{k} = {chosen.best.values[k]:g}" for k in TUNED_KEYS)
+    base = "n/a" if chosen.default is None else f"{chosen.default.score:.4f}"
+    text += (
+        f"selected for {kind}: {values} (score {chosen.best.score:.4f}; the configuration's values: {base})\n"
+    )
     if out is not None:
-        write_config(result.config, out, header=(
-            f"semiparam_ros estimator parameters tuned by `tune` ({kind}) on {train}\n"
-            f"hold-out {holdout:g} ({result.n_holdout} samples): nRMSE {result.best['score']:.4f} "
-            f"(base configuration {result.default['score']:.4f})"))
+        write_config(
+            chosen.config,
+            out,
+            header=(
+                f"semiparam_ros estimator parameters tuned by `tune --method {method}` ({kind}) on {train}\n"
+                f"score {chosen.best.score:.4f} (base configuration {base})"
+            ),
+        )
         text += f"wrote {out}\n"
     if json_path is not None:
-        write_json({"grid": result.grid, "best": result.best, "default": result.default,
-                    "n_train": result.n_train, "n_holdout": result.n_holdout, "drops": drops, "kind": kind,
-                    "config": result.config.to_flat()}, json_path)
+        write_json(
+            {
+                "method": method,
+                "kind": kind,
+                "drops": drops,
+                "holdout": holdout if method == "holdout" else None,
+                "selections": {k: s.to_json() for k, s in selections.items()},
+                **doc,
+            },
+            json_path,
+        )
     return text

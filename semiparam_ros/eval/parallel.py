@@ -1,0 +1,78 @@
+"""Independent offline jobs (grid points, replicates) on every core, through joblib.
+
+:func:`run_jobs` calls ``fn(*args)`` for every argument tuple and returns the results in order. With
+``jobs == 1`` it is a plain loop in this process; otherwise joblib's default process backend (loky) runs
+them. Every job runs with one BLAS thread in either case (``threadpoolctl``), and builds its own seeded
+learners from its arguments, so the results are the same numbers whatever ``jobs`` is.
+
+To send the jobs to a cluster, wrap the call in another joblib backend, e.g. Dask's
+(``from dask.distributed import Client; client = Client("scheduler:8786")`` then
+``with joblib.parallel_config(backend="dask"): ...``) or Ray's (``from ray.util.joblib import
+register_ray; register_ray()`` then ``backend="ray"``); :func:`run_jobs` picks up the active backend
+(docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
+
+__all__ = ["resolve_jobs", "run_jobs"]
+
+T = TypeVar("T")
+
+
+def resolve_jobs(jobs: int) -> int:
+    """Return the number of workers for ``jobs``: itself if positive, all cores for ``-1`` (or ``0``).
+
+    Raises:
+        ValueError: If ``jobs < -1``.
+    """
+    if jobs < -1:
+        raise ValueError(f"jobs must be >= 1, or -1 / 0 for all cores, got {jobs}")
+    return jobs if jobs >= 1 else (os.cpu_count() or 1)
+
+
+def run_jobs(
+    fn: Callable[..., T],
+    args: Sequence[tuple[Any, ...]],
+    *,
+    jobs: int = 1,
+    progress: bool = False,
+    unit: str = "job",
+) -> list[T]:
+    """Run ``fn(*a)`` for each ``a`` in ``args``; results in the order of ``args``.
+
+    Args:
+        fn: A module-level function (picklable for the process backend).
+        args: One argument tuple per job.
+        jobs: Workers (1 = serial in this process; -1 or 0 = all cores).
+        progress: Progress bar on stderr (serial runs; joblib reports nothing in parallel).
+        unit: Unit name for the bar.
+
+    Returns:
+        The results.
+
+    Raises:
+        ValueError: If ``jobs < -1``. Whatever ``fn`` raises is re-raised.
+    """
+    n = resolve_jobs(jobs)
+    if n == 1 or len(args) <= 1:
+        items: Any = args
+        if progress:
+            from tqdm import tqdm
+
+            items = tqdm(args, unit=unit)
+        return [_one_thread(fn, *a) for a in items]
+    from joblib import Parallel, delayed
+
+    return list(Parallel(n_jobs=min(n, len(args)))(delayed(_one_thread)(fn, *a) for a in args))
+
+
+def _one_thread(fn: Callable[..., T], *args: Any) -> T:
+    """Call ``fn(*args)`` with one BLAS/OpenMP thread (the same arithmetic in every worker and here)."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        return fn(*args)
