@@ -6,6 +6,9 @@ For D ∈ {100, 250, 500, 1000, 2000} features and 6 outputs, the time of one te
 * ``ours β=1``      — ``RecursiveRLS.predict_update`` (compiled Givens kernel, prediction from the rotations),
   including the Python-side validation of every call;
 * ``ours β<1``      — the same with prior-keeping forgetting (β = 0.999: scale + one regularizer row a step);
+* ``predict, update`` — the library habit (river/scikit-learn): ``predict(z)`` then ``update(z, u)``;
+  measured interleaved with ``predict_update`` (alternating short repeats in one run), reported as the
+  median of the per-pair ratios (target ≤ 1.3 at D = 500 and 1000);
 * ``ours+RFF``      — ``NonparametricModel.predict_learn_one`` on a 12-d input: standardize, random
   features, predict_update (the whole NP budget per sample);
 * ``numpy Givens``  — the pure-numpy reference (test/reference_rrls.py): one Python loop over the b rows;
@@ -92,6 +95,26 @@ def time_per_call(step: Callable[[int], object], calls: int, repeats: int) -> di
             "cpu_share": cpu / wall if wall > 0 else float("nan")}
 
 
+def time_side_by_side(step_a: Callable[[int], object], step_b: Callable[[int], object], calls: int,
+                      repeats: int) -> dict[str, object]:
+    """Alternate short repeats of a and b; medians of each and the median of the per-pair ratios b/a."""
+    step_a(0)
+    step_b(0)
+    ta, tb, i = [], [], 1
+    for _ in range(repeats):
+        for step, out in ((step_a, ta), (step_b, tb)):
+            t0 = time.perf_counter()
+            for _ in range(calls):
+                step(i)
+                i += 1
+            out.append((time.perf_counter() - t0) / calls * 1e6)
+    ratios = [b / a for a, b in zip(ta, tb, strict=True)]
+    return {"a_median_us": statistics.median(ta), "b_median_us": statistics.median(tb),
+            "ratio_median": statistics.median(ratios),
+            "ratio_of_medians": statistics.median(tb) / statistics.median(ta),
+            "calls": calls, "repeats": repeats}
+
+
 def features_stream(rng: np.random.Generator, n: int, D: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows that look like random Fourier features (√(2/D)·cos) and 6 targets."""
     Z = np.sqrt(2.0 / D) * np.cos(rng.uniform(0, 2 * np.pi, (n, D)))
@@ -142,6 +165,15 @@ def bench_size(D: int, quick: bool, rng: np.random.Generator) -> dict[str, objec
 
     ours = RecursiveRLS(D, T_OUT, LAM)
     row["ours_beta1"] = time_per_call(lambda i: ours.predict_update(Z[i % n_fast], U[i % n_fast]), calls, rep)
+    fused = RecursiveRLS(D, T_OUT, LAM)
+    habit = RecursiveRLS(D, T_OUT, LAM)
+
+    def predict_then_update(i: int) -> None:
+        habit.predict(Z[i % n_fast])
+        habit.update(Z[i % n_fast], U[i % n_fast])
+
+    row["predict_then_update"] = time_side_by_side(
+        lambda i: fused.predict_update(Z[i % n_fast], U[i % n_fast]), predict_then_update, calls, 2 * rep)
     ours_f = RecursiveRLS(D, T_OUT, LAM, forgetting=BETA)
     row["ours_forgetting"] = time_per_call(
         lambda i: ours_f.predict_update(Z[i % n_fast], U[i % n_fast]), calls, rep)
@@ -247,6 +279,13 @@ def main(argv: list[str] | None = None) -> int:
                  f"{r['ours_beta1']['cpu_share']:.2f}",  # type: ignore[index]
                  f"{r['ours_beta1']['cpu_median_us']:.1f}"]  # type: ignore[index]
         print("| " + " | ".join(cells) + " |")
+    print("\npredict(z) then update(z, u) vs the fused predict_update(z, u), interleaved, µs (median)\n")
+    print("| D | predict_update | predict, update | ratio (median of pairs) | target |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        sbs = r["predict_then_update"]
+        print(f"| {r['D']} | {sbs['a_median_us']:.1f} | {sbs['b_median_us']:.1f} | "  # type: ignore[index]
+              f"{sbs['ratio_median']:.2f} | {'≤ 1.3' if r['D'] in (500, 1000) else '–'} |")  # type: ignore[index]
     print(f"\nMemory (D={mem['D']}, β={BETA}): " + ", ".join(
         f"{k}: RSS {v['rss_MB']:.1f} MB, learner state {v['state_bytes'] / 1e6:.2f} MB"
         for k, v in mem.items() if k != "D"))

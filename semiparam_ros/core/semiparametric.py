@@ -160,15 +160,15 @@ class ParametricModel(_Model):
 
         Args:
             x: The input ``[q, q̇, q̈]``.
-            return_variance: Also compute ``diag(Φ A⁻¹ Φᵀ)`` (one triangular solve).
+            return_variance: Also compute ``diag(Φ A⁻¹ Φᵀ)`` (same triangular solve as the prediction).
 
         Raises:
             ValueError: Bad x or regressor output.
         """
         xv, _ = self._check(x)
         Phi = self._phi(xv)
-        yp = self.rls.predict(Phi)[:, 0]
-        var = self.rls.variance(Phi) if return_variance else None
+        P, var = self.rls._predict_valid(Phi, return_variance)
+        yp = P[:, 0]
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy(), var)
 
     def learn_one(self, x: Any, y: Any) -> None:
@@ -276,8 +276,10 @@ class NonparametricModel(_Model):
             var = np.full(self.n_outputs, np.nan) if return_variance else None
             return np.zeros(self.n_outputs), var
         phi = self._features(xin)
-        var = np.full(self.n_outputs, float(self.rls.variance(phi)[0])) if return_variance else None
-        return (phi @ self.rls.weights)[0], var
+        # one forward substitution gives both (fused with a pending update: see RecursiveRLS.predict)
+        P, v = self.rls._predict_valid(phi, return_variance)
+        var = np.full(self.n_outputs, float(v[0])) if v is not None else None
+        return P[0], var
 
     def _learn(self, xin: np.ndarray, target: np.ndarray, want_prediction: bool) -> np.ndarray:
         """Warm-up or update with validated inputs; returns the a-priori prediction if asked."""
@@ -529,11 +531,12 @@ class SemiparametricModel(_TwoStageModel):
             ValueError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        yp = self.parametric.rls.predict(Phi)[:, 0]
+        P, var_p = self.parametric.rls._predict_valid(Phi, return_variance)
+        yp = P[:, 0]
         r, var_np = self.nonparametric._predict(np.concatenate([xv, yp]), return_variance)
         var = None
-        if return_variance:
-            var = self.parametric.rls.variance(Phi) + np.nan_to_num(var_np, nan=0.0)
+        if var_p is not None:
+            var = var_p + np.nan_to_num(var_np, nan=0.0)
         return Prediction(yp, r, yp + r, var)
 
     def _step(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
