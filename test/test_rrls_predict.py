@@ -130,6 +130,7 @@ def test_rejected_update_raises_at_once_and_keeps_the_pending_one():
 def test_single_row_shapes():
     rls = RecursiveRLS(5, 3)
     rls.update(np.ones(5), np.ones(3))
+    assert rls._predict_valid(np.ones((1, 5)), False)[1] is None  # no variance unless asked for
     p, v = rls.predict(np.ones(5), return_variance=True)
     assert p.shape == (3,) and np.shape(v) == ()
     assert rls.predict(np.ones((2, 5))).shape == (2, 3)
@@ -169,6 +170,7 @@ def test_models_predict_one_after_learn_one_equals_the_weights(kind):
         for r in rlss:
             r._flush()  # the copy runs its pending update now: its predictions take the unfused path
         want = ref.predict_one(X[i + 1], return_variance=True)
+        assert model.predict_one(X[i + 1]).variance is None
         # well conditioned here (λ = 0.5, ≤ 40 features): 1e-9 is the bound, ≥ 10⁴× the rounding
         np.testing.assert_allclose(got.total, want.total, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(got.variance, want.variance, rtol=1e-9, atol=1e-12)

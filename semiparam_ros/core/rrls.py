@@ -362,7 +362,7 @@ class RecursiveRLS:
                 self._run(Zp, Up, Zp.shape[0], self._no_pred, self._no_pred, Z2, P, var)
             else:
                 solve_predict(self._M, Z2, P, var)
-            return P, var
+            return P, (var if want_variance else None)
         P = Z2 @ self.weights
         return P, (self._variance_valid(Z2) if want_variance else None)
 
