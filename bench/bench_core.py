@@ -97,21 +97,29 @@ def time_per_call(step: Callable[[int], object], calls: int, repeats: int) -> di
 
 def time_side_by_side(step_a: Callable[[int], object], step_b: Callable[[int], object], calls: int,
                       repeats: int) -> dict[str, object]:
-    """Alternate short repeats of a and b; medians of each and the median of the per-pair ratios b/a."""
+    """Alternate short repeats of a and b; medians of each and the median of the per-pair ratios b/a.
+
+    Wall and process-CPU time are both kept: on a shared machine the CPU-time ratio is the one less
+    affected by being descheduled.
+    """
     step_a(0)
     step_b(0)
-    ta, tb, i = [], [], 1
+    ta, tb, ca, cb, i = [], [], [], [], 1
     for _ in range(repeats):
-        for step, out in ((step_a, ta), (step_b, tb)):
+        for step, out, cout in ((step_a, ta, ca), (step_b, tb, cb)):
+            c0 = time.process_time()
             t0 = time.perf_counter()
             for _ in range(calls):
                 step(i)
                 i += 1
             out.append((time.perf_counter() - t0) / calls * 1e6)
+            cout.append((time.process_time() - c0) / calls * 1e6)
     ratios = [b / a for a, b in zip(ta, tb, strict=True)]
     return {"a_median_us": statistics.median(ta), "b_median_us": statistics.median(tb),
             "ratio_median": statistics.median(ratios),
             "ratio_of_medians": statistics.median(tb) / statistics.median(ta),
+            "a_cpu_median_us": statistics.median(ca), "b_cpu_median_us": statistics.median(cb),
+            "cpu_ratio_of_medians": statistics.median(cb) / max(statistics.median(ca), 1e-9),
             "calls": calls, "repeats": repeats}
 
 
@@ -226,6 +234,39 @@ def bench_size(D: int, quick: bool, rng: np.random.Generator) -> dict[str, objec
     return row
 
 
+def predict_update_only(path: pathlib.Path) -> int:
+    """The predict-then-update comparison alone (issue 15's target), printed and saved to ``path``."""
+    rng = np.random.default_rng(0)
+    load_before = os.getloadavg()
+    rows = []
+    with threadpool_limits(1):
+        for D in (500, 1000):
+            Z, U = features_stream(rng, 4001, D)
+            fused, habit = RecursiveRLS(D, T_OUT, LAM), RecursiveRLS(D, T_OUT, LAM)
+
+            def both(i: int, habit: RecursiveRLS = habit, Z: np.ndarray = Z, U: np.ndarray = U) -> None:
+                habit.predict(Z[i % 4000])
+                habit.update(Z[i % 4000], U[i % 4000])
+
+            rows.append({"D": D, "predict_then_update": time_side_by_side(
+                lambda i, fused=fused, Z=Z, U=U: fused.predict_update(Z[i % 4000], U[i % 4000]), both,
+                max(5, int(2e4 / D)), 120)})
+    print("| D | predict_update µs | predict, update µs | ratio wall (median of pairs) | ratio CPU "
+          "| target |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        s = r["predict_then_update"]
+        print(f"| {r['D']} | {s['a_median_us']:.1f} | {s['b_median_us']:.1f} | {s['ratio_median']:.2f} | "
+              f"{s['cpu_ratio_of_medians']:.2f} | ≤ 1.3 |")
+    load_after = os.getloadavg()
+    print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"benchmark": "bench_core --predict-update-only", "rows": rows,
+                                "loadavg_before": load_before, "loadavg_after": load_after}, indent=2))
+    print(f"wrote {path}")
+    return 0
+
+
 def memory_check(D: int = 1000) -> dict[str, object]:
     rng = np.random.default_rng(1)
     proc = psutil.Process()
@@ -251,7 +292,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer sizes/repeats (smoke run, < 60 s)")
     parser.add_argument("--json", type=pathlib.Path, default=RESULTS, help=f"output JSON (default {RESULTS})")
+    parser.add_argument("--predict-update-only", action="store_true",
+                        help="only predict, update vs predict_update at D = 500, 1000 (≈ 20 s)")
     args = parser.parse_args(argv)
+    if args.predict_update_only:
+        return predict_update_only(args.json)
     sizes = [100, 500, 1000] if args.quick else [100, 250, 500, 1000, 2000]
     rng = np.random.default_rng(0)
     load_before = os.getloadavg()
