@@ -90,8 +90,15 @@ def test_deferred_update_leaves_the_same_state_as_an_immediate_one(beta, kq):
     eager = RecursiveRLS(b, t, 0.3, forgetting=beta)
     for Z, U in random_steps(rng, 80, 1, b, t):
         lazy.update(Z, U)
-        lazy.predict(rng.standard_normal((kq, b)))
+        Zq = rng.standard_normal((kq, b))
+        got, got_var = lazy.predict(Zq, return_variance=True)
         eager.predict_update(Z, U)  # runs the rotations at once
+        # the fused substitution equals solve_predict on the updated factor (other blocking of the rows)
+        P, var = np.empty((kq, t)), np.empty(kq)
+        solve_predict(np.hstack([eager.R, eager.d]), Zq, P, var)
+        kappa = eager.condition_number()
+        assert np.all(np.abs(got - P) <= bound(eager, Zq, kappa)[:, None])
+        assert np.all(np.abs(got_var - var) <= 10 * b * EPS * kappa * var)
         assert lazy.n_samples_seen == eager.n_samples_seen and lazy.n_steps == eager.n_steps
     for key, value in eager.state_dict().items():
         assert np.array_equal(value, lazy.state_dict()[key]), key
