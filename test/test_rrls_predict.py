@@ -181,3 +181,17 @@ def test_models_predict_one_after_learn_one_equals_the_weights(kind):
         # well conditioned here (λ = 0.5, ≤ 40 features): 1e-9 is the bound, ≥ 10⁴× the rounding
         np.testing.assert_allclose(got.total, want.total, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(got.variance, want.variance, rtol=1e-9, atol=1e-12)
+
+
+def test_strided_and_integer_rows_are_accepted_like_contiguous_float_rows():
+    rng = np.random.default_rng(9)
+    b, t = 6, 2
+    a, ref = RecursiveRLS(b, t), RecursiveRLS(b, t)
+    X = rng.standard_normal((b, 2 * b))
+    U = rng.standard_normal((b, t))
+    for i in range(b):
+        a.update(X[i, ::2], U[i])  # a strided view
+        ref.update(np.ascontiguousarray(X[i, ::2]), U[i].copy())
+    zi = np.arange(b)  # integers
+    assert np.array_equal(a.predict(zi), ref.predict(zi.astype(float)))
+    assert np.array_equal(a.predict(X[0, 1::2]), ref.predict(X[0, 1::2].copy()))

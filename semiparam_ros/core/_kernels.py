@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["back_substitute", "qr_rls_steps", "solve_predict", "values_within"]
+__all__ = ["back_substitute", "checked_copies", "qr_rls_steps", "solve_predict", "values_within"]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -505,3 +505,9 @@ def values_within(Z: np.ndarray, U: np.ndarray, max_abs: float) -> bool:
             if not (abs(U[r, q]) <= max_abs):
                 return False
     return True
+
+
+@njit(cache=True, nogil=True)
+def checked_copies(Z: np.ndarray, U: np.ndarray, max_abs: float) -> tuple[bool, np.ndarray, np.ndarray]:
+    """``(ok, Z.copy(), U.copy())`` with ``ok`` as :func:`values_within` (one call for a deferred update)."""
+    return values_within(Z, U, max_abs), Z.copy(), U.copy()

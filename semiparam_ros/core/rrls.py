@@ -59,7 +59,13 @@ from typing import Any
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from semiparam_ros.core._kernels import back_substitute, qr_rls_steps, solve_predict, values_within
+from semiparam_ros.core._kernels import (
+    back_substitute,
+    checked_copies,
+    qr_rls_steps,
+    solve_predict,
+    values_within,
+)
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 
 __all__ = ["RecursiveRLS"]
@@ -119,6 +125,7 @@ class RecursiveRLS:
         self._M = np.empty((self.n_features, self.n_features + self.n_outputs))
         self._no_pred = np.empty((0, self.n_outputs))
         self._no_query = np.empty((0, self.n_features))
+        self._row_shape = (self.n_features,)
         self._no_var = np.empty(0)
         self.reset()
 
@@ -199,11 +206,12 @@ class RecursiveRLS:
 
     def _defer(self, Z2: np.ndarray, U2: np.ndarray) -> None:
         """Validate the values of one step and leave a copy of it pending."""
-        if not values_within(Z2, U2, MAX_ABS_INPUT):
+        ok, Zc, Uc = checked_copies(Z2, U2, MAX_ABS_INPUT)  # copies: the caller may reuse its arrays
+        if not ok:
             raise ValueError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in "
                              "magnitude")
         self._flush()
-        self._pending = (Z2.copy(), U2.copy())  # the caller may reuse its arrays
+        self._pending = (Zc, Uc)
         self._W = None
         self.n_steps += 1
         self.n_samples_seen += Z2.shape[0]
@@ -397,6 +405,12 @@ class RecursiveRLS:
 
     # ------------------------------------------------------------------ validation
     def _check_features(self, Z: Any, values: bool = True) -> tuple[np.ndarray, bool]:
+        if (type(Z) is np.ndarray and Z.shape == self._row_shape and Z.dtype == np.float64
+                and Z.flags.c_contiguous):
+            Z2 = Z.reshape(1, -1)  # the common case, one contiguous float64 row: a (1, b) view
+            if values and not values_within(Z2, self._no_pred, MAX_ABS_INPUT):
+                raise ValueError(f"Z contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")
+            return Z2, True
         Z2 = np.asarray(Z, dtype=np.float64)
         single = Z2.ndim == 1
         if single:
