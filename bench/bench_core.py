@@ -68,6 +68,7 @@ LAM = 1.0
 BETA = 0.999
 REFIT_WINDOW = 1000
 RESULTS = pathlib.Path(__file__).resolve().parent / "results" / "bench_core.json"
+RESULTS_PU = RESULTS.with_name("bench_core_predict_update.json")
 TARGETS_US = {500: 60.0, 1000: 250.0}
 
 
@@ -291,12 +292,14 @@ def fmt(cell: object) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer sizes/repeats (smoke run, < 60 s)")
-    parser.add_argument("--json", type=pathlib.Path, default=RESULTS, help=f"output JSON (default {RESULTS})")
+    parser.add_argument("--json", type=pathlib.Path, default=None,
+                        help=f"output JSON (default {RESULTS}, or {RESULTS_PU} with --predict-update-only)")
     parser.add_argument("--predict-update-only", action="store_true",
                         help="only predict, update vs predict_update at D = 500, 1000 (≈ 20 s)")
     args = parser.parse_args(argv)
     if args.predict_update_only:
-        return predict_update_only(args.json)
+        return predict_update_only(args.json or RESULTS_PU)
+    args.json = args.json or RESULTS
     sizes = [100, 500, 1000] if args.quick else [100, 250, 500, 1000, 2000]
     rng = np.random.default_rng(0)
     load_before = os.getloadavg()
