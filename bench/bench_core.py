@@ -6,6 +6,9 @@ For D ∈ {100, 250, 500, 1000, 2000} features and 6 outputs, the time of one te
 * ``ours β=1``      — ``RecursiveRLS.predict_update`` (compiled Givens kernel, prediction from the rotations),
   including the Python-side validation of every call;
 * ``ours β<1``      — the same with prior-keeping forgetting (β = 0.999: scale + one regularizer row a step);
+* ``predict, update`` — the library habit (river/scikit-learn): ``predict(z)`` then ``update(z, u)``;
+  measured interleaved with ``predict_update`` (alternating short repeats in one run), reported as the
+  median of the per-pair ratios (target ≤ 1.3 at D = 500 and 1000);
 * ``ours+RFF``      — ``NonparametricModel.predict_learn_one`` on a 12-d input: standardize, random
   features, predict_update (the whole NP budget per sample);
 * ``numpy Givens``  — the pure-numpy reference (test/reference_rrls.py): one Python loop over the b rows;
@@ -65,6 +68,7 @@ LAM = 1.0
 BETA = 0.999
 REFIT_WINDOW = 1000
 RESULTS = pathlib.Path(__file__).resolve().parent / "results" / "bench_core.json"
+RESULTS_PU = RESULTS.with_name("bench_core_predict_update.json")
 TARGETS_US = {500: 60.0, 1000: 250.0}
 
 
@@ -90,6 +94,34 @@ def time_per_call(step: Callable[[int], object], calls: int, repeats: int) -> di
     return {"median_us": statistics.median(samples), "min_us": min(samples), "max_us": max(samples),
             "cpu_median_us": statistics.median(cpu_samples), "calls": calls, "repeats": repeats,
             "cpu_share": cpu / wall if wall > 0 else float("nan")}
+
+
+def time_side_by_side(step_a: Callable[[int], object], step_b: Callable[[int], object], calls: int,
+                      repeats: int) -> dict[str, object]:
+    """Alternate short repeats of a and b; medians of each and the median of the per-pair ratios b/a.
+
+    Wall and process-CPU time are both kept: on a shared machine the CPU-time ratio is the one less
+    affected by being descheduled.
+    """
+    step_a(0)
+    step_b(0)
+    ta, tb, ca, cb, i = [], [], [], [], 1
+    for _ in range(repeats):
+        for step, out, cout in ((step_a, ta, ca), (step_b, tb, cb)):
+            c0 = time.process_time()
+            t0 = time.perf_counter()
+            for _ in range(calls):
+                step(i)
+                i += 1
+            out.append((time.perf_counter() - t0) / calls * 1e6)
+            cout.append((time.process_time() - c0) / calls * 1e6)
+    ratios = [b / a for a, b in zip(ta, tb, strict=True)]
+    return {"a_median_us": statistics.median(ta), "b_median_us": statistics.median(tb),
+            "ratio_median": statistics.median(ratios),
+            "ratio_of_medians": statistics.median(tb) / statistics.median(ta),
+            "a_cpu_median_us": statistics.median(ca), "b_cpu_median_us": statistics.median(cb),
+            "cpu_ratio_of_medians": statistics.median(cb) / max(statistics.median(ca), 1e-9),
+            "calls": calls, "repeats": repeats}
 
 
 def features_stream(rng: np.random.Generator, n: int, D: int) -> tuple[np.ndarray, np.ndarray]:
@@ -142,6 +174,15 @@ def bench_size(D: int, quick: bool, rng: np.random.Generator) -> dict[str, objec
 
     ours = RecursiveRLS(D, T_OUT, LAM)
     row["ours_beta1"] = time_per_call(lambda i: ours.predict_update(Z[i % n_fast], U[i % n_fast]), calls, rep)
+    fused = RecursiveRLS(D, T_OUT, LAM)
+    habit = RecursiveRLS(D, T_OUT, LAM)
+
+    def predict_then_update(i: int) -> None:
+        habit.predict(Z[i % n_fast])
+        habit.update(Z[i % n_fast], U[i % n_fast])
+
+    row["predict_then_update"] = time_side_by_side(
+        lambda i: fused.predict_update(Z[i % n_fast], U[i % n_fast]), predict_then_update, calls, 2 * rep)
     ours_f = RecursiveRLS(D, T_OUT, LAM, forgetting=BETA)
     row["ours_forgetting"] = time_per_call(
         lambda i: ours_f.predict_update(Z[i % n_fast], U[i % n_fast]), calls, rep)
@@ -194,6 +235,39 @@ def bench_size(D: int, quick: bool, rng: np.random.Generator) -> dict[str, objec
     return row
 
 
+def predict_update_only(path: pathlib.Path) -> int:
+    """The predict-then-update comparison alone (issue 15's target), printed and saved to ``path``."""
+    rng = np.random.default_rng(0)
+    load_before = os.getloadavg()
+    rows = []
+    with threadpool_limits(1):
+        for D in (500, 1000):
+            Z, U = features_stream(rng, 4001, D)
+            fused, habit = RecursiveRLS(D, T_OUT, LAM), RecursiveRLS(D, T_OUT, LAM)
+
+            def both(i: int, habit: RecursiveRLS = habit, Z: np.ndarray = Z, U: np.ndarray = U) -> None:
+                habit.predict(Z[i % 4000])
+                habit.update(Z[i % 4000], U[i % 4000])
+
+            rows.append({"D": D, "predict_then_update": time_side_by_side(
+                lambda i, fused=fused, Z=Z, U=U: fused.predict_update(Z[i % 4000], U[i % 4000]), both,
+                max(5, int(2e4 / D)), 120)})
+    print("| D | predict_update µs | predict, update µs | ratio wall (median of pairs) | ratio CPU "
+          "| target |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        s = r["predict_then_update"]
+        print(f"| {r['D']} | {s['a_median_us']:.1f} | {s['b_median_us']:.1f} | {s['ratio_median']:.2f} | "
+              f"{s['cpu_ratio_of_medians']:.2f} | ≤ 1.3 |")
+    load_after = os.getloadavg()
+    print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"benchmark": "bench_core --predict-update-only", "rows": rows,
+                                "loadavg_before": load_before, "loadavg_after": load_after}, indent=2))
+    print(f"wrote {path}")
+    return 0
+
+
 def memory_check(D: int = 1000) -> dict[str, object]:
     rng = np.random.default_rng(1)
     proc = psutil.Process()
@@ -218,8 +292,14 @@ def fmt(cell: object) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer sizes/repeats (smoke run, < 60 s)")
-    parser.add_argument("--json", type=pathlib.Path, default=RESULTS, help=f"output JSON (default {RESULTS})")
+    parser.add_argument("--json", type=pathlib.Path, default=None,
+                        help=f"output JSON (default {RESULTS}, or {RESULTS_PU} with --predict-update-only)")
+    parser.add_argument("--predict-update-only", action="store_true",
+                        help="only predict, update vs predict_update at D = 500, 1000 (≈ 20 s)")
     args = parser.parse_args(argv)
+    if args.predict_update_only:
+        return predict_update_only(args.json or RESULTS_PU)
+    args.json = args.json or RESULTS
     sizes = [100, 500, 1000] if args.quick else [100, 250, 500, 1000, 2000]
     rng = np.random.default_rng(0)
     load_before = os.getloadavg()
@@ -247,6 +327,13 @@ def main(argv: list[str] | None = None) -> int:
                  f"{r['ours_beta1']['cpu_share']:.2f}",  # type: ignore[index]
                  f"{r['ours_beta1']['cpu_median_us']:.1f}"]  # type: ignore[index]
         print("| " + " | ".join(cells) + " |")
+    print("\npredict(z) then update(z, u) vs the fused predict_update(z, u), interleaved, µs (median)\n")
+    print("| D | predict_update | predict, update | ratio (median of pairs) | target |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        sbs = r["predict_then_update"]
+        print(f"| {r['D']} | {sbs['a_median_us']:.1f} | {sbs['b_median_us']:.1f} | "  # type: ignore[index]
+              f"{sbs['ratio_median']:.2f} | {'≤ 1.3' if r['D'] in (500, 1000) else '–'} |")  # type: ignore[index]
     print(f"\nMemory (D={mem['D']}, β={BETA}): " + ", ".join(
         f"{k}: RSS {v['rss_MB']:.1f} MB, learner state {v['state_bytes'] / 1e6:.2f} MB"
         for k, v in mem.items() if k != "D"))

@@ -87,3 +87,20 @@ class ReferenceQRRLS:
 
     def update(self, Z: np.ndarray, U: np.ndarray) -> None:
         self.predict_update(Z, U)
+
+
+def forward_predict(M: np.ndarray, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(Z R⁻¹ d, ‖R⁻ᵀ Zᵀ‖² per row)`` for ``M = [R | d]``, by the textbook dot-product substitution.
+
+    Solves ``Rᵀ v = zᵀ`` one unknown at a time, ``v_i = (z_i − R[:i, i]·v[:i]) / R_ii`` (reading ``R`` by
+    columns), where the compiled kernel subtracts each finished ``v_i R[i, i+1:]`` from the remaining
+    right-hand side (reading ``R`` by rows, several rows at once).
+    """
+    b = M.shape[0]
+    R, d = M[:, :b], M[:, b:]
+    Z = np.atleast_2d(Z)
+    V = np.zeros((Z.shape[0], b))
+    for r in range(Z.shape[0]):
+        for i in range(b):
+            V[r, i] = (Z[r, i] - R[:i, i] @ V[r, :i]) / R[i, i]
+    return V @ d, np.einsum("ij,ij->i", V, V)

@@ -663,8 +663,9 @@ UR5_JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist
 
 
 def write_ur5_torque_bag(path: Path, seconds: float, seed: int, rate_hz: float = 100.0) -> None:
-    """A 6-joint JointState bag whose efforts are Pinocchio's RNEA torques (N·m) of a smooth motion, plus a
-    small viscous friction the rigid-body model cannot express and sensor noise."""
+    """A 6-joint JointState bag whose efforts are Pinocchio's RNEA torques (N·m) of a smooth motion, plus
+    viscous friction (which the parametric stage's friction columns express), a position-dependent elastic
+    torque (a cable or spring: which no rigid-body + friction model expresses) and sensor noise."""
     import pinocchio as pin
 
     from semiparam_ros.core.dynamics import example_robot_data_path
@@ -682,7 +683,8 @@ def write_ur5_torque_bag(path: Path, seconds: float, seed: int, rate_hz: float =
             q = amp * np.sin(w * t + phase)
             dq = amp * w * np.cos(w * t + phase)
             ddq = -amp * w * w * np.sin(w * t + phase)
-            tau = pin.rnea(model, data, q, dq, ddq) + 0.5 * dq + 0.01 * rng.normal(size=6)
+            tau = (pin.rnea(model, data, q, dq, ddq) + 0.5 * dq + 0.3 * np.sin(3.0 * q)
+                   + 0.01 * rng.normal(size=6))
             msg = JointStateData(stamp_ns=1_000_000_000 + round(t * 1e9), names=UR5_JOINTS, position=q,
                                  velocity=dq, effort=tau)
             writer.write_joint_state("/joint_states", msg)
@@ -738,7 +740,7 @@ def test_six_joint_torques_are_evaluated_per_joint_not_as_a_wrench(ur5_bags, tmp
     assert "force" not in text and "joint torque RMSE (mean over joints) at regime [N·m]" in text
     assert "| shoulder_pan_joint RMSE [N·m] |" in text.replace(" | shoulder_lift", " |\n| shoulder_lift")
     assert "mean nMSE" in text
-    # the learners do learn the arm: SP below P's error at regime (P lacks the friction; measured 0.56×)
+    # the learners do learn the arm: SP below P's error at regime (P cannot express the elastic torque)
     assert report.models["SP"].rmse("torque") < 0.75 * report.models["P"].rmse("torque")
     png = plot_protocol(report, tmp_path / "ur5.png")
     assert png.read_bytes()[:8] == PNG_MAGIC

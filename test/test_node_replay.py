@@ -41,14 +41,18 @@ def _rmse(errors: list[np.ndarray], cols: slice) -> float:
     return float(np.sqrt(np.mean(np.square(np.array(errors)[:, cols]))))
 
 
-@pytest.mark.parametrize("combination", ["cascade", "joint"])
-def test_replay_matches_offline_core_and_beats_parametric(ros_env, tmp_path_factory, combination):
+@pytest.mark.parametrize(("combination", "executor"),
+                         [("cascade", "single_threaded"), ("joint", "single_threaded"),
+                          ("cascade", "events")])
+def test_replay_matches_offline_core_and_beats_parametric(ros_env, tmp_path_factory, combination,
+                                                          executor):
+    """Either executor (``--executor``) gives the offline core's numbers to 1e-9."""
     bag = source_bag(tmp_path_factory.mktemp("bags"))
     messages = load_raw(bag, TOPICS, limit=N_MESSAGES)
     offline = offline_replay(bag, N_MESSAGES, {**OVERRIDES, "semiparametric.combination": combination})
     assert len(offline.order) > 400
 
-    node = NodeProcess(ros_env, [*PARAMS, f"semiparametric.combination:={combination}"])
+    node = NodeProcess(ros_env, [*PARAMS, f"semiparametric.combination:={combination}"], executor=executor)
     client = TestClient(ros_env)
     try:
         total = client.collect(WrenchStamped, "/estimator/predicted_wrench")

@@ -41,12 +41,12 @@ def test_queued_messages_are_learned_before_the_final_checkpoint(ros_env, tmp_pa
                context=context)
     try:
         node = EstimatorNode(context=context)
-        # the subscription callbacks convert and enqueue; without an executor nothing is learned yet
+        # queue the messages as the callbacks do (without running the estimator, which they do next)
         for m in messages:
             if m.topic == "/joint_states":
-                node._on_joint_state(deserialize_message(m.data, JointState))
+                node._intake("joint_states", deserialize_message(m.data, JointState))
             else:
-                node._on_wrench(deserialize_message(m.data, WrenchStamped))
+                node._intake("wrench", deserialize_message(m.data, WrenchStamped))
         assert node.estimator.n_samples_learned == 0
         node.shutdown()  # what main() does after Ctrl-C: learn the queue, then the final checkpoint
         assert node.estimator.n_samples_learned == len(offline.order)

@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["back_substitute", "qr_rls_steps"]
+__all__ = ["back_substitute", "checked_copies", "qr_rls_steps", "solve_predict", "values_within"]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -52,6 +52,9 @@ def _rotate_in(
     ext: int,
     coef: np.ndarray,
     act: np.ndarray,
+    QV: np.ndarray,
+    QP: np.ndarray,
+    Qvar: np.ndarray,
 ) -> None:
     """Rotate the rows of ``W`` into ``M = [R | d]`` (in place), scaling ``M`` by ``scale``.
 
@@ -65,7 +68,16 @@ def _rotate_in(
     active at columns i and i+1 (the rank-1 hot path), both rotations are applied in one sweep over rows
     i and i+1 of ``M`` (the new row is loaded and stored once for two rotations: 1.3× faster at b = 1000,
     2× at b = 2000 where ``M`` no longer fits in cache).
+
+    Query rows (``QV`` (kq, b) as made by :func:`_start_queries`, ``QP`` (kq, t), ``Qvar`` (kq,); kq may
+    be 0) are predicted with the *new* factor during the same sweep: each row of ``M`` is final as soon as
+    its column is rotated, and the forward substitution of :func:`solve_predict` needs the rows in that
+    same order, so it advances over the row(s) just finished while they are still in cache. The result
+    equals :func:`solve_predict` on the updated ``M`` (the same operations in the same order, blocks of
+    one or two rows instead of four).
     """
+    qv = np.empty(2)
+    kq = QV.shape[0]
     b = M.shape[0]
     bt = M.shape[1]
     kk = W.shape[0]
@@ -108,18 +120,57 @@ def _rotate_in(
                 Mi = M[i, i + 2 :]
                 Mk = M[i + 1, i + 2 :]
                 Wv = Wr[i + 2 : bt]
-                for j in range(Mi.shape[0]):
-                    x = Mi[j]
-                    y = Wv[j]
-                    z = Mk[j]
-                    Mi[j] = cs1 * x + s1 * y
-                    y1 = c1 * y - ss1 * x
-                    Mk[j] = cs2 * z + s2 * y1
-                    Wv[j] = c2 * y1 - ss2 * z
+                if kq == 1:
+                    # one query row: its substitution over rows i, i+1 rides in the rotation loop
+                    # (same operations, in the same order, as _forward_block with m = 2)
+                    Vq = QV[0]
+                    vi = Vq[i] / M[i, i]
+                    vk = (Vq[i + 1] - vi * M[i, i + 1]) / M[i + 1, i + 1]
+                    Vv = Vq[i + 2 : b]
+                    nb = Vv.shape[0]
+                    for j in range(nb):
+                        x = Mi[j]
+                        y = Wv[j]
+                        z = Mk[j]
+                        xn = cs1 * x + s1 * y
+                        y1 = c1 * y - ss1 * x
+                        zn = cs2 * z + s2 * y1
+                        Mi[j] = xn
+                        Mk[j] = zn
+                        Wv[j] = c2 * y1 - ss2 * z
+                        Vv[j] -= vi * xn + vk * zn
+                    for j in range(nb, Mi.shape[0]):
+                        x = Mi[j]
+                        y = Wv[j]
+                        z = Mk[j]
+                        Mi[j] = cs1 * x + s1 * y
+                        y1 = c1 * y - ss1 * x
+                        Mk[j] = cs2 * z + s2 * y1
+                        Wv[j] = c2 * y1 - ss2 * z
+                    Qvar[0] += vi * vi
+                    Qvar[0] += vk * vk
+                    Pq = QP[0]
+                    di = M[i, b:bt]
+                    dk = M[i + 1, b:bt]
+                    for q in range(bt - b):
+                        Pq[q] += vi * di[q]
+                    for q in range(bt - b):
+                        Pq[q] += vk * dk[q]
+                else:
+                    for j in range(Mi.shape[0]):
+                        x = Mi[j]
+                        y = Wv[j]
+                        z = Mk[j]
+                        Mi[j] = cs1 * x + s1 * y
+                        y1 = c1 * y - ss1 * x
+                        Mk[j] = cs2 * z + s2 * y1
+                        Wv[j] = c2 * y1 - ss2 * z
                 # tracker: the finished rows' extra columns start at zero, so a lone rotation scales by c
                 c12 = c1 * c2
                 for q in range(ext):
                     Wr[bt + q] *= c12
+                if kq > 1:
+                    _forward_block(M, i, 2, QV, QP, Qvar, qv)
                 i += 2
                 continue
         n_act = 0
@@ -145,6 +196,8 @@ def _rotate_in(
             if sc != 1.0:
                 for j in range(n):
                     Mi[j] *= sc
+            if kq > 0:
+                _forward_block(M, i, 1, QV, QP, Qvar, qv)
             i += 1
             continue
         if n_act == 1:
@@ -199,6 +252,8 @@ def _rotate_in(
                     y = W[r, bt + q]
                     scratch[q] = c * x + s * y
                     W[r, bt + q] = c * y - s * x
+        if kq > 0:
+            _forward_block(M, i, 1, QV, QP, Qvar, qv)
         i += 1
 
 
@@ -214,6 +269,9 @@ def qr_rls_steps(
     P: np.ndarray,
     max_abs: float,
     L: np.ndarray,
+    Q: np.ndarray,
+    QP: np.ndarray,
+    Qvar: np.ndarray,
 ) -> int:
     """Apply ``len(Z) // rows_per_step`` consecutive time steps to ``M = [R | d]`` in place.
 
@@ -240,19 +298,18 @@ def qr_rls_steps(
             the rotations are orthogonal, ``EᵀE`` is the step's increment of the weighted residual matrix
             ``S = Σ β^{n−m} U_mᵀU_m − dᵀd`` (the minimum of the ridge cost, per pair of output columns):
             ``S ← β·S + EᵀE``.
+        Q: ``(kq, b)`` query rows predicted with the factor *after* the last step, in the last step's
+            sweep (see :func:`_rotate_in`), or a ``(0, b)`` array for none.
+        QP: ``(kq, t)`` output, ``Q W_new``.
+        Qvar: ``(kq,)`` output, ``diag(Q A_new⁻¹ Qᵀ)``.
 
     Returns:
         The coordinate of the regularizer row of the next step, or −1 if the input was rejected.
     """
     b = M.shape[0]
     bt = M.shape[1]
-    for r in range(Z.shape[0]):
-        for q in range(Z.shape[1]):
-            if not (abs(Z[r, q]) <= max_abs):
-                return -1
-        for q in range(U.shape[1]):
-            if not (abs(U[r, q]) <= max_abs):
-                return -1
+    if not values_within(Z, U, max_abs):
+        return -1
     k = rows_per_step
     n_steps = Z.shape[0] // k
     track = P.shape[0] > 0
@@ -265,6 +322,8 @@ def qr_rls_steps(
     act = np.empty(kk, dtype=np.int64)
     sqrt_reg = math.sqrt(reg)
     e = np.empty(bt - b)
+    QV = _start_queries(Q, QP, Qvar)
+    QV0 = QV[:0]
     j = j0
     for step in range(n_steps):
         base = step * k
@@ -286,7 +345,8 @@ def qr_rls_steps(
                 for q in range(ext):
                     W[r, bt + q] = 0.0
                 W[r, bt + r] = 1.0
-        _rotate_in(M, W, scale, scratch, ext, coef, act)
+        last = step == n_steps - 1
+        _rotate_in(M, W, scale, scratch, ext, coef, act, QV if last else QV0, QP, Qvar)
         if track:
             # E = Q22 (U − Z W_old), Q22 lower triangular: forward substitution for the data rows.
             for r in range(k):
@@ -331,3 +391,123 @@ def back_substitute(M: np.ndarray) -> np.ndarray:
                 acc -= M[i, j] * W[j, q]
             W[i, q] = acc * inv
     return W
+
+
+
+
+@njit(cache=True, nogil=True)
+def _forward_block(M: np.ndarray, i0: int, m: int, V: np.ndarray, P: np.ndarray, var: np.ndarray,
+                   v: np.ndarray) -> None:
+    """Advance the forward substitution ``Rᵀ vᵣ = zᵣᵀ`` of every query row r over rows ``i0 … i0+m−1``.
+
+    ``V[r, i0:]`` holds what is left of query row r after the rows above ``i0`` were eliminated; the
+    rows ``i0 … i0+m−1`` of ``M = [R | d]`` must be final. The m×m diagonal block is solved first
+    (``v``, length ≥ m, is scratch), ``P[r] += Σ v_p d[i0+p]`` and ``var[r] += Σ v_p²`` accumulate, then
+    ``V[r, i0+m:] −= Σ_p v_p R[i0+p, i0+m:]`` in one pass (fused loops for m = 1, 2, 4).
+    """
+    b = M.shape[0]
+    bt = M.shape[1]
+    t = bt - b
+    for r in range(V.shape[0]):
+        Vr = V[r]
+        for p in range(m):
+            i = i0 + p
+            acc = Vr[i]
+            for s in range(p):
+                acc -= v[s] * M[i0 + s, i]
+            v[p] = acc / M[i, i]
+        Pr = P[r]
+        for p in range(m):
+            vp = v[p]
+            var[r] += vp * vp
+            dp = M[i0 + p, b:bt]
+            for q in range(t):
+                Pr[q] += vp * dp[q]
+        W = Vr[i0 + m : b]
+        n = W.shape[0]
+        if m == 4:
+            v0 = v[0]
+            v1 = v[1]
+            v2 = v[2]
+            v3 = v[3]
+            M0 = M[i0, i0 + 4 : b]
+            M1 = M[i0 + 1, i0 + 4 : b]
+            M2 = M[i0 + 2, i0 + 4 : b]
+            M3 = M[i0 + 3, i0 + 4 : b]
+            for j in range(n):
+                W[j] -= v0 * M0[j] + v1 * M1[j] + v2 * M2[j] + v3 * M3[j]
+        elif m == 2:
+            v0 = v[0]
+            v1 = v[1]
+            M0 = M[i0, i0 + 2 : b]
+            M1 = M[i0 + 1, i0 + 2 : b]
+            for j in range(n):
+                W[j] -= v0 * M0[j] + v1 * M1[j]
+        else:
+            for p in range(m):
+                vp = v[p]
+                Mp = M[i0 + p, i0 + m : b]
+                for j in range(n):
+                    W[j] -= vp * Mp[j]
+
+
+@njit(cache=True, nogil=True)
+def _start_queries(Z: np.ndarray, P: np.ndarray, var: np.ndarray) -> np.ndarray:
+    """Working copy of the query rows; zero the outputs of :func:`_forward_block`."""
+    V = np.empty(Z.shape)
+    for r in range(Z.shape[0]):
+        Vr = V[r]
+        Zr = Z[r]
+        for j in range(Z.shape[1]):
+            Vr[j] = Zr[j]
+        for q in range(P.shape[1]):
+            P[r, q] = 0.0
+        var[r] = 0.0
+    return V
+
+
+@njit(cache=True, nogil=True)
+def solve_predict(M: np.ndarray, Z: np.ndarray, P: np.ndarray, var: np.ndarray) -> None:
+    """Prediction ``Z W = (Z R⁻¹) d`` and ``diag(Z A⁻¹ Zᵀ) = ‖R⁻ᵀ Zᵀ‖²`` in one read-only sweep of ``R``.
+
+    For each query row z the forward substitution ``Rᵀ v = zᵀ`` runs down the rows of ``R`` in the
+    "axpy" order: once ``v_i = z_i / R_ii`` is known, ``v_i · R[i, i+1:]`` is subtracted from the rest of
+    z. Rows of ``R`` are taken four at a time, so each entry of ``R`` is read once, contiguously, and the
+    working row is loaded and stored once per four rows of ``R``; ``R`` is never written.
+    ``P += v_i · d[i]`` and ``var += v_i²`` accumulate on the way. Cost ``k·b²`` flops, against
+    ``t·b²`` for the weights ``W = R⁻¹d`` (t outputs) plus ``k·b·t`` for ``Z W``.
+
+    Args:
+        M: ``(b, b+t)`` float64 C-contiguous ``[R | d]``, ``R`` upper triangular with a nonzero diagonal.
+        Z: ``(k, b)`` float64 query rows (read only).
+        P: ``(k, t)`` output, ``Z W``.
+        var: ``(k,)`` output, ``z A⁻¹ zᵀ`` per row (≥ 0).
+    """
+    b = M.shape[0]
+    V = _start_queries(Z, P, var)
+    v = np.empty(4)
+    i0 = 0
+    while i0 < b:
+        m = min(4, b - i0)
+        _forward_block(M, i0, m, V, P, var, v)
+        i0 += m
+
+
+@njit(cache=True, nogil=True)
+def values_within(Z: np.ndarray, U: np.ndarray, max_abs: float) -> bool:
+    """Whether every entry of ``Z`` and ``U`` (2-d float64) satisfies ``|v| ≤ max_abs`` (false for NaN)."""
+    for r in range(Z.shape[0]):
+        for q in range(Z.shape[1]):
+            if not (abs(Z[r, q]) <= max_abs):
+                return False
+    for r in range(U.shape[0]):
+        for q in range(U.shape[1]):
+            if not (abs(U[r, q]) <= max_abs):
+                return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def checked_copies(Z: np.ndarray, U: np.ndarray, max_abs: float) -> tuple[bool, np.ndarray, np.ndarray]:
+    """``(ok, Z.copy(), U.copy())`` with ``ok`` as :func:`values_within` (one call for a deferred update)."""
+    return values_within(Z, U, max_abs), Z.copy(), U.copy()

@@ -36,6 +36,18 @@ forgetting (provided for comparison; it is not bounded).
 
 Time steps: one call of :meth:`update` / :meth:`predict_update` is one time step, whatever its number of
 rows (e.g. the 6 rows of one wrench sample); :meth:`update_steps` runs many steps in one call.
+
+Prediction after an update
+--------------------------
+``W = R⁻¹d`` costs ``t·b²`` flops, so :meth:`predict` never forms it for a few rows: ``z W = (z R⁻¹) d``
+is one forward substitution ``Rᵀv = zᵀ`` (``k·b²``), and ``‖v‖² = z A⁻¹ zᵀ`` is the predictive variance
+of the same sweep. Better still, :meth:`update` is *deferred*: its rows are validated and copied at once,
+and the rotations run when the state is next needed. A :meth:`predict` that finds an update pending runs
+the rotations and its own forward substitution in the same sweep over ``R`` (each row of ``R`` is final as
+soon as its column is rotated, which is the order the substitution reads them), so the learn-then-predict
+habit costs about one update (see docs/performance.md). Every other read of the state (:attr:`R`,
+:attr:`d`, :attr:`weights`, :meth:`state_dict`, …) applies the pending update first; the observable
+results are those of an immediate update.
 """
 
 from __future__ import annotations
@@ -47,9 +59,15 @@ from typing import Any
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from semiparam_ros.core._kernels import back_substitute, qr_rls_steps
+from semiparam_ros.core._kernels import (
+    back_substitute,
+    checked_copies,
+    qr_rls_steps,
+    solve_predict,
+    values_within,
+)
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
-from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int, check_range
+from semiparam_ros.core.validation import MAX_ABS_INPUT, check_positive_int, check_range
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = ["MAX_ABS_INPUT", "RecursiveRLS"]
@@ -59,6 +77,9 @@ __all__ = ["MAX_ABS_INPUT", "RecursiveRLS"]
 _MAX_TRACKED_ROWS = 32
 #: Factors up to this size are solved by the compiled back-substitution (no scipy call overhead).
 _SMALL_SOLVE = 64
+#: Query blocks up to this many rows are predicted by forward substitution (fused with a pending update);
+#: larger blocks through the weights.
+_MAX_SOLVED_ROWS = 8
 _STATE_VERSION = 1
 
 
@@ -107,6 +128,9 @@ class RecursiveRLS:
         self._reg = self.n_features * (1.0 - forgetting) * lam if bounded else 0.0
         self._M = np.empty((self.n_features, self.n_features + self.n_outputs))
         self._no_pred = np.empty((0, self.n_outputs))
+        self._no_query = np.empty((0, self.n_features))
+        self._row_shape = (self.n_features,)
+        self._no_var = np.empty(0)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -119,10 +143,21 @@ class RecursiveRLS:
         self.n_steps = 0
         self._j = 0
         self._W: np.ndarray | None = None
+        # a validated, copied (Z, U) step whose rotations have not run yet (see "Prediction after an update")
+        self._pending: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _flush(self) -> None:
+        """Run the rotations of the pending update, if any."""
+        if self._pending is not None:
+            Z, U = self._pending
+            self._pending = None
+            self._run(Z, U, Z.shape[0], self._no_pred, self._no_pred, self._no_query, self._no_pred,
+                      self._no_var)
 
     @property
     def R(self) -> np.ndarray:  # noqa: N802 (the factor's name in the literature)
         """The upper-triangular factor (b, b), ``RᵀR = A`` (read-only view)."""
+        self._flush()
         v = self._M[:, : self.n_features]
         v.flags.writeable = False
         return v
@@ -130,6 +165,7 @@ class RecursiveRLS:
     @property
     def d(self) -> np.ndarray:
         """``d = R⁻ᵀB`` (b, t) (read-only view)."""
+        self._flush()
         v = self._M[:, self.n_features :]
         v.flags.writeable = False
         return v
@@ -137,6 +173,7 @@ class RecursiveRLS:
     @property
     def weights(self) -> np.ndarray:
         """The ridge solution ``W = R⁻¹d = A⁻¹B`` (b, t), cached until the next update (read-only)."""
+        self._flush()
         if self._W is None:
             if self.n_features <= _SMALL_SOLVE:
                 W = back_substitute(self._M)
@@ -149,12 +186,16 @@ class RecursiveRLS:
 
     def condition_number(self) -> float:
         """``cond₂(R)`` (= √cond(A)), from the singular values of R (O(b³): diagnostics only)."""
+        self._flush()
         s = np.linalg.svd(self._M[:, : self.n_features], compute_uv=False)
         return float(s[0] / s[-1]) if s[-1] > 0 else math.inf
 
     # ------------------------------------------------------------------ learning
     def update(self, Z: np.ndarray, U: np.ndarray) -> None:
         """Absorb one time step of k ≥ 1 rows in O(k·b²).
+
+        The rows are checked and copied now; the rotations run at the next use of the state, fused with
+        the next :meth:`predict` if that comes first (see the module docstring).
 
         Args:
             Z: (k, b) rows, or (b,) for one row.
@@ -165,7 +206,19 @@ class RecursiveRLS:
                 learner is left unchanged.
         """
         Z2, U2, _ = self._check_rows(Z, U)
-        self._step(Z2, U2, Z2.shape[0], self._no_pred)
+        self._defer(Z2, U2)
+
+    def _defer(self, Z2: np.ndarray, U2: np.ndarray) -> None:
+        """Validate the values of one step and leave a copy of it pending."""
+        ok, Zc, Uc = checked_copies(Z2, U2, MAX_ABS_INPUT)  # copies: the caller may reuse its arrays
+        if not ok:
+            raise RejectedSampleError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} "
+                                      "in magnitude")
+        self._flush()
+        self._pending = (Zc, Uc)
+        self._W = None
+        self.n_steps += 1
+        self.n_samples_seen += Z2.shape[0]
 
     def predict_update(self, Z: np.ndarray, U: np.ndarray) -> np.ndarray:
         """Predict the rows with the current weights, then absorb them as one time step (one pass).
@@ -188,8 +241,8 @@ class RecursiveRLS:
         return P[0] if single else P
 
     def _update_valid(self, Z2: np.ndarray, U2: np.ndarray) -> None:
-        """:meth:`update` for already validated C-contiguous float64 (k, b) / (k, t) arrays."""
-        self._step(Z2, U2, Z2.shape[0], self._no_pred)
+        """:meth:`update` for C-contiguous float64 (k, b) / (k, t) arrays of checked shape."""
+        self._defer(Z2, U2)
 
     def _predict_update_valid(self, Z2: np.ndarray, U2: np.ndarray) -> np.ndarray:
         """:meth:`predict_update` for already validated C-contiguous float64 (k, b) / (k, t) arrays."""
@@ -260,35 +313,70 @@ class RecursiveRLS:
 
     def _step(self, Z: np.ndarray, U: np.ndarray, rows_per_step: int, P: np.ndarray,
               E: np.ndarray | None = None) -> None:
-        # the kernel checks every value (NaN, inf, > MAX_ABS_INPUT) before it touches the state
+        self._flush()
         E = self._no_pred if E is None else E
-        j = int(qr_rls_steps(self._M, Z, U, rows_per_step, self._scale, self._reg, self._j, P, MAX_ABS_INPUT,
-                             E))
-        if j < 0:
+        if not self._run(Z, U, rows_per_step, P, E, self._no_query, self._no_pred, self._no_var):
             raise RejectedSampleError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in "
                              "magnitude")
-        self._W = None
-        self._j = j
         n_steps = Z.shape[0] // rows_per_step
         self.n_steps += n_steps
         self.n_samples_seen += Z.shape[0]
 
+    def _run(self, Z: np.ndarray, U: np.ndarray, rows_per_step: int, P: np.ndarray, E: np.ndarray,
+             Q: np.ndarray, QP: np.ndarray, Qvar: np.ndarray) -> bool:
+        """Call the kernel; False (state untouched) if a value was rejected. Counters are the caller's."""
+        # the kernel checks every value (NaN, inf, > MAX_ABS_INPUT) before it touches the state
+        j = int(qr_rls_steps(self._M, Z, U, rows_per_step, self._scale, self._reg, self._j, P, MAX_ABS_INPUT,
+                             E, Q, QP, Qvar))
+        if j < 0:
+            return False
+        self._W = None
+        self._j = j
+        return True
+
     # ------------------------------------------------------------------ prediction
-    def predict(self, Z: np.ndarray) -> np.ndarray:
-        """``Z W`` with the cached weights.
+    def predict(self, Z: np.ndarray, *, return_variance: bool = False,
+                ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """``Z W``, and optionally ``z A⁻¹ zᵀ`` per row, without forming ``W`` for a few rows.
+
+        Up to 8 rows are predicted by one forward substitution ``Rᵀv = zᵀ`` (``z W = v·d``,
+        ``z A⁻¹ zᵀ = ‖v‖²``, O(k·b²)), fused with the rotations of a pending :meth:`update` when there is
+        one; more rows use the cached weights, ``Z W``. The path depends on k only, so equal states give
+        bit-equal predictions; both give ``Z A⁻¹ B`` up to rounding (≈ cond(R)·ε relative).
 
         Args:
             Z: (k, b) rows or (b,) for one row.
+            return_variance: Also return ``z A⁻¹ zᵀ`` per row (see :meth:`variance`).
 
         Returns:
-            (k, t), or (t,) for one row.
+            (k, t), or (t,) for one row; with ``return_variance`` the pair ``(prediction, variance)``,
+            the variance (k,) or of shape () for one row.
 
         Raises:
             RejectedSampleError: Wrong shape or non-finite entries.
         """
         Z2, single = self._check_features(Z)
+        P, var = self._predict_valid(Z2, return_variance)
+        if single:
+            return (P[0], var[0]) if return_variance else P[0]  # type: ignore[index]
+        return (P, var) if return_variance else P  # type: ignore[return-value]
+
+    def _predict_valid(self, Z2: np.ndarray, want_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`predict` for a validated C-contiguous float64 (k, b) array: ``(Z W, var or None)``."""
+        k = Z2.shape[0]
+        # the path depends on k only (not on what is cached), so equal states give bit-equal predictions
+        if k <= _MAX_SOLVED_ROWS:
+            P = np.empty((k, self.n_outputs))
+            var = np.empty(k)
+            if self._pending is not None:
+                Zp, Up = self._pending
+                self._pending = None
+                self._run(Zp, Up, Zp.shape[0], self._no_pred, self._no_pred, Z2, P, var)
+            else:
+                solve_predict(self._M, Z2, P, var)
+            return P, (var if want_variance else None)
         P = Z2 @ self.weights
-        return P[0] if single else P
+        return P, (self._variance_valid(Z2) if want_variance else None)
 
     def variance(self, Z: np.ndarray) -> np.ndarray:
         """``z A⁻¹ zᵀ`` per row by one triangular solve (``‖R⁻ᵀzᵀ‖²``).
@@ -306,12 +394,28 @@ class RecursiveRLS:
             RejectedSampleError: Wrong shape or non-finite entries.
         """
         Z2, single = self._check_features(Z)
-        V = solve_triangular(self._M[:, : self.n_features], Z2.T, trans="T", lower=False, check_finite=False)
-        out = np.einsum("ij,ij->j", V, V)
+        out = self._variance_valid(Z2)
         return out[0] if single else out
+
+    def _variance_valid(self, Z2: np.ndarray) -> np.ndarray:
+        self._flush()
+        if Z2.shape[0] <= _MAX_SOLVED_ROWS:
+            P = np.empty((Z2.shape[0], self.n_outputs))
+            out = np.empty(Z2.shape[0])
+            solve_predict(self._M, Z2, P, out)
+            return out
+        V = solve_triangular(self._M[:, : self.n_features], Z2.T, trans="T", lower=False, check_finite=False)
+        return np.einsum("ij,ij->j", V, V)
 
     # ------------------------------------------------------------------ validation
     def _check_features(self, Z: Any, values: bool = True) -> tuple[np.ndarray, bool]:
+        if (type(Z) is np.ndarray and Z.shape == self._row_shape and Z.dtype == np.float64
+                and Z.flags.c_contiguous):
+            Z2 = Z.reshape(1, -1)  # the common case, one contiguous float64 row: a (1, b) view
+            if values and not values_within(Z2, self._no_pred, MAX_ABS_INPUT):
+                raise RejectedSampleError(
+                    f"Z contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")
+            return Z2, True
         Z2 = np.asarray(Z, dtype=np.float64)
         single = Z2.ndim == 1
         if single:
@@ -321,9 +425,11 @@ class RecursiveRLS:
                              f"got {np.shape(Z)}")
         if Z2.shape[0] == 0:
             raise RejectedSampleError("Z has no rows")
-        if values:
-            check_finite_array("Z", Z2)
-        return np.ascontiguousarray(Z2), single
+        Z2 = np.ascontiguousarray(Z2)
+        if values and not values_within(Z2, self._no_pred, MAX_ABS_INPUT):
+            raise RejectedSampleError(
+                f"Z contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")
+        return Z2, single
 
     def _check_rows(self, Z: Any, U: Any) -> tuple[np.ndarray, np.ndarray, bool]:
         Z2, single = self._check_features(Z, values=False)  # values are checked in the kernel
@@ -344,6 +450,7 @@ class RecursiveRLS:
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the whole learner as arrays (keys start with ``prefix``), for :func:`atomic_save_npz`."""
+        self._flush()
         return {
             f"{prefix}version": np.array(_STATE_VERSION),
             f"{prefix}n_features": np.array(self.n_features),

@@ -165,11 +165,14 @@ class ParametricModel(_Model):
         """``Φπ₀`` (t,), or None for a zero prior."""
         return Phi @ self.prior if self._has_prior else None
 
-    def _predict_phi(self, Phi: np.ndarray) -> np.ndarray:
-        """``Φ(π₀ + δ̂)`` for a validated regressor (t,)."""
-        yp = self.rls.predict(Phi)[:, 0]
+    def _predict_phi(
+        self, Phi: np.ndarray, want_variance: bool = False
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """``Φ(π₀ + δ̂)`` (t,) for a validated regressor, and ``diag(Φ A⁻¹ Φᵀ)`` when asked (one pass)."""
+        P, var = self.rls._predict_valid(np.ascontiguousarray(Phi), want_variance)
+        yp = P[:, 0]
         y0 = self._prior_output(Phi)
-        return yp if y0 is None else yp + y0
+        return (yp if y0 is None else yp + y0), var
 
     def _predict_update_phi(self, Phi: np.ndarray, y: np.ndarray) -> np.ndarray:
         """A-priori ``Φ(π₀ + δ̂)``, then learn ``y − Φπ₀`` (validated inputs); counters untouched."""
@@ -204,15 +207,14 @@ class ParametricModel(_Model):
 
         Args:
             x: The input ``[q, q̇, q̈]``.
-            return_variance: Also compute ``diag(Φ A⁻¹ Φᵀ)`` (one triangular solve).
+            return_variance: Also compute ``diag(Φ A⁻¹ Φᵀ)`` (same triangular solve as the prediction).
 
         Raises:
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _ = self._check(x)
         Phi = self._phi(xv)
-        yp = self._predict_phi(Phi)
-        var = self.rls.variance(Phi) if return_variance else None
+        yp, var = self._predict_phi(Phi, return_variance)
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy(), var)
 
     def learn_one(self, x: Any, y: Any) -> None:
@@ -339,8 +341,10 @@ class NonparametricModel(_Model):
             var = np.full(self.n_outputs, np.nan) if return_variance else None
             return np.zeros(self.n_outputs), var
         phi = self._features(xin)
-        var = np.full(self.n_outputs, float(self.rls.variance(phi)[0])) if return_variance else None
-        return (phi @ self.rls.weights)[0], var
+        # one forward substitution gives both (fused with a pending update: see RecursiveRLS.predict)
+        P, v = self.rls._predict_valid(phi, return_variance)
+        var = np.full(self.n_outputs, float(v[0])) if v is not None else None
+        return P[0], var
 
     def _learn(self, xin: np.ndarray, target: np.ndarray, want_prediction: bool) -> np.ndarray:
         """Warm-up or update with validated inputs; returns the a-priori prediction if asked."""
@@ -603,12 +607,12 @@ class SemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        yp = self.parametric._predict_phi(Phi)
+        yp, var_p = self.parametric._predict_phi(Phi, return_variance)
         r, var_np = self.nonparametric._predict(np.concatenate([xv, yp]), return_variance)
         var = None
-        if return_variance:
+        if var_p is not None:
             assert var_np is not None  # _predict computes it when asked
-            var = self.parametric.rls.variance(Phi) + np.nan_to_num(var_np, nan=0.0)
+            var = var_p + np.nan_to_num(var_np, nan=0.0)
         return Prediction(yp, r, yp + r, var)
 
     def _step(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:

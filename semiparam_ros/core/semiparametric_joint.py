@@ -150,8 +150,10 @@ class JointSemiparametricModel(_TwoStageModel):
         t, p = self.n_outputs, self.n_params
         if npm.standardizer.ready:
             phi = npm._features(xv)
-            pk = (phi @ npm.rls.weights)[0]
-            var_k = float(npm.rls.variance(phi)[0]) if return_variance else 0.0
+            # one forward substitution (O(D²)) instead of the t(1+p)-column weights (O(t(1+p)·D²))
+            P, v = npm.rls._predict_valid(phi, return_variance)
+            pk = P[0]
+            var_k = float(v[0]) if v is not None else 0.0
         else:
             pk = np.zeros(t * (1 + p))
             var_k = 0.0

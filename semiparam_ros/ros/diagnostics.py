@@ -20,6 +20,7 @@ wrench_rate_hz                  WrenchStamped messages received per second
 joint_states_received, ...      messages received since start (JointState, WrenchStamped)
 update_latency_mean_ms / _max   core step (predict + learn) wall time over the last period
 pipeline_latency_mean_ms / _max message received → prediction published, over the last period
+pipeline_latency_p99_ms          its 99th percentile over the last period (of at most the last 8192 samples)
 learning_cpu_percent            CPU time spent in the estimator over the last period (100 = one core)
 processed_in_period             queued messages run through the estimator in the last period
 acceleration_delay_ms           inherent lag of the acceleration estimate (centred window)
@@ -54,6 +55,9 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 __all__ = ["NodeStatistics", "diagnostic_array"]
+
+#: Pipeline latencies kept per diagnostics period for the percentile (a ring: memory is bounded).
+_E2E_RING = 8192
 
 
 class _RingRMSE:
@@ -98,6 +102,7 @@ class NodeStatistics:
         self._rmse_total = _RingRMSE(rmse_window, n_outputs)
         self._rmse_param = _RingRMSE(rmse_window, n_outputs)
         self._period_start = time.monotonic()
+        self._e2e_ring = np.empty(_E2E_RING)
         self._reset_period()
         self.samples_predicted = 0
         self.joint_states_received = 0
@@ -115,6 +120,7 @@ class NodeStatistics:
         self._step_max = 0.0
         self._e2e_sum = 0.0
         self._e2e_max = 0.0
+        self._e2e_count = 0
         self._drops_in_period = 0
         self._learning_cpu = 0.0
         self._processed = 0
@@ -163,6 +169,8 @@ class NodeStatistics:
             self._step_max = max(self._step_max, step_s)
             self._e2e_sum += e2e_s
             self._e2e_max = max(self._e2e_max, e2e_s)
+            self._e2e_ring[self._e2e_count % _E2E_RING] = e2e_s
+            self._e2e_count += 1
             self._rmse_total.add(y - total)
             self._rmse_param.add(y - parametric)
 
@@ -193,6 +201,8 @@ class NodeStatistics:
                 update_latency_max_ms=1e3 * self._step_max if n else math.nan,
                 pipeline_latency_mean_ms=1e3 * self._e2e_sum / n if n else math.nan,
                 pipeline_latency_max_ms=1e3 * self._e2e_max if n else math.nan,
+                pipeline_latency_p99_ms=1e3 * float(np.percentile(
+                    self._e2e_ring[: min(self._e2e_count, _E2E_RING)], 99)) if self._e2e_count else math.nan,
                 learning_cpu_percent=100.0 * self._learning_cpu / dt,
                 processed_in_period=self._processed,
                 samples_predicted=self.samples_predicted,

@@ -29,14 +29,17 @@ Topics (relative names, remap with ``-r``):
 Services (``std_srvs/Trigger``): ``~/save`` writes a checkpoint to ``checkpoint.path`` (atomic; the reply
 comes once the file is on disk), ``~/reset`` forgets everything learned.
 
-Threads. One single-threaded executor runs everything that touches the estimator. Subscription callbacks
-only convert the message and append it to a bounded deque (``queue_size``; when full the oldest entry is
-dropped and counted); appending to an empty queue triggers a guard condition whose callback runs the
-estimator on the queued messages (predict, publish, then learn), at most 50 per turn so that inputs,
-services and timers get their turns in between; input keeps arriving meanwhile in the DDS history
-(depth 100) and is taken in bulk by the next subscription callback. Why not a learner thread (or a timer in a
+Threads. One executor thread runs everything that touches the estimator: the classic
+``SingleThreadedExecutor`` by default, ``--executor events`` for rclpy's ``EventsExecutor`` (its event queue
+and timers live in C++; in rclpy 7.1.6 it never awaits async service callbacks, so ``~/save`` does not
+answer under it — the comparison is in docs/performance.md). A subscription callback converts the message,
+appends it to a bounded deque (``queue_size``; when full the oldest entry is dropped and counted), takes
+what else is already waiting on that subscription, and runs the estimator on the queue at once (predict,
+publish, then learn): no executor round trip lies between receipt and prediction. At most 50 messages are
+processed per callback so that inputs, services and timers get their turns; a backlog beyond that is
+worked off by a catch-up timer armed only while input is waiting. Why not a learner thread (or a
 ``MultiThreadedExecutor``): on CPython the executor thread and a learner thread serialise on the GIL, and
-every hand-over costs (the measured comparison is in ``docs/design-notes.md``).
+every hand-over costs (measured in docs/design-notes.md).
 A second thread only writes checkpoints (periodically every ``checkpoint.period`` seconds of wall time,
 on ``~/save``, on clean shutdown): it snapshots the learned state under a lock (a memory copy, ~1 ms at
 D = 500) and writes outside it, so neither callbacks nor learning ever wait for the disk. On a clean
@@ -54,6 +57,7 @@ logged at FATAL level, is not counted as a drop, and propagates out of ``spin``,
 
 from __future__ import annotations
 
+import argparse
 import collections
 import sys
 import threading
@@ -69,7 +73,8 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
@@ -125,6 +130,8 @@ _OUTPUT_QOS = 100
 _LOG_THROTTLE_S = 5.0
 _BATCH = 50  # queued messages processed per turn of the executor (≈ 10–20 ms of learning at most)
 _SHUTDOWN_BUDGET_S = 10.0  # time allowed to learn the queue at shutdown (1000 messages take ≈ 0.2 s)
+_CATCH_UP_PERIOD_S = 1e-4  # the backlog timer fires at every executor turn while armed
+_SPIN_TIMEOUT_S = 0.1  # EventsExecutor.spin_once timeout (see spin())
 _MAX_DRAIN = 64  # messages taken per subscription callback at most (bounds the executor's time away)
 
 
@@ -189,7 +196,6 @@ class EstimatorNode(Node):
         self._model_lock = threading.Lock()
         self._queue: collections.deque[tuple[str, JointStateData | WrenchData, float]] = collections.deque()
         self._queue_size = int(cfg["queue_size"])
-        self._work_pending = False  # the guard condition is triggered and not yet served
         self._version = 0  # bumped whenever the learned state changes (learning, reset)
         self._published_version = -1
         self._ckpt_event = threading.Event()
@@ -244,7 +250,10 @@ class EstimatorNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(float(cfg["diagnostics.period"]), self._on_diagnostics_timer, clock=steady)
 
-        self._work_gc = self.create_guard_condition(self._process_queued)
+        # Catch-up of a backlog (more than a batch queued): a timer armed only while input is waiting
+        # (timers work with every executor, guard conditions not with the EventsExecutor).
+        self._catch_up = self.create_timer(_CATCH_UP_PERIOD_S, self._process_queued, clock=steady)
+        self._catch_up.cancel()
         self._ckpt_thread = threading.Thread(target=self._checkpoint_loop, name="estimator-checkpoint",
                                              daemon=True)
         self._ckpt_thread.start()
@@ -274,9 +283,6 @@ class EstimatorNode(Node):
         if dropped:
             self._queue.popleft()
         self._queue.append((kind, item, time.perf_counter()))
-        if not self._work_pending:
-            self._work_pending = True
-            self._work_gc.trigger()
         if dropped:
             self._stats.count_drop("queue_full")
             self.get_logger().warning(
@@ -286,10 +292,12 @@ class EstimatorNode(Node):
     def _on_joint_state(self, msg: JointState) -> None:
         self._intake("joint_states", msg)
         self._drain("joint_states")
+        self._process_queued()
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
         self._intake("wrench", msg)
         self._drain("wrench")
+        self._process_queued()
 
     def _intake(self, kind: str, msg: Any) -> None:
         self._stats.count_input(kind)
@@ -427,18 +435,23 @@ class EstimatorNode(Node):
 
     # ================================================================== learning (executor thread)
     def _process_queued(self) -> None:
-        """Run the estimator on queued input: at most a batch, so inputs, services and timers get turns."""
-        self._work_pending = False
+        """Run the estimator on queued input: at most a batch, so inputs, services and timers get turns.
+
+        Called right after each input is queued (no executor round trip between receipt and prediction)
+        and, while a backlog remains, by the catch-up timer.
+        """
         for _ in range(_BATCH):
             if not self._queue:
-                return
+                break
             kind, data, t_recv = self._queue.popleft()
             cpu = time.thread_time()
             self._process(kind, data, t_recv)
             self._stats.add_learning_cpu(time.thread_time() - cpu)
-        if self._queue and not self._work_pending:
-            self._work_pending = True
-            self._work_gc.trigger()
+        if self._queue:
+            if self._catch_up.is_canceled():
+                self._catch_up.reset()
+        elif not self._catch_up.is_canceled():
+            self._catch_up.cancel()
 
     def _process(self, kind: str, data: JointStateData | WrenchData, t_recv: float, *,
                  publish: bool = True) -> None:
@@ -603,11 +616,50 @@ class EstimatorNode(Node):
         return False
 
 
+#: Executors ``main`` can spin the node with (``--executor NAME``); the first is the default.
+EXECUTORS: dict[str, Callable[[], Executor]] = {
+    "single_threaded": SingleThreadedExecutor,
+    "events": EventsExecutor,
+}
+
+
+def spin(executor: Executor) -> None:
+    """Spin until the context shuts down (raises ``ExternalShutdownException`` then, like ``spin``).
+
+    rclpy 7.1.6's ``EventsExecutor.spin()`` (and ``spin_once()`` without a timeout) runs no timer
+    callback at all; ``spin_once`` with a timeout does, so the events executor is driven by that loop.
+    """
+    if isinstance(executor, SingleThreadedExecutor):
+        executor.spin()
+        return
+    while rclpy.ok(context=executor.context):
+        executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
+
+
+def parse_node_args(args: list[str]) -> argparse.Namespace:
+    """Parse the node's own options (those outside ``--ros-args``).
+
+    Args:
+        args: The command line without the program name and without ROS arguments.
+
+    Returns:
+        The options: ``executor`` (a key of :data:`EXECUTORS`).
+
+    Raises:
+        SystemExit: Unknown option or executor name (argparse prints the usage).
+    """
+    parser = argparse.ArgumentParser(prog="estimator", description="semiparam_ros estimator node")
+    parser.add_argument("--executor", choices=tuple(EXECUTORS), default=next(iter(EXECUTORS)),
+                        help="rclpy executor spinning the node (default: %(default)s; measured in "
+                             "docs/performance.md)")
+    return parser.parse_args(args)
+
+
 def main(args: list[str] | None = None) -> int:
     """Run the estimator node until shut down (Ctrl-C, SIGTERM or context shutdown).
 
     Args:
-        args: Command-line arguments (``--ros-args ...``); ``sys.argv`` when None.
+        args: Command-line arguments (``[--executor NAME] --ros-args ...``); ``sys.argv[1:]`` when None.
 
     Returns:
         Process exit code: 0 on a clean shutdown, 2 if the node could not start.
@@ -617,7 +669,9 @@ def main(args: list[str] | None = None) -> int:
             process dies with the traceback, and a launch file's ``respawn`` restarts it from the last
             periodic checkpoint); the node is destroyed without learning the queue or saving first.
     """
-    rclpy.init(args=args)
+    argv = sys.argv[1:] if args is None else list(args)
+    options = parse_node_args(rclpy.utilities.remove_ros_args(["estimator", *argv])[1:])
+    rclpy.init(args=argv)
     node: EstimatorNode | None = None
     code = 0
     crashed = False
@@ -626,9 +680,9 @@ def main(args: list[str] | None = None) -> int:
         # small machine extra threads only compete with DDS and the checkpoint writer.
         with threadpool_limits(1):
             node = EstimatorNode()
-            executor = SingleThreadedExecutor()
+            executor = EXECUTORS[options.executor]()
             executor.add_node(node)
-            executor.spin()
+            spin(executor)
     except StartupError as err:
         print(f"[estimator] FATAL: {err}", file=sys.stderr, flush=True)
         code = 2
