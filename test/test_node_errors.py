@@ -52,13 +52,16 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
         raise IndexError("injected bug")
 
     monkeypatch.setattr(est.model, "predict_learn_one", buggy)
-    # through the executor, as live: the guard-condition callback raises out of spin_once
+    # through the executor, as live: queued input is processed by an executor callback (the catch-up
+    # timer, armed as when a backlog remains), and the error raises out of spin_once
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     try:
         with pytest.raises(IndexError, match="injected bug"):
-            for msg in messages:
+            for _ in range(100):
+                msg = next(messages)
                 node._enqueue(_kind(msg), msg)
+                node._catch_up.reset()
                 executor.spin_once(timeout_sec=1.0)
     finally:
         executor.remove_node(node)
