@@ -188,7 +188,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("adaptation.rate_samples", "integer", 50,
                   "paired samples over which the sample period is measured (median of the stamp steps)",
                   min=2, max=10**6),
-    ParameterSpec("uncertainty.noise_time_constant", "double", 10.0,
+    ParameterSpec("uncertainty.noise_time_constant", "double", 2.0,
                   "time constant of the running estimate of the noise scale s^2 per output [s]; the "
                   "published std is sqrt(s^2 (1 + z A^-1 z^T))", min=0.0, min_exclusive=True, max=1e9,
                   read_only=False),

@@ -272,6 +272,12 @@ class StepResult:
     std: np.ndarray | None = None
     verdict: Verdict | None = None
 
+    @property
+    def external(self) -> np.ndarray:
+        """``y − prediction.total``: what the model does not explain, i.e. the external wrench (N, N·m) or
+        joint torques (N·m) when something touches the robot, noise otherwise (σ = :attr:`std`)."""
+        return self.sample.y - self.prediction.total
+
 
 class OnlineEstimator:
     """Pipeline + semiparametric learner, driven one message at a time.
