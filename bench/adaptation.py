@@ -69,7 +69,9 @@ def run(bag: str, overrides: dict, *, contacts: list[tuple[float, float, np.ndar
 
 
 def groups(n_out: int, output: str) -> dict[str, slice]:
-    return {"force": slice(0, 3), "torque": slice(3, 6)} if output == "wrench" else {"joints": slice(0, n_out)}
+    if output == "wrench":
+        return {"force": slice(0, 3), "torque": slice(3, 6)}
+    return {"joints": slice(0, n_out), **{f"joint{i}": slice(i, i + 1) for i in range(n_out)}}
 
 
 def summarize(res: dict, output: str, windows: dict[str, tuple[float, float]], pickup: float | None,

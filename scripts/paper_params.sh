@@ -2,4 +2,8 @@
 # the paper reproduction. Selected on the training bag (XY) only — see docs/results.md and reproduce.sh.
 config=config/icub_right_arm.yaml
 tuned=(--set parametric.lam=0.01 --set nonparametric.lam=0.001 --set nonparametric.sigma=6.0
-       --set nonparametric.n_features=500)
+       --set nonparametric.n_features=500
+       # the paper's learners: no forgetting, every sample learned (the shipped configuration adapts and
+       # gates contacts; docs/adaptation.md)
+       --set parametric.forgetting=1.0 --set nonparametric.forgetting=1.0
+       --set adaptation.time_constant=0.0 --set gate.enabled=false)

@@ -9,7 +9,9 @@ with the period measured on the stream itself:
 
 which weights a sample of age a seconds by ``exp(−a / τ)`` whatever the rate. The period is the median of
 the stamp steps of the first few paired samples (robust to a dropout or a duplicated stamp); until it is
-known the learners run with β = 1, which for a few dozen samples is indistinguishable.
+known the learners run with the configured per-sample factors (``parametric.forgetting``,
+``nonparametric.forgetting``; the shipped configuration sets them to the same τ at the iCub's 100 Hz, so
+tools that never see stamps, e.g. the paper's protocol on arrays, still adapt).
 """
 
 from __future__ import annotations

@@ -183,8 +183,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("adaptation.time_constant", "double", 0.0,
                   "memory of both learners [s]: when > 0 it replaces parametric.forgetting and "
                   "nonparametric.forgetting by beta = exp(-T/tau), T the sample period measured over the "
-                  "first adaptation.rate_samples samples (the learners run with beta = 1 until then); "
-                  "0 = use the per-sample forgetting factors as given", min=0.0, max=1e9),
+                  "first adaptation.rate_samples samples (until then, and in tools that do not know the "
+                  "rate, the per-sample factors apply); 0 = use the per-sample forgetting factors only",
+                  min=0.0, max=1e9),
     ParameterSpec("adaptation.rate_samples", "integer", 50,
                   "paired samples over which the sample period is measured (median of the stamp steps)",
                   min=2, max=10**6),

@@ -186,14 +186,17 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
 
 
 def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
-                regressor: RigidBodyRegressor | None = None) -> Model:
+                regressor: RigidBodyRegressor | None = None, *, sample_period_s: float | None = None) -> Model:
     """Build one of the paper's three learners, with zero initial parameters.
 
     Args:
-        config: Estimator configuration (``parametric.*``, ``nonparametric.*``).
+        config: Estimator configuration (``parametric.*``, ``nonparametric.*``, ``adaptation.*``).
         kind: ``"P"`` (rigid-body RRLS), ``"NP"`` (random features RRLS) or ``"SP"`` (both; the paper's
             cascade or the joint fit, by ``semiparametric.combination``).
         regressor: Rigid-body regressor to use; built from the configuration when omitted.
+        sample_period_s: The stream's sample period [s], when known (offline tools): with
+            ``adaptation.time_constant`` τ > 0 both stages then forget with β = exp(−T/τ) instead of the
+            configured per-sample factors. :class:`OnlineEstimator` measures T itself.
 
     Returns:
         The learner.
@@ -203,6 +206,10 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
     """
     if kind not in ("P", "NP", "SP"):
         raise ValueError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
+    tau = float(config["adaptation.time_constant"])
+    if tau > 0.0 and sample_period_s is not None:
+        beta = forgetting_factor(tau, sample_period_s)
+        config = config.with_overrides({"parametric.forgetting": beta, "nonparametric.forgetting": beta})
     n_joints = len(config["robot.joints"])
     n_inputs = 3 * n_joints
     if kind == "NP":
