@@ -32,7 +32,8 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config" / "icub_right_arm.yaml"
 BAGS = ROOT / "bags"
 FAST = {"nonparametric.n_features": 100}
-CONTACT = (25.0, 1.5, np.array([12.0, -15.0, 5.0]))  # start [s from the first wrench], duration [s], force [N]
+# start [s from the first wrench], duration [s], force [N]
+CONTACT = (25.0, 1.5, np.array([12.0, -15.0, 5.0]))
 
 
 @dataclasses.dataclass
@@ -133,13 +134,18 @@ def test_contact_is_absorbed_without_the_gate_and_not_with_it(gate):
 def test_payload_is_adopted_with_the_gate_on():
     on = run("icub_payload", tuple({**FAST, "gate.enabled": True}.items()))
     off = run("icub_payload", tuple({**FAST, "gate.enabled": False}.items()))
+    paper = run("icub_payload", tuple({**FAST, "gate.enabled": False, "adaptation.time_constant": 0.0,
+                                       "parametric.forgetting": 1.0, "nonparametric.forgetting": 1.0}.items()))
     pickup = 19.8  # scenario.yaml: payload at 20 s of the bag, the first wrench at 0.2 s
     assert sum(v is Verdict.ADOPTED for v in on.verdicts) > 0
     gated = [t for t, v in zip(on.t, on.verdicts, strict=True) if v is Verdict.GATED]
-    assert gated and min(gated) >= pickup - 0.05 and max(gated) <= pickup + 3.0 + 1.0
-    regime_on, regime_off = _rmse(on, 30.0, 40.0), _rmse(off, 30.0, 40.0)
-    assert regime_on <= 1.1 * regime_off, (regime_on, regime_off)
-    assert regime_on <= 1.25 * _rmse(on, 12.0, pickup - 0.5)
+    # refused only from the pickup for gate.max_contact_duration (3 s), then adopted
+    assert gated and min(gated) >= pickup - 0.05 and max(gated) <= pickup + 3.0 + 0.5
+    # from 4 s after the pickup on: as accurate as without the gate (10 %), and better than the paper's
+    # learner without forgetting (measured ratio ≈ 0.8 on this bag; D = 100)
+    late_on, late_off, late_paper = (_rmse(r, pickup + 4.0, 40.0) for r in (on, off, paper))
+    assert late_on <= 1.1 * late_off, (late_on, late_off)
+    assert late_on < 0.9 * late_paper, (late_on, late_paper)
 
 
 @pytest.mark.parametrize("gate", [False, True])

@@ -27,7 +27,7 @@ __all__ = ["PeriodEstimator", "forgetting_factor", "learners"]
 
 
 def forgetting_factor(time_constant_s: float, period_s: float) -> float:
-    """The per-sample forgetting factor of a memory time constant.
+    """Return the per-sample forgetting factor of a memory time constant.
 
     Args:
         time_constant_s: τ > 0, the memory [s] (data of age τ weigh e⁻¹).
@@ -87,7 +87,7 @@ class PeriodEstimator:
 
 
 def learners(model: object) -> Iterator[RecursiveRLS]:
-    """The recursive least-squares learners inside a model (P, NP, or either SP combination).
+    """Iterate over the recursive least-squares learners of a model (P, NP, or either SP combination).
 
     Args:
         model: A learner of :mod:`semiparam_ros.core.semiparametric` or

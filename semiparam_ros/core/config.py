@@ -180,7 +180,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   choices=("cascade", "joint")),
     # adaptation, uncertainty and the contact-aware learning gate (core/adaptation.py, core/uncertainty.py,
     # core/gate.py; measurements in docs/adaptation.md)
-    ParameterSpec("adaptation.time_constant", "double", 0.0,
+    ParameterSpec("adaptation.time_constant", "double", 20.0,
                   "memory of both learners [s]: when > 0 it replaces parametric.forgetting and "
                   "nonparametric.forgetting by beta = exp(-T/tau), T the sample period measured over the "
                   "first adaptation.rate_samples samples (until then, and in tools that do not know the "

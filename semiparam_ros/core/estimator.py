@@ -57,8 +57,9 @@ DROP_REJECTED_SAMPLE = "rejected_sample"
 bound or a regressor overflow), typically after a finite but absurd joint state passed the pipeline."""
 
 NOT_LEARNED_GATED_CONTACT = "gated_contact"
-"""Key of :attr:`OnlineEstimator.not_learned`: a sample predicted but not learned because its residual was
-implausibly large for less than ``gate.max_contact_duration`` (see :mod:`semiparam_ros.core.gate`); not an input drop."""
+"""Key of :attr:`OnlineEstimator.not_learned`: a sample predicted but not learned because its residual
+was implausibly large for less than ``gate.max_contact_duration`` (see :mod:`semiparam_ros.core.gate`);
+not an input drop."""
 
 _CHECKPOINT_VERSION = 1
 # Parameters that fix the shape or meaning of the learned state: a checkpoint is only loaded when these
@@ -185,8 +186,8 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
     return np.concatenate(floors)
 
 
-def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
-                regressor: RigidBodyRegressor | None = None, *, sample_period_s: float | None = None) -> Model:
+def build_model(config: EstimatorConfig, kind: ModelKind = "SP", regressor: RigidBodyRegressor | None = None,
+                *, sample_period_s: float | None = None) -> Model:
     """Build one of the paper's three learners, with zero initial parameters.
 
     Args:
@@ -281,8 +282,11 @@ class StepResult:
 
     @property
     def external(self) -> np.ndarray:
-        """``y − prediction.total``: what the model does not explain, i.e. the external wrench (N, N·m) or
-        joint torques (N·m) when something touches the robot, noise otherwise (σ = :attr:`std`)."""
+        """``y − prediction.total``, what the model does not explain.
+
+        The external wrench (N, N·m) or joint torques (N·m) when something touches the robot, noise
+        otherwise (σ = :attr:`std`).
+        """
         return self.sample.y - self.prediction.total
 
 
