@@ -134,8 +134,9 @@ def test_contact_is_absorbed_without_the_gate_and_not_with_it(gate):
 def test_payload_is_adopted_with_the_gate_on():
     on = run("icub_payload", tuple({**FAST, "gate.enabled": True}.items()))
     off = run("icub_payload", tuple({**FAST, "gate.enabled": False}.items()))
-    paper = run("icub_payload", tuple({**FAST, "gate.enabled": False, "adaptation.time_constant": 0.0,
-                                       "parametric.forgetting": 1.0, "nonparametric.forgetting": 1.0}.items()))
+    paper_learner = {**FAST, "gate.enabled": False, "adaptation.time_constant": 0.0,
+                     "parametric.forgetting": 1.0, "nonparametric.forgetting": 1.0}
+    paper = run("icub_payload", tuple(paper_learner.items()))
     pickup = 19.8  # scenario.yaml: payload at 20 s of the bag, the first wrench at 0.2 s
     assert sum(v is Verdict.ADOPTED for v in on.verdicts) > 0
     gated = [t for t, v in zip(on.t, on.verdicts, strict=True) if v is Verdict.GATED]
