@@ -34,7 +34,7 @@ from semiparam_ros.core.semiparametric import (
     SemiparametricModel,
 )
 from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
-from semiparam_ros.core.uncertainty import NoiseScale
+from semiparam_ros.core.uncertainty import NoiseScale, predict_with_variance
 
 __all__ = [
     "DROP_REJECTED_SAMPLE",
@@ -359,7 +359,7 @@ class OnlineEstimator:
         if self._period is not None and self.forgetting is None:
             self._adapt_to_rate(sample.stamp_ns)
         # the relative variance v = z A⁻¹ zᵀ of the a-priori prediction (the state is not changed)
-        ahead = self.model.predict_one(sample.x, return_variance=True)
+        ahead = predict_with_variance(self.model, sample.x)
         verdict = None
         if self.learning_enabled and self.gate_enabled:
             prediction = ahead
