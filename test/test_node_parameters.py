@@ -45,6 +45,9 @@ def test_invalid_startup_values_exit_with_a_clear_message(ros_env, tmp_path):
         "joint_fit_forgetting": (["semiparametric.combination:=joint", "parametric.forgetting:=0.99"],
                                  ["parametric.forgetting", "nonparametric.forgetting", "joint"]),
         "checkpoint": ([f"checkpoint.path:={incompatible}"], ["d100.npz", "load_on_start"]),
+        # the contact gate's parameters (core/gate.py)
+        "gate_threshold": (["gate.threshold:=0.0"], ["gate.threshold", "> 0"]),
+        "gate_duration": (["gate.max_contact_duration:=-3.0"], ["gate.max_contact_duration", ">= 0"]),
     }
     procs = {name: NodeProcess(ros_env, params, tag=name) for name, (params, _) in cases.items()}
     for name, (_, needles) in cases.items():

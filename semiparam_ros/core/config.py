@@ -208,6 +208,36 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "[x, y_hat]); 'joint' = rigid-body parameters and kernel residual (on x) fitted as one "
                   "ridge problem, which needs parametric.forgetting == nonparametric.forgetting",
                   choices=("cascade", "joint")),
+    # adaptation, uncertainty and the contact-aware learning gate (core/adaptation.py, core/uncertainty.py,
+    # core/gate.py; measurements in docs/adaptation.md)
+    ParameterSpec("adaptation.time_constant", "double", 20.0,
+                  "memory of both learners [s]: when > 0 it replaces parametric.forgetting and "
+                  "nonparametric.forgetting by beta = exp(-T/tau), T the sample period measured over the "
+                  "first adaptation.rate_samples samples (until then, and in tools that do not know the "
+                  "rate, the per-sample factors apply); 0 = use the per-sample forgetting factors only",
+                  min=0.0, max=1e9),
+    ParameterSpec("adaptation.rate_samples", "integer", 50,
+                  "paired samples over which the sample period is measured (median of the stamp steps)",
+                  min=2, max=10**6),
+    ParameterSpec("uncertainty.noise_time_constant", "double", 2.0,
+                  "time constant of the running estimate of the noise scale s^2 per output [s]; the "
+                  "published std is sqrt(s^2 (1 + z A^-1 z^T))", min=0.0, min_exclusive=True, max=1e9,
+                  read_only=False),
+    ParameterSpec("gate.enabled", "bool", True,
+                  "contact-aware learning gate: a sample whose residual exceeds gate.threshold standard "
+                  "deviations is predicted but not learned, unless the excursion outlasts "
+                  "gate.max_contact_duration (false = learn every sample, the paper's behaviour)",
+                  read_only=False),
+    ParameterSpec("gate.threshold", "double", 5.0,
+                  "residual beyond which a sample is not learned, in predictive standard deviations of "
+                  "any one output component", min=0.0, min_exclusive=True, max=1e6, read_only=False),
+    ParameterSpec("gate.max_contact_duration", "double", 3.0,
+                  "an excursion beyond the threshold that lasts longer than this is a new normal (a "
+                  "payload) and is learned [s]; longer than the longest expected contact",
+                  min=0.0, max=1e6, read_only=False),
+    ParameterSpec("gate.warmup", "double", 10.0,
+                  "time from the first sample during which every sample is learned and the noise "
+                  "estimate settles before the gate engages [s]", min=0.0, max=1e6, read_only=False),
     # run time
     ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)", read_only=False),
     ParameterSpec("queue_size", "integer", 1000,

@@ -20,9 +20,11 @@ from typing import Any, Literal
 import numpy as np
 
 from semiparam_ros.core.acceleration import AccelerationConfig
+from semiparam_ros.core.adaptation import PeriodEstimator, forgetting_factor, learners
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.dynamics import RigidBodyRegressor
+from semiparam_ros.core.gate import ContactGate, GateConfig, Verdict
 from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
 from semiparam_ros.core.pipeline import SamplePipeline
 from semiparam_ros.core.semiparametric import (
@@ -32,10 +34,12 @@ from semiparam_ros.core.semiparametric import (
     SemiparametricModel,
 )
 from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
+from semiparam_ros.core.uncertainty import NoiseScale, predict_with_variance
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = [
     "DROP_REJECTED_SAMPLE",
+    "NOT_LEARNED_GATED_CONTACT",
     "ModelKind",
     "OnlineEstimator",
     "StepResult",
@@ -54,6 +58,11 @@ Model = ParametricModel | NonparametricModel | SemiparametricModel | JointSemipa
 DROP_REJECTED_SAMPLE = "rejected_sample"
 """Key of :attr:`OnlineEstimator.drops`: a paired sample the learner refused (values beyond its input
 bound or a regressor overflow), typically after a finite but absurd joint state passed the pipeline."""
+
+NOT_LEARNED_GATED_CONTACT = "gated_contact"
+"""Key of :attr:`OnlineEstimator.not_learned`: a sample predicted but not learned because its residual
+was implausibly large for less than ``gate.max_contact_duration`` (see :mod:`semiparam_ros.core.gate`);
+not an input drop."""
 
 _CHECKPOINT_VERSION = 1
 # Parameters that fix the shape or meaning of the learned state: a checkpoint is only loaded when these
@@ -241,8 +250,8 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
     return np.concatenate(floors)
 
 
-def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
-                regressor: RigidBodyRegressor | None = None) -> Model:
+def build_model(config: EstimatorConfig, kind: ModelKind = "SP", regressor: RigidBodyRegressor | None = None,
+                *, sample_period_s: float | None = None) -> Model:
     """Build one of the paper's three learners.
 
     The rigid-body stage works on the scaled base parameters ``θ = c ⊙ π_b`` (:func:`column_scale`) and
@@ -250,10 +259,13 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
     :func:`column_scale` for π̂_b, as :attr:`OnlineEstimator.parameters` does).
 
     Args:
-        config: Estimator configuration (``parametric.*``, ``nonparametric.*``).
+        config: Estimator configuration (``parametric.*``, ``nonparametric.*``, ``adaptation.*``).
         kind: ``"P"`` (rigid-body RRLS), ``"NP"`` (random features RRLS) or ``"SP"`` (both; the paper's
             cascade or the joint fit, by ``semiparametric.combination``).
         regressor: Rigid-body regressor to use; built from the configuration when omitted.
+        sample_period_s: The stream's sample period [s], when known (offline tools): with
+            ``adaptation.time_constant`` τ > 0 both stages then forget with β = exp(−T/τ) instead of the
+            configured per-sample factors. :class:`OnlineEstimator` measures T itself.
 
     Returns:
         The learner.
@@ -263,6 +275,10 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
     """
     if kind not in ("P", "NP", "SP"):
         raise ConfigurationError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
+    tau = float(config["adaptation.time_constant"])
+    if tau > 0.0 and sample_period_s is not None:
+        beta = forgetting_factor(tau, sample_period_s)
+        config = config.with_overrides({"parametric.forgetting": beta, "nonparametric.forgetting": beta})
     n_joints = len(config["robot.joints"])
     n_inputs = 3 * n_joints
     if kind == "NP":
@@ -324,13 +340,27 @@ class StepResult:
         prediction: The a-priori prediction of y (parametric, residual and total parts; N, N·m for a
             wrench, N·m for joint torques), made before the sample was learned.
         latency_s: Wall time of predict + learn for this sample [s].
-        learned: Whether the sample was learned (false when learning is disabled).
+        learned: Whether the sample was learned (false when learning is disabled or the gate refused it).
+        std: Predictive standard deviation of each component of y, noise included (units of y; +inf
+            before the first sample): also the σ of the external wrench/torques ``y − prediction.total``.
+        verdict: The contact gate's verdict, or None when the gate is off or learning is disabled.
     """
 
     sample: Sample
     prediction: Prediction
     latency_s: float
     learned: bool
+    std: np.ndarray | None = None
+    verdict: Verdict | None = None
+
+    @property
+    def external(self) -> np.ndarray:
+        """``y − prediction.total``, what the model does not explain.
+
+        The external wrench (N, N·m) or joint torques (N·m) when something touches the robot, noise
+        otherwise (σ = :attr:`std`).
+        """
+        return self.sample.y - self.prediction.total
 
 
 class OnlineEstimator:
@@ -363,6 +393,12 @@ class OnlineEstimator:
         self.learning_enabled = bool(config["learning_enabled"])
         self.n_samples_learned = 0
         self._rejected = 0
+        self.noise = NoiseScale(self.model.n_outputs, config["uncertainty.noise_time_constant"])
+        self.gate = ContactGate(_gate_config(config))
+        self.gate_enabled = bool(config["gate.enabled"])
+        tau = float(config["adaptation.time_constant"])
+        self._period = PeriodEstimator(config["adaptation.rate_samples"]) if tau > 0.0 else None
+        self.forgetting: float | None = None  # β from adaptation.time_constant, once the rate is measured
 
     # ------------------------------------------------------------------ streaming
     def process_joint_state(self, msg: JointStateData) -> list[StepResult]:
@@ -407,12 +443,62 @@ class OnlineEstimator:
                 large values, regressor overflow); the learned state is then unchanged.
         """
         start = time.perf_counter()
-        if self.learning_enabled:
-            prediction = self.model.predict_learn_one(sample.x, sample.y)
-            self.n_samples_learned += 1
+        if self._period is not None and self.forgetting is None:
+            self._adapt_to_rate(sample.stamp_ns)
+        # the relative variance v = z A⁻¹ zᵀ of the a-priori prediction (the state is not changed)
+        ahead = predict_with_variance(self.model, sample.x)
+        variance = ahead.variance
+        assert variance is not None  # predict_with_variance always computes it
+        verdict = None
+        if self.learning_enabled and self.gate_enabled:
+            prediction = ahead
+            error = sample.y - prediction.total
+            std = self.noise.std(variance)
+            verdict = self.gate.decide(sample.stamp_ns, error, std)
+            learned = verdict.learn
+            if learned:
+                self.model.learn_one(sample.x, sample.y)
+                self.n_samples_learned += 1
         else:
-            prediction = self.model.predict_one(sample.x)
-        return StepResult(sample, prediction, time.perf_counter() - start, self.learning_enabled)
+            # gate off: exactly the paper's predict-then-learn (bit-identical predictions)
+            learned = self.learning_enabled
+            if learned:
+                prediction = self.model.predict_learn_one(sample.x, sample.y)
+                self.n_samples_learned += 1
+            else:
+                prediction = self.model.predict_one(sample.x)
+            std = self.noise.std(variance)
+        if learned or verdict is None:
+            self.noise.update(sample.stamp_ns, sample.y - prediction.total, variance)
+        else:
+            self.noise.skip(sample.stamp_ns)
+        return StepResult(sample, prediction, time.perf_counter() - start, learned, std, verdict)
+
+    def _adapt_to_rate(self, stamp_ns: int) -> None:
+        """Measure the sample period; once known, set β = exp(−T/τ) in every learner."""
+        assert self._period is not None
+        period = self._period.add(stamp_ns)
+        if period is not None:
+            self._apply_forgetting(forgetting_factor(self.config["adaptation.time_constant"], period))
+
+    def _apply_forgetting(self, beta: float) -> None:
+        for rls in learners(self.model):
+            rls.set_forgetting(beta)
+        self.forgetting = beta
+
+    def apply_runtime_parameters(self, config: EstimatorConfig) -> None:
+        """Take the run-time gate and noise parameters (``gate.*``, ``uncertainty.*``) of a configuration.
+
+        Args:
+            config: A validated configuration (only its run-time gate/uncertainty entries are read).
+
+        Raises:
+            ValueError: On an invalid gate parameter (nothing is changed then).
+        """
+        gate_config = _gate_config(config)
+        self.noise.set_time_constant(config["uncertainty.noise_time_constant"])
+        self.gate.config = gate_config
+        self.gate_enabled = bool(config["gate.enabled"])
 
     # ------------------------------------------------------------------ inspection
     @property
@@ -421,6 +507,11 @@ class OnlineEstimator:
         drops = dict(self.pipeline.drops)
         drops[DROP_REJECTED_SAMPLE] = self._rejected
         return drops
+
+    @property
+    def not_learned(self) -> dict[str, int]:
+        """Samples predicted but deliberately not learned, by reason (``gated_contact``); not drops."""
+        return {NOT_LEARNED_GATED_CONTACT: self.gate.counts[Verdict.GATED]}
 
     @property
     def n_dropped(self) -> int:
@@ -465,6 +556,8 @@ class OnlineEstimator:
         self.pipeline.reset()
         self.n_samples_learned = 0
         self._rejected = 0
+        self.noise.reset()
+        self.gate.reset()
 
     def _fingerprint(self) -> str:
         structure = {name: self.config[name] for name in _STRUCTURAL}
@@ -480,6 +573,9 @@ class OnlineEstimator:
                 structure["parametric.column_scaling"] = True
             if any(name.endswith(".coulomb") for name in self.parameter_names):
                 structure["parametric.coulomb_velocity"] = self.config["parametric.coulomb_velocity"]
+        if self.config["adaptation.time_constant"] > 0.0:
+            # only when on, so that checkpoints written before the option existed (or with it off) still load
+            structure["adaptation.time_constant"] = self.config["adaptation.time_constant"]
         structure["kind"] = self.kind
         structure["base_parameters"] = list(self.parameter_names)
         return json.dumps(structure, sort_keys=True)
@@ -543,6 +639,14 @@ class OnlineEstimator:
             raise CheckpointError(f"{path}: corrupt checkpoint: {type(err).__name__}: {err}") from err
         self.model = model
         self.n_samples_learned = n_learned
+        if self.forgetting is not None:
+            self._apply_forgetting(self.forgetting)
+
+
+def _gate_config(config: EstimatorConfig) -> GateConfig:
+    return GateConfig(threshold=config["gate.threshold"],
+                      max_contact_duration_s=config["gate.max_contact_duration"],
+                      warmup_s=config["gate.warmup"])
 
 
 def _scalar(value: np.ndarray, kind: type[int] | type[str]) -> Any:

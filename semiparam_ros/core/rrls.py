@@ -154,6 +154,26 @@ class RecursiveRLS:
             self._run(Z, U, Z.shape[0], self._no_pred, self._no_pred, self._no_query, self._no_pred,
                       self._no_var)
 
+    def set_forgetting(self, forgetting: float) -> None:
+        """Change β from the next time step on, keeping the learned state.
+
+        The recursion of the module docstring simply continues with the new β (and the prior row's
+        ``c = b(1 − β)λ``): the past keeps the weights it had, the future is weighted by the new β.
+
+        Args:
+            forgetting: β ∈ (0, 1].
+
+        Raises:
+            ValueError: For β ∉ (0, 1] (the learner is unchanged).
+        """
+        forgetting = float(forgetting)
+        if not (0.0 < forgetting <= 1.0):
+            raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")
+        self.forgetting = forgetting
+        self._scale = math.sqrt(forgetting)
+        bounded = self.keep_prior and forgetting < 1.0
+        self._reg = self.n_features * (1.0 - forgetting) * self.lam if bounded else 0.0
+
     @property
     def R(self) -> np.ndarray:  # noqa: N802 (the factor's name in the literature)
         """The upper-triangular factor (b, b), ``RᵀR = A`` (read-only view)."""

@@ -35,6 +35,12 @@ rmse_force_N, rmse_torque_Nm    a-priori RMSE of the semiparametric prediction (
 rmse_parametric_force_N, ...    same for the rigid-body part alone
 rmse_Nm, rmse_parametric_Nm     joint-torque output
 model_size                      learned coefficients (parametric + residual weights)
+not_learned.gated_contact       samples predicted but not learned: residual beyond gate.threshold σ for
+                                less than gate.max_contact_duration (a contact); since start or ~/reset
+gate_enabled                    ``true`` / ``false`` (gate.enabled)
+gate_in_excursion               ``true`` while the last sample's residual was beyond the gate threshold
+forgetting                      per-sample β from adaptation.time_constant at the measured rate (-1:
+                                not measured yet, or adaptation.time_constant = 0)
 checkpoint_path                 configured path ('' = disabled)
 checkpoint_age_s                seconds since the last successful checkpoint write (-1 = never)
 checkpoint_errors               failed checkpoint writes

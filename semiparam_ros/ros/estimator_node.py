@@ -19,6 +19,15 @@ Topics (relative names, remap with ``-r``):
   ``~/predicted_wrench/parametric`` (rigid-body part), ``~/predicted_wrench/nonparametric`` (residual);
   with ``robot.output: joint_torques`` instead ``predicted_joint_torques`` (``sensor_msgs/JointState``,
   ``effort`` in N·m); every prediction is a priori: it was made before its own sample was learned;
+* out, for contact detection and control (same stamp and frame as the prediction):
+  ``~/external_wrench`` (``WrenchStamped``, measured − predicted: the wrench the model does not explain,
+  i.e. external forces at the robot) and ``~/predicted_wrench/std`` (``WrenchStamped`` whose six
+  components are the predictive standard deviations σ of the six components [N, N·m], noise included;
+  σ is also the standard deviation of ``~/external_wrench`` when nothing touches the robot); with
+  ``robot.output: joint_torques`` instead ``~/external_joint_torques`` and
+  ``~/predicted_joint_torques/std`` (``JointState``, ``effort`` = external torques / σ [N·m]); σ is +inf
+  before the first sample (see :mod:`semiparam_ros.core.uncertainty`); a sample the contact gate
+  refuses to learn is still predicted and published (:mod:`semiparam_ros.core.gate`);
 * out ``~/inertial_parameters`` (``std_msgs/Float64MultiArray``, base parameters in physical units, then
   friction/offset terms such as ``lwr_0_joint.viscous``, names comma-joined in ``layout.dim[0].label``;
   reliable + transient local, depth 1): published once per diagnostics period when learning changed them,
@@ -215,14 +224,18 @@ class EstimatorNode(Node):
             return self.create_publisher(msg_type, topic, qos,
                                          event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
-        self._out_msgs = (WrenchStamped(), WrenchStamped(), WrenchStamped())  # refilled per sample
+        self._out_msgs = tuple(WrenchStamped() for _ in range(5))  # refilled per sample
         if self._output == "wrench":
             self._pub_total = publisher(WrenchStamped, "~/predicted_wrench", _OUTPUT_QOS)
             self._pub_param = publisher(WrenchStamped, "~/predicted_wrench/parametric", _OUTPUT_QOS)
             self._pub_resid = publisher(WrenchStamped, "~/predicted_wrench/nonparametric", _OUTPUT_QOS)
+            self._pub_external = publisher(WrenchStamped, "~/external_wrench", _OUTPUT_QOS)
+            self._pub_std = publisher(WrenchStamped, "~/predicted_wrench/std", _OUTPUT_QOS)
         else:
             self._pub_total = publisher(JointState, "predicted_joint_torques", _OUTPUT_QOS)
             self._pub_param = self._pub_resid = None
+            self._pub_external = publisher(JointState, "~/external_joint_torques", _OUTPUT_QOS)
+            self._pub_std = publisher(JointState, "~/predicted_joint_torques/std", _OUTPUT_QOS)
         self._pub_params = publisher(Float64MultiArray, "~/inertial_parameters", PARAMETERS_QOS)
         self._pub_diag = publisher(DiagnosticArray, "/diagnostics", 10)
 
@@ -394,6 +407,9 @@ class EstimatorNode(Node):
             with self._model_lock:
                 self._estimator.learning_enabled = bool(known["learning_enabled"])
             self.get_logger().info(f"learning {'enabled' if known['learning_enabled'] else 'disabled'}")
+        if any(name.startswith(("gate.", "uncertainty.")) for name in known):
+            with self._model_lock:
+                self._estimator.apply_runtime_parameters(self.config)
         if "checkpoint.period" in known:
             self._ckpt_period = float(known["checkpoint.period"])
             self._ckpt_event.set()
@@ -406,6 +422,11 @@ class EstimatorNode(Node):
             stats["samples_learned"] = est.n_samples_learned
             stats["learning_enabled"] = est.learning_enabled
             stats["model_size"] = est.model_size
+            for reason, count in est.not_learned.items():
+                stats[f"not_learned.{reason}"] = count
+            stats["gate_enabled"] = est.gate_enabled
+            stats["gate_in_excursion"] = est.gate.in_excursion
+            stats["forgetting"] = est.forgetting if est.forgetting is not None else -1.0
         stats["queue_length"] = len(self._queue)
         stats["queue_size"] = self._queue_size
         stats["acceleration_delay_ms"] = 1e3 * float(getattr(est.pipeline, "acceleration_delay_s", 0.0))
@@ -488,16 +509,22 @@ class EstimatorNode(Node):
     def _publish_result(self, result: StepResult) -> None:
         stamp = result.sample.stamp_ns
         pred = result.prediction
+        external = result.sample.y - pred.total
         if self._output == "wrench":
             frame = self._last_wrench_frame
             out = self._out_msgs
             self._pub_total.publish(wrench_stamped_msg(stamp, frame, pred.total, out[0]))
+            self._pub_external.publish(wrench_stamped_msg(stamp, frame, external, out[3]))
             for k, (pub, value) in enumerate(((self._pub_param, pred.parametric),
-                                              (self._pub_resid, pred.residual)), start=1):
-                if pub is not None and pub.get_subscription_count() > 0:
-                    pub.publish(wrench_stamped_msg(stamp, frame, value, out[k]))
+                                              (self._pub_resid, pred.residual),
+                                              (self._pub_std, result.std)), start=1):
+                if value is not None and pub is not None and pub.get_subscription_count() > 0:
+                    pub.publish(wrench_stamped_msg(stamp, frame, value, out[4 if k == 3 else k]))
         else:
             self._pub_total.publish(joint_torques_msg(stamp, self._joints, pred.total))
+            self._pub_external.publish(joint_torques_msg(stamp, self._joints, external))
+            if result.std is not None and self._pub_std.get_subscription_count() > 0:
+                self._pub_std.publish(joint_torques_msg(stamp, self._joints, result.std))
 
     # ================================================================== checkpoint thread
     def _checkpoint_loop(self) -> None:
