@@ -82,7 +82,8 @@ class GateConfig:
             v = float(value)
             if not math.isfinite(v) or v < 0.0 or (positive and v == 0.0):
                 bound = ">" if positive else ">="
-                raise ConfigurationError(f"parameter '{name}' must be a finite number {bound} 0, got {value!r}")
+                raise ConfigurationError(
+                    f"parameter '{name}' must be a finite number {bound} 0, got {value!r}")
 
 
 class ContactGate:
