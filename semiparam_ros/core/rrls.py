@@ -164,11 +164,12 @@ class RecursiveRLS:
             forgetting: β ∈ (0, 1].
 
         Raises:
-            ValueError: For β ∉ (0, 1] (the learner is unchanged).
+            ConfigurationError: For β ∉ (0, 1] (the learner is unchanged).
         """
         forgetting = float(forgetting)
         if not (0.0 < forgetting <= 1.0):
-            raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")
+            raise ConfigurationError(f"forgetting must be in (0, 1], got {forgetting!r}")
+        self._flush()  # a deferred update belongs to the time step with the old β
         self.forgetting = forgetting
         self._scale = math.sqrt(forgetting)
         bounded = self.keep_prior and forgetting < 1.0

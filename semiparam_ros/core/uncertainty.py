@@ -27,86 +27,35 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
-from semiparam_ros.core.rrls import RecursiveRLS
-from semiparam_ros.core.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    Prediction,
-    SemiparametricModel,
-)
+from semiparam_ros.core.semiparametric import Prediction
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
-__all__ = ["NoiseScale", "predict_with_variance", "rls_predict_variance"]
-
-
-def rls_predict_variance(rls: RecursiveRLS, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Prediction ``Z W`` and relative variance ``diag(Z A⁻¹ Zᵀ)`` of k rows by one triangular solve.
-
-    With ``V = R⁻ᵀZᵀ`` (b × k): ``Z W = Z R⁻¹ d = Vᵀd`` and ``z A⁻¹ zᵀ = ‖V_col‖²`` — the weights
-    ``W = R⁻¹d`` (a solve with t right-hand sides) are never formed.
-
-    Args:
-        rls: The learner.
-        Z: (k, b) rows, finite.
-
-    Returns:
-        ``(P, v)``: (k, t) predictions and (k,) relative variances.
-    """
-    V = solve_triangular(rls.R, np.asarray(Z, dtype=np.float64).T, trans="T", lower=False, check_finite=False)
-    return V.T @ rls.d, np.einsum("ij,ij->j", V, V)
+__all__ = ["NoiseScale", "predict_with_variance"]
 
 
 def predict_with_variance(model: Any, x: np.ndarray) -> Prediction:
-    """A-priori prediction of a model with its relative predictive variance per output.
+    """A-priori prediction of a model with its relative predictive variance ``v`` per output.
 
-    The same quantities as ``model.predict_one(x, return_variance=True)`` (equal to rounding), at the cost
-    of one triangular solve per stage instead of two (the residual stage's weight solve, D² · t flops after
-    every update, is avoided). Other model types fall back on ``predict_one``.
+    ``model.predict_one(x, return_variance=True)``: each stage's prediction and ``v = z A⁻¹ zᵀ`` come from
+    one triangular solve with its factor (:meth:`RecursiveRLS.predict`), the stages' ``v`` summed; a
+    residual stage still in its standardizer warm-up contributes 0 (it predicts 0 and is not uncertain
+    about it — its uncertainty is then in the noise scale).
 
     Args:
-        model: A :class:`ParametricModel`, :class:`NonparametricModel`, cascade
-            :class:`SemiparametricModel`, or any learner with ``predict_one(x, return_variance=True)``.
+        model: Any learner of :mod:`semiparam_ros.core.semiparametric` or
+            :mod:`semiparam_ros.core.semiparametric_joint`.
         x: The input ``[q, q̇, q̈]`` [rad, rad/s, rad/s²].
 
     Returns:
-        The prediction; ``variance`` holds v per output (0 for a residual stage still warming up).
+        The prediction; ``variance`` holds v per output (dimensionless, ≥ 0).
 
     Raises:
         RejectedSampleError: Wrong size or non-finite x, or a non-finite regressor.
     """
-    if type(model) not in (ParametricModel, NonparametricModel, SemiparametricModel):
-        return model.predict_one(x, return_variance=True)
-    xv = np.asarray(x, dtype=np.float64)
-    size = getattr(model, "n_inputs", None)  # the parametric model takes what its regressor takes
-    if xv.ndim != 1 or (size is not None and xv.shape != (size,)):
-        raise RejectedSampleError(f"x must be a vector of the model's input size, got shape {xv.shape}")
-    if not np.isfinite(xv).all():
-        raise RejectedSampleError("x contains NaN or inf")
-    t = model.n_outputs
-    if isinstance(model, NonparametricModel):
-        r, v = _residual(model, xv)
-        return Prediction(np.zeros(t), r, r.copy(), np.full(t, v))
-    parametric = model if isinstance(model, ParametricModel) else model.parametric
-    Phi = np.asarray(parametric.regressor(xv), dtype=np.float64)
-    if Phi.shape != (t, parametric.n_params) or not np.isfinite(Phi).all():
-        raise RejectedSampleError("the regressor returned a wrong shape or non-finite entries")
-    P, var = rls_predict_variance(parametric.rls, Phi)
-    yp = P[:, 0]
-    if isinstance(model, ParametricModel):
-        return Prediction(yp, np.zeros(t), yp.copy(), var)
-    r, v = _residual(model.nonparametric, np.concatenate([xv, yp]))
-    return Prediction(yp, r, yp + r, var + v)
-
-
-def _residual(stage: NonparametricModel, xin: np.ndarray) -> tuple[np.ndarray, float]:
-    """Residual prediction and its relative variance (zeros during the standardizer warm-up)."""
-    if not stage.standardizer.ready:
-        return np.zeros(stage.n_outputs), 0.0
-    phi = stage.rff.transform(stage.standardizer.transform(xin[None, :]))
-    P, v = rls_predict_variance(stage.rls, phi)
-    return P[0], float(v[0])
+    pred = model.predict_one(x, return_variance=True)
+    var = np.nan_to_num(np.asarray(pred.variance, dtype=np.float64), nan=0.0)
+    return Prediction(pred.parametric, pred.residual, pred.total, var)
 
 
 class NoiseScale:
