@@ -31,8 +31,8 @@ KUKA_FRICTION_JOINTS = ("lwr_0_joint", "lwr_4_joint", "lwr_5_joint", "lwr_6_join
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``real_robots``."""
     p = argparse.ArgumentParser(prog="real_robots", description=__doc__.split("\n\n")[0])
-    p.add_argument("--data", type=Path, default=Path("../shared/data/kuka_lwr4"),
-                   help="folder of the logs (default ../shared/data/kuka_lwr4)")
+    p.add_argument("--data", type=Path, default=_ROOT.parent / "shared" / "data" / "kuka_lwr4",
+                   help="folder of the logs (default: ../shared/data/kuka_lwr4 beside the repository)")
     p.add_argument("--train", default="measurements_1", help="training bag inside --data")
     p.add_argument("--test", default="measurements_3", help="test bag inside --data")
     p.add_argument("--config", type=Path, default=_ROOT / "config" / "kuka_lwr4.yaml",
