@@ -213,3 +213,11 @@ def test_kuka_comparison_reports_every_reference():
     np.testing.assert_allclose([models[PERSISTENCE].components[j].rmse for j in cfg["robot.joints"]],
                                np.mean(direct, axis=0), rtol=1e-12)
     assert [c.id for c in comp.criteria][-1] == "P/P rigid/lwr_6_joint/regime"
+
+
+def test_real_robots_command_reports_a_missing_data_folder(tmp_path, capsys):
+    """Bad input is a clear error and exit status 2, not a traceback."""
+    from semiparam_ros.cli.real_robots import main
+
+    assert main(["--data", str(tmp_path / "absent"), "--no-progress"]) == 2
+    assert "absent" in capsys.readouterr().err
