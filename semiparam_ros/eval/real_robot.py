@@ -336,7 +336,7 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
             f"\nExternal torque of {inj.amplitude:g} N·m on every joint for {inj.duration_s:g} s "
             f"(from {inj.start_s:.1f} s of the test log): fraction of it in the residual τ − τ̂, "
             "mean over joints\n\n"
-            "| model | mean over the window | last 10 % of the window |\n|---|---|---|\n"
+            + "| model | mean over the window | last 10 % of the window |\n|---|---|---|\n"
             + "".join(f"| {k} | {inj.mean_fraction[k]:.3f} | {inj.end_fraction[k]:.3f} |\n"
                       for k in inj.mean_fraction)
         )
