@@ -221,3 +221,21 @@ def test_real_robots_command_reports_a_missing_data_folder(tmp_path, capsys):
 
     assert main(["--data", str(tmp_path / "absent"), "--no-progress"]) == 2
     assert "absent" in capsys.readouterr().err
+
+
+def test_joint_torque_floor_is_its_own_parameter_and_the_wrench_floors_are_unchanged():
+    """With joint torques the ŷ block's floors come from min_scale.joint_torque (not the wrench's torque
+    floor); with a wrench, from min_scale.force (3) and min_scale.torque (3). Exact: the floors are copied."""
+    from semiparam_ros.core.estimator import standardizer_min_scale
+
+    cfg = load_config(ROOT / "config" / "ur5.yaml").with_overrides(
+        {"nonparametric.min_scale.joint_torque": 0.3, "nonparametric.min_scale.torque": 7.0})
+    floors = standardizer_min_scale(cfg, with_outputs=True)
+    assert floors.shape == (4 * 6,) and np.all(floors[18:] == 0.3)
+    assert np.all(floors[:6] == cfg["nonparametric.min_scale.position"])
+    icub = load_config(ROOT / "config" / "icub_right_arm.yaml").with_overrides(
+        {"nonparametric.min_scale.joint_torque": 0.3})
+    n = len(icub["robot.joints"])
+    tail = standardizer_min_scale(icub, with_outputs=True)[3 * n:]
+    np.testing.assert_array_equal(tail, [icub["nonparametric.min_scale.force"]] * 3
+                                  + [icub["nonparametric.min_scale.torque"]] * 3)

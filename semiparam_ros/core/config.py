@@ -197,10 +197,15 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("nonparametric.min_scale.acceleration", "double", 1.0,
                   "floor of the standardization scale of joint accelerations [rad/s^2]", min=0.0, max=1e5),
     ParameterSpec("nonparametric.min_scale.force", "double", 1.0,
-                  "floor of the standardization scale of predicted forces [N] (residual-stage input of SP)",
+                  "wrench output: floor of the standardization scale of predicted forces [N] (residual-stage "
+                  "input of SP)",
                   min=0.0, max=1e5),
     ParameterSpec("nonparametric.min_scale.torque", "double", 0.05,
-                  "floor of the standardization scale of predicted torques [N·m] (SP; also joint torques)",
+                  "wrench output: floor of the standardization scale of predicted torques [N·m] (SP)",
+                  min=0.0, max=1e5),
+    ParameterSpec("nonparametric.min_scale.joint_torque", "double", 0.05,
+                  "joint_torques output: floor of the standardization scale of predicted joint torques "
+                  "[N·m] (SP); only a warm-up whose torques barely move reaches it (the arm at rest)",
                   min=0.0, max=1e5),
     # how the two stages are combined
     ParameterSpec("semiparametric.combination", "string", "cascade",

@@ -227,7 +227,8 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
 
     Returns:
         One floor per input: q [rad], q̇ [rad/s], q̈ [rad/s²] per joint, then forces [N] and torques
-        [N·m] of a wrench, or torques [N·m] per joint.
+        [N·m] of a wrench (``min_scale.force``/``torque``), or joint torques [N·m] per joint
+        (``min_scale.joint_torque``: the wrench floors never apply to joint torques).
     """
     n = len(config["robot.joints"])
     floors = [np.full(n, config[f"nonparametric.min_scale.{name}"])
@@ -237,7 +238,7 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
             floors += [np.full(3, config["nonparametric.min_scale.force"]),
                        np.full(3, config["nonparametric.min_scale.torque"])]
         else:
-            floors.append(np.full(n, config["nonparametric.min_scale.torque"]))
+            floors.append(np.full(n, config["nonparametric.min_scale.joint_torque"]))
     return np.concatenate(floors)
 
 
@@ -480,6 +481,12 @@ class OnlineEstimator:
                 structure["parametric.column_scaling"] = True
             if any(name.endswith(".coulomb") for name in self.parameter_names):
                 structure["parametric.coulomb_velocity"] = self.config["parametric.coulomb_velocity"]
+        if (self.kind != "P" and self.config["robot.output"] == "joint_torques"
+                and self.config["nonparametric.min_scale.joint_torque"]
+                != self.config["nonparametric.min_scale.torque"]):
+            # joint-torque checkpoints written before the key existed used min_scale.torque as this floor
+            key = "nonparametric.min_scale.joint_torque"
+            structure[key] = self.config[key]
         structure["kind"] = self.kind
         structure["base_parameters"] = list(self.parameter_names)
         return json.dumps(structure, sort_keys=True)
