@@ -186,9 +186,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "forgetting factor of the residual stage (1 = no forgetting; the regularizer is kept)",
                   min=0.9, max=1.0),
     ParameterSpec("nonparametric.seed", "integer", 0, "seed of the random features", min=0, max=2**31 - 1),
-    ParameterSpec("nonparametric.standardizer_warmup", "integer", 200,
-                  "samples used to estimate the input standardization before the residual stage learns",
-                  min=1, max=10**7),
+    ParameterSpec("nonparametric.standardizer_warmup", "integer", 0,
+                  "samples used to estimate the input standardization before the residual stage learns, "
+                  "overriding nonparametric.standardizer_warmup_s; 0 = use standardizer_warmup_s",
+                  min=0, max=10**7),
+    ParameterSpec("nonparametric.standardizer_warmup_s", "double", 2.0,
+                  "duration of the input standardization's warm-up [s], converted to samples at the measured "
+                  "sample rate (2 s = the former 200 samples at 100 Hz)", min=0.0, min_exclusive=True,
+                  max=1e5),
     ParameterSpec("nonparametric.min_scale.position", "double", 0.05,
                   "floor of the standardization scale of joint positions [rad] (a warm-up at rest measures "
                   "only sensor noise)", min=0.0, max=1e3),
@@ -224,8 +229,13 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "period of automatic checkpoints [s]; 0 disables them", min=0.0, max=1e7, read_only=False),
     ParameterSpec("checkpoint.load_on_start", "bool", True, "warm start from an existing checkpoint"),
     ParameterSpec("diagnostics.period", "double", 1.0, "period of /diagnostics [s]", min=0.01, max=3600.0),
-    ParameterSpec("diagnostics.rmse_window", "integer", 300,
-                  "samples in the running RMSE window reported in diagnostics", min=1, max=10**6),
+    ParameterSpec("diagnostics.rmse_window", "integer", 0,
+                  "samples in the running RMSE window reported in diagnostics, overriding "
+                  "diagnostics.rmse_window_s; 0 = use rmse_window_s", min=0, max=10**6),
+    ParameterSpec("diagnostics.rmse_window_s", "double", 3.0,
+                  "duration of the running RMSE window reported in diagnostics [s], converted to samples at "
+                  "the measured sample rate (3 s = the former 300 samples at 100 Hz)", min=0.0,
+                  min_exclusive=True, max=1e5),
 )
 
 _SPECS: Mapping[str, ParameterSpec] = MappingProxyType({p.name: p for p in PARAMETERS})

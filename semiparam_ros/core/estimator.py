@@ -11,6 +11,7 @@ is fed.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -36,6 +37,8 @@ from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSa
 
 __all__ = [
     "DROP_REJECTED_SAMPLE",
+    "NOMINAL_PERIOD_S",
+    "RATE_SAMPLES",
     "ModelKind",
     "OnlineEstimator",
     "StepResult",
@@ -43,9 +46,13 @@ __all__ = [
     "build_pipeline",
     "build_regressor",
     "column_scale",
+    "measured_period_s",
     "parametric_prior",
     "regressor_function",
+    "rmse_window_samples",
+    "samples_in",
     "standardizer_min_scale",
+    "standardizer_warmup_samples",
 ]
 
 ModelKind = Literal["P", "NP", "SP"]
@@ -242,8 +249,85 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
     return np.concatenate(floors)
 
 
+#: Samples whose stamps measure the sample rate (median interval of the first ones).
+RATE_SAMPLES = 10
+#: Sample period [s] at which seconds-based lengths are converted before the rate is measured (100 Hz: the
+#: rate at which the former sample-count defaults were chosen).
+NOMINAL_PERIOD_S = 0.01
+
+
+def samples_in(duration_s: float, sample_period_s: float) -> int:
+    """Return the number of samples spanning a duration: ``max(1, round(duration_s / sample_period_s))``.
+
+    Args:
+        duration_s: Duration [s], > 0.
+        sample_period_s: Sample period [s], > 0.
+
+    Raises:
+        ConfigurationError: If either is not a finite positive number.
+    """
+    if not (math.isfinite(duration_s) and duration_s > 0 and math.isfinite(sample_period_s)
+            and sample_period_s > 0):
+        raise ConfigurationError(f"need a positive duration and period, got {duration_s!r} s, "
+                                 f"{sample_period_s!r} s")
+    return max(1, round(duration_s / sample_period_s))
+
+
+def measured_period_s(stamps_ns: Any) -> float | None:
+    """Measure the sample period [s] as the median interval of the first :data:`RATE_SAMPLES` stamps.
+
+    The node (:class:`OnlineEstimator`) and offline replay measure it alike, so both convert seconds to
+    the same sample counts.
+
+    Args:
+        stamps_ns: Sample stamps [ns] in order (at least the first :data:`RATE_SAMPLES`).
+
+    Returns:
+        The period [s], or ``None`` with fewer than :data:`RATE_SAMPLES` stamps or no positive interval.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)[:RATE_SAMPLES]
+    if len(stamps) < RATE_SAMPLES:
+        return None
+    dt = np.diff(stamps)
+    dt = dt[dt > 0]
+    return float(np.median(dt)) * 1e-9 if len(dt) else None
+
+
+def standardizer_warmup_samples(config: EstimatorConfig, sample_period_s: float | None = None) -> int:
+    """Length of the residual stage's standardizer warm-up [samples].
+
+    Args:
+        config: ``nonparametric.standardizer_warmup`` (samples; wins when > 0) or
+            ``nonparametric.standardizer_warmup_s`` [s].
+        sample_period_s: Measured sample period [s]; ``None``: :data:`NOMINAL_PERIOD_S` (provisional, until
+            :class:`OnlineEstimator` has measured it).
+
+    Returns:
+        The warm-up length, ≥ 1.
+    """
+    if config["nonparametric.standardizer_warmup"]:
+        return int(config["nonparametric.standardizer_warmup"])
+    return samples_in(config["nonparametric.standardizer_warmup_s"], sample_period_s or NOMINAL_PERIOD_S)
+
+
+def rmse_window_samples(config: EstimatorConfig, sample_period_s: float | None = None) -> int:
+    """Length of the diagnostics' running RMSE window [samples].
+
+    Args:
+        config: ``diagnostics.rmse_window`` (samples; wins when > 0) or ``diagnostics.rmse_window_s`` [s].
+        sample_period_s: Measured sample period [s]; ``None``: :data:`NOMINAL_PERIOD_S`.
+
+    Returns:
+        The window length, ≥ 1.
+    """
+    if config["diagnostics.rmse_window"]:
+        return int(config["diagnostics.rmse_window"])
+    return samples_in(config["diagnostics.rmse_window_s"], sample_period_s or NOMINAL_PERIOD_S)
+
+
 def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
-                regressor: RigidBodyRegressor | None = None) -> Model:
+                regressor: RigidBodyRegressor | None = None, *,
+                sample_period_s: float | None = None) -> Model:
     """Build one of the paper's three learners.
 
     The rigid-body stage works on the scaled base parameters ``θ = c ⊙ π_b`` (:func:`column_scale`) and
@@ -255,6 +339,9 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
         kind: ``"P"`` (rigid-body RRLS), ``"NP"`` (random features RRLS) or ``"SP"`` (both; the paper's
             cascade or the joint fit, by ``semiparametric.combination``).
         regressor: Rigid-body regressor to use; built from the configuration when omitted.
+        sample_period_s: Sample period [s] at which a warm-up given in seconds is converted to samples
+            (:func:`standardizer_warmup_samples`; ``None``: provisionally at 100 Hz — set the measured
+            length later with the model's ``set_standardizer_warmup``, as :class:`OnlineEstimator` does).
 
     Returns:
         The learner.
@@ -266,6 +353,7 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
         raise ConfigurationError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
     n_joints = len(config["robot.joints"])
     n_inputs = 3 * n_joints
+    warmup = standardizer_warmup_samples(config, sample_period_s)
     if kind == "NP":
         n_outputs = 6 if config["robot.output"] == "wrench" else n_joints
         return NonparametricModel(
@@ -276,7 +364,7 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
             lam=config["nonparametric.lam"],
             forgetting=config["nonparametric.forgetting"],
             seed=config["nonparametric.seed"],
-            standardizer_warmup=config["nonparametric.standardizer_warmup"],
+            standardizer_warmup=warmup,
             standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
         )
     regressor = regressor if regressor is not None else build_regressor(config)
@@ -298,7 +386,7 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
         n_features=config["nonparametric.n_features"],
         sigma=config["nonparametric.sigma"],
         seed=config["nonparametric.seed"],
-        standardizer_warmup=config["nonparametric.standardizer_warmup"],
+        standardizer_warmup=warmup,
     )
     if config["semiparametric.combination"] == "joint":
         # the configuration guarantees equal forgetting factors for the joint fit
@@ -364,6 +452,9 @@ class OnlineEstimator:
         self.learning_enabled = bool(config["learning_enabled"])
         self.n_samples_learned = 0
         self._rejected = 0
+        #: Sample period [s] measured from the first :data:`RATE_SAMPLES` samples (None until then).
+        self.sample_period_s: float | None = None
+        self._rate_stamps: list[int] = []
 
     # ------------------------------------------------------------------ streaming
     def process_joint_state(self, msg: JointStateData) -> list[StepResult]:
@@ -407,6 +498,8 @@ class OnlineEstimator:
             RejectedSampleError: If the learner rejects the sample (wrong sizes, non-finite or absurdly
                 large values, regressor overflow); the learned state is then unchanged.
         """
+        if self.sample_period_s is None:
+            self._measure_rate(sample.stamp_ns)
         start = time.perf_counter()
         if self.learning_enabled:
             prediction = self.model.predict_learn_one(sample.x, sample.y)
@@ -414,6 +507,19 @@ class OnlineEstimator:
         else:
             prediction = self.model.predict_one(sample.x)
         return StepResult(sample, prediction, time.perf_counter() - start, self.learning_enabled)
+
+    def _measure_rate(self, stamp_ns: int) -> None:
+        """Collect the first sample stamps; once the rate is known, convert the seconds-based warm-up."""
+        self._rate_stamps.append(int(stamp_ns))
+        period = measured_period_s(self._rate_stamps)
+        if period is None:
+            if len(self._rate_stamps) >= RATE_SAMPLES:
+                self._rate_stamps.clear()  # no positive interval yet (repeated stamps): measure again
+            return
+        self.sample_period_s = period
+        self._rate_stamps.clear()
+        if not self.config["nonparametric.standardizer_warmup"]:
+            self.model.set_standardizer_warmup(standardizer_warmup_samples(self.config, period))
 
     # ------------------------------------------------------------------ inspection
     @property
@@ -469,6 +575,11 @@ class OnlineEstimator:
 
     def _fingerprint(self) -> str:
         structure = {name: self.config[name] for name in _STRUCTURAL}
+        if not self.config["nonparametric.standardizer_warmup"]:
+            # a warm-up in seconds: its sample count depends on the rate, so the fingerprint names the seconds
+            del structure["nonparametric.standardizer_warmup"]
+            key = "nonparametric.standardizer_warmup_s"
+            structure[key] = self.config[key]
         if self.kind == "SP" and self.config["semiparametric.combination"] != "cascade":
             # only when not the default, so that checkpoints written before the option existed still load
             structure["semiparametric.combination"] = self.config["semiparametric.combination"]

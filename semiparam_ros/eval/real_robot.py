@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.estimator import measured_period_s
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.baselines import (
     Persistence,
@@ -153,11 +154,13 @@ def _models(config: EstimatorConfig, train: SampleArrays) -> tuple[dict[str, Any
     fit = batch_least_squares(phi, train.X, train.Y)
     models[BATCH] = least_squares_model(phi, fit)
     models[BATCH_ONLINE] = least_squares_model(phi, fit)
-    models.update(build_models(config, LEARNERS))
-    models.update({k + FROZEN_SUFFIX: m for k, m in build_models(config, LEARNERS).items()})
+    period = measured_period_s(train.stamps_ns)
+    models.update(build_models(config, LEARNERS, sample_period_s=period))
+    models.update({k + FROZEN_SUFFIX: m
+                   for k, m in build_models(config, LEARNERS, sample_period_s=period).items()})
     rigid = config.with_overrides({"parametric.friction": False, "parametric.offsets": False,
                                    "parametric.armature": False})
-    models[P_RIGID] = build_models(rigid, ("P",))["P"]
+    models[P_RIGID] = build_models(rigid, ("P",), sample_period_s=period)["P"]
     models[PERSISTENCE] = Persistence(train.n_outputs)
     frozen = {CAD, BATCH, *(k + FROZEN_SUFFIX for k in LEARNERS)}
     return models, frozen, {BATCH, BATCH_ONLINE}
