@@ -31,6 +31,7 @@ setup(
             "simulate = semiparam_ros.cli.simulate:main",
             "evaluate = semiparam_ros.cli.evaluate:main",
             "tune = semiparam_ros.cli.tune:main",
+            "real_robots = semiparam_ros.cli.real_robots:main",
         ],
     },
 )

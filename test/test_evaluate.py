@@ -704,7 +704,7 @@ def ur5_config():
     return load_config(CONFIG).with_overrides({
         "robot.urdf": UR5_URDF, "robot.joints": list(UR5_JOINTS), "robot.locked_joints": [],
         "robot.locked_positions": [], "robot.output": "joint_torques", "nonparametric.n_features": 100,
-        "nonparametric.standardizer_warmup": 100})
+        "nonparametric.standardizer_warmup": 100, "parametric.friction": False, "parametric.offsets": False})
 
 
 def test_six_joint_torques_are_evaluated_per_joint_not_as_a_wrench(ur5_bags, tmp_path: Path) -> None:

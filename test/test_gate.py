@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from semiparam_ros.core.adaptation import PeriodEstimator, forgetting_factor
+from semiparam_ros.core.adaptation import forgetting_factor
 from semiparam_ros.core.gate import ContactGate, GateConfig, Verdict
 from semiparam_ros.core.rrls import RecursiveRLS
 from semiparam_ros.core.uncertainty import NoiseScale
@@ -99,16 +99,6 @@ def test_forgetting_time_constant_is_rate_independent():
         forgetting_factor(0.0, 0.01)
     with pytest.raises(ValueError):
         forgetting_factor(1.0, -0.01)
-
-
-def test_period_estimator_median_ignores_a_dropout_and_repeats():
-    est = PeriodEstimator(6)
-    stamps = [0, 5, 10, 10, 15, 100, 105, 110]  # ms: a repeat and a gap
-    out = [est.add(T0 + s * 1_000_000) for s in stamps]
-    assert out[:6] == [None] * 6
-    assert out[6] == pytest.approx(0.005)  # median of [5, 5, 5, 85, 5]
-    with pytest.raises(ValueError):
-        PeriodEstimator(1)
 
 
 def test_set_forgetting_continues_the_closed_form_recursion():

@@ -19,12 +19,10 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 
-import numpy as np
-
 from semiparam_ros.core.rrls import RecursiveRLS
 from semiparam_ros.errors import ConfigurationError
 
-__all__ = ["PeriodEstimator", "forgetting_factor", "learners"]
+__all__ = ["forgetting_factor", "learners"]
 
 
 def forgetting_factor(time_constant_s: float, period_s: float) -> float:
@@ -46,45 +44,6 @@ def forgetting_factor(time_constant_s: float, period_s: float) -> float:
     if not (math.isfinite(period) and period > 0.0):
         raise ConfigurationError(f"sample period must be a finite number > 0 s, got {period_s!r}")
     return math.exp(-period / tau)
-
-
-class PeriodEstimator:
-    """Median stamp step of the first ``n_samples`` samples.
-
-    Args:
-        n_samples: Samples to observe (≥ 2): the median is over ``n_samples − 1`` steps.
-
-    Attributes:
-        period_s: The measured period [s], or None until ``n_samples`` samples with increasing stamps
-            were seen.
-    """
-
-    def __init__(self, n_samples: int) -> None:
-        if isinstance(n_samples, bool) or not isinstance(n_samples, int | np.integer) or n_samples < 2:
-            raise ConfigurationError(f"n_samples must be an integer >= 2, got {n_samples!r}")
-        self.n_samples = int(n_samples)
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget the observed stamps."""
-        self._steps: list[int] = []
-        self._last: int | None = None
-        self.period_s: float | None = None
-
-    def add(self, stamp_ns: int) -> float | None:
-        """Observe one sample stamp [ns]; return the period [s] once it is measured, else None.
-
-        Steps that are not positive (a repeated or backward stamp) are not counted.
-        """
-        if self.period_s is not None:
-            return self.period_s
-        if self._last is not None and stamp_ns > self._last:
-            self._steps.append(stamp_ns - self._last)
-        self._last = stamp_ns
-        if len(self._steps) >= self.n_samples - 1:
-            self.period_s = float(np.median(self._steps)) * 1e-9
-            self._steps = []
-        return self.period_s
 
 
 def learners(model: object) -> Iterator[RecursiveRLS]:

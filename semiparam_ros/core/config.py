@@ -186,9 +186,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "forgetting factor of the residual stage (1 = no forgetting; the regularizer is kept)",
                   min=0.9, max=1.0),
     ParameterSpec("nonparametric.seed", "integer", 0, "seed of the random features", min=0, max=2**31 - 1),
-    ParameterSpec("nonparametric.standardizer_warmup", "integer", 200,
-                  "samples used to estimate the input standardization before the residual stage learns",
-                  min=1, max=10**7),
+    ParameterSpec("nonparametric.standardizer_warmup", "integer", 0,
+                  "samples used to estimate the input standardization before the residual stage learns, "
+                  "overriding nonparametric.standardizer_warmup_s; 0 = use standardizer_warmup_s",
+                  min=0, max=10**7),
+    ParameterSpec("nonparametric.standardizer_warmup_s", "double", 2.0,
+                  "duration of the input standardization's warm-up [s], converted to samples at the measured "
+                  "sample rate (2 s = the former 200 samples at 100 Hz)", min=0.0, min_exclusive=True,
+                  max=1e5),
     ParameterSpec("nonparametric.min_scale.position", "double", 0.05,
                   "floor of the standardization scale of joint positions [rad] (a warm-up at rest measures "
                   "only sensor noise)", min=0.0, max=1e3),
@@ -197,10 +202,15 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("nonparametric.min_scale.acceleration", "double", 1.0,
                   "floor of the standardization scale of joint accelerations [rad/s^2]", min=0.0, max=1e5),
     ParameterSpec("nonparametric.min_scale.force", "double", 1.0,
-                  "floor of the standardization scale of predicted forces [N] (residual-stage input of SP)",
+                  "wrench output: floor of the standardization scale of predicted forces [N] (residual-stage "
+                  "input of SP)",
                   min=0.0, max=1e5),
     ParameterSpec("nonparametric.min_scale.torque", "double", 0.05,
-                  "floor of the standardization scale of predicted torques [N·m] (SP; also joint torques)",
+                  "wrench output: floor of the standardization scale of predicted torques [N·m] (SP)",
+                  min=0.0, max=1e5),
+    ParameterSpec("nonparametric.min_scale.joint_torque", "double", 0.05,
+                  "joint_torques output: floor of the standardization scale of predicted joint torques "
+                  "[N·m] (SP); only a warm-up whose torques barely move reaches it (the arm at rest)",
                   min=0.0, max=1e5),
     # how the two stages are combined
     ParameterSpec("semiparametric.combination", "string", "cascade",
@@ -212,13 +222,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     # core/gate.py; measurements in docs/adaptation.md)
     ParameterSpec("adaptation.time_constant", "double", 20.0,
                   "memory of both learners [s]: when > 0 it replaces parametric.forgetting and "
-                  "nonparametric.forgetting by beta = exp(-T/tau), T the sample period measured over the "
-                  "first adaptation.rate_samples samples (until then, and in tools that do not know the "
-                  "rate, the per-sample factors apply); 0 = use the per-sample forgetting factors only",
+                  "nonparametric.forgetting by beta = exp(-T/tau), T the sample period measured (median "
+                  "step) over the first samples (until then, and in tools that do not know the rate, the "
+                  "per-sample factors apply); 0 = use the per-sample forgetting factors only",
                   min=0.0, max=1e9),
-    ParameterSpec("adaptation.rate_samples", "integer", 50,
-                  "paired samples over which the sample period is measured (median of the stamp steps)",
-                  min=2, max=10**6),
     ParameterSpec("uncertainty.noise_time_constant", "double", 2.0,
                   "time constant of the running estimate of the noise scale s^2 per output [s]; the "
                   "published std is sqrt(s^2 (1 + z A^-1 z^T))", min=0.0, min_exclusive=True, max=1e9,
@@ -249,8 +256,13 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "period of automatic checkpoints [s]; 0 disables them", min=0.0, max=1e7, read_only=False),
     ParameterSpec("checkpoint.load_on_start", "bool", True, "warm start from an existing checkpoint"),
     ParameterSpec("diagnostics.period", "double", 1.0, "period of /diagnostics [s]", min=0.01, max=3600.0),
-    ParameterSpec("diagnostics.rmse_window", "integer", 300,
-                  "samples in the running RMSE window reported in diagnostics", min=1, max=10**6),
+    ParameterSpec("diagnostics.rmse_window", "integer", 0,
+                  "samples in the running RMSE window reported in diagnostics, overriding "
+                  "diagnostics.rmse_window_s; 0 = use rmse_window_s", min=0, max=10**6),
+    ParameterSpec("diagnostics.rmse_window_s", "double", 3.0,
+                  "duration of the running RMSE window reported in diagnostics [s], converted to samples at "
+                  "the measured sample rate (3 s = the former 300 samples at 100 Hz)", min=0.0,
+                  min_exclusive=True, max=1e5),
 )
 
 _SPECS: Mapping[str, ParameterSpec] = MappingProxyType({p.name: p for p in PARAMETERS})

@@ -11,6 +11,7 @@ is fed.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,7 +21,7 @@ from typing import Any, Literal
 import numpy as np
 
 from semiparam_ros.core.acceleration import AccelerationConfig
-from semiparam_ros.core.adaptation import PeriodEstimator, forgetting_factor, learners
+from semiparam_ros.core.adaptation import forgetting_factor, learners
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.dynamics import RigidBodyRegressor
@@ -39,7 +40,9 @@ from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSa
 
 __all__ = [
     "DROP_REJECTED_SAMPLE",
+    "NOMINAL_PERIOD_S",
     "NOT_LEARNED_GATED_CONTACT",
+    "RATE_SAMPLES",
     "ModelKind",
     "OnlineEstimator",
     "StepResult",
@@ -47,9 +50,13 @@ __all__ = [
     "build_pipeline",
     "build_regressor",
     "column_scale",
+    "measured_period_s",
     "parametric_prior",
     "regressor_function",
+    "rmse_window_samples",
+    "samples_in",
     "standardizer_min_scale",
+    "standardizer_warmup_samples",
 ]
 
 ModelKind = Literal["P", "NP", "SP"]
@@ -236,7 +243,8 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
 
     Returns:
         One floor per input: q [rad], q̇ [rad/s], q̈ [rad/s²] per joint, then forces [N] and torques
-        [N·m] of a wrench, or torques [N·m] per joint.
+        [N·m] of a wrench (``min_scale.force``/``torque``), or joint torques [N·m] per joint
+        (``min_scale.joint_torque``: the wrench floors never apply to joint torques).
     """
     n = len(config["robot.joints"])
     floors = [np.full(n, config[f"nonparametric.min_scale.{name}"])
@@ -246,12 +254,89 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
             floors += [np.full(3, config["nonparametric.min_scale.force"]),
                        np.full(3, config["nonparametric.min_scale.torque"])]
         else:
-            floors.append(np.full(n, config["nonparametric.min_scale.torque"]))
+            floors.append(np.full(n, config["nonparametric.min_scale.joint_torque"]))
     return np.concatenate(floors)
 
 
-def build_model(config: EstimatorConfig, kind: ModelKind = "SP", regressor: RigidBodyRegressor | None = None,
-                *, sample_period_s: float | None = None) -> Model:
+#: Samples whose stamps measure the sample rate (median interval of the first ones).
+RATE_SAMPLES = 10
+#: Sample period [s] at which seconds-based lengths are converted before the rate is measured (100 Hz: the
+#: rate at which the former sample-count defaults were chosen).
+NOMINAL_PERIOD_S = 0.01
+
+
+def samples_in(duration_s: float, sample_period_s: float) -> int:
+    """Return the number of samples spanning a duration: ``max(1, round(duration_s / sample_period_s))``.
+
+    Args:
+        duration_s: Duration [s], > 0.
+        sample_period_s: Sample period [s], > 0.
+
+    Raises:
+        ConfigurationError: If either is not a finite positive number.
+    """
+    if not (math.isfinite(duration_s) and duration_s > 0 and math.isfinite(sample_period_s)
+            and sample_period_s > 0):
+        raise ConfigurationError(f"need a positive duration and period, got {duration_s!r} s, "
+                                 f"{sample_period_s!r} s")
+    return max(1, round(duration_s / sample_period_s))
+
+
+def measured_period_s(stamps_ns: Any) -> float | None:
+    """Measure the sample period [s] as the median interval of the first :data:`RATE_SAMPLES` stamps.
+
+    The node (:class:`OnlineEstimator`) and offline replay measure it alike, so both convert seconds to
+    the same sample counts.
+
+    Args:
+        stamps_ns: Sample stamps [ns] in order (at least the first :data:`RATE_SAMPLES`).
+
+    Returns:
+        The period [s], or ``None`` with fewer than :data:`RATE_SAMPLES` stamps or no positive interval.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)[:RATE_SAMPLES]
+    if len(stamps) < RATE_SAMPLES:
+        return None
+    dt = np.diff(stamps)
+    dt = dt[dt > 0]
+    return float(np.median(dt)) * 1e-9 if len(dt) else None
+
+
+def standardizer_warmup_samples(config: EstimatorConfig, sample_period_s: float | None = None) -> int:
+    """Length of the residual stage's standardizer warm-up [samples].
+
+    Args:
+        config: ``nonparametric.standardizer_warmup`` (samples; wins when > 0) or
+            ``nonparametric.standardizer_warmup_s`` [s].
+        sample_period_s: Measured sample period [s]; ``None``: :data:`NOMINAL_PERIOD_S` (provisional, until
+            :class:`OnlineEstimator` has measured it).
+
+    Returns:
+        The warm-up length, ≥ 1.
+    """
+    if config["nonparametric.standardizer_warmup"]:
+        return int(config["nonparametric.standardizer_warmup"])
+    return samples_in(config["nonparametric.standardizer_warmup_s"], sample_period_s or NOMINAL_PERIOD_S)
+
+
+def rmse_window_samples(config: EstimatorConfig, sample_period_s: float | None = None) -> int:
+    """Length of the diagnostics' running RMSE window [samples].
+
+    Args:
+        config: ``diagnostics.rmse_window`` (samples; wins when > 0) or ``diagnostics.rmse_window_s`` [s].
+        sample_period_s: Measured sample period [s]; ``None``: :data:`NOMINAL_PERIOD_S`.
+
+    Returns:
+        The window length, ≥ 1.
+    """
+    if config["diagnostics.rmse_window"]:
+        return int(config["diagnostics.rmse_window"])
+    return samples_in(config["diagnostics.rmse_window_s"], sample_period_s or NOMINAL_PERIOD_S)
+
+
+def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
+                regressor: RigidBodyRegressor | None = None, *,
+                sample_period_s: float | None = None) -> Model:
     """Build one of the paper's three learners.
 
     The rigid-body stage works on the scaled base parameters ``θ = c ⊙ π_b`` (:func:`column_scale`) and
@@ -263,9 +348,11 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP", regressor: Rigi
         kind: ``"P"`` (rigid-body RRLS), ``"NP"`` (random features RRLS) or ``"SP"`` (both; the paper's
             cascade or the joint fit, by ``semiparametric.combination``).
         regressor: Rigid-body regressor to use; built from the configuration when omitted.
-        sample_period_s: The stream's sample period [s], when known (offline tools): with
+        sample_period_s: The stream's sample period [s], when known (offline tools). With
             ``adaptation.time_constant`` τ > 0 both stages then forget with β = exp(−T/τ) instead of the
-            configured per-sample factors. :class:`OnlineEstimator` measures T itself.
+            configured per-sample factors, and a warm-up given in seconds is converted at it
+            (:func:`standardizer_warmup_samples`). ``None``: the configured β, and the warm-up provisionally
+            at 100 Hz (:class:`OnlineEstimator` measures T itself and sets both later).
 
     Returns:
         The learner.
@@ -281,6 +368,7 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP", regressor: Rigi
         config = config.with_overrides({"parametric.forgetting": beta, "nonparametric.forgetting": beta})
     n_joints = len(config["robot.joints"])
     n_inputs = 3 * n_joints
+    warmup = standardizer_warmup_samples(config, sample_period_s)
     if kind == "NP":
         n_outputs = 6 if config["robot.output"] == "wrench" else n_joints
         return NonparametricModel(
@@ -291,7 +379,7 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP", regressor: Rigi
             lam=config["nonparametric.lam"],
             forgetting=config["nonparametric.forgetting"],
             seed=config["nonparametric.seed"],
-            standardizer_warmup=config["nonparametric.standardizer_warmup"],
+            standardizer_warmup=warmup,
             standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
         )
     regressor = regressor if regressor is not None else build_regressor(config)
@@ -313,7 +401,7 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP", regressor: Rigi
         n_features=config["nonparametric.n_features"],
         sigma=config["nonparametric.sigma"],
         seed=config["nonparametric.seed"],
-        standardizer_warmup=config["nonparametric.standardizer_warmup"],
+        standardizer_warmup=warmup,
     )
     if config["semiparametric.combination"] == "joint":
         # the configuration guarantees equal forgetting factors for the joint fit
@@ -396,9 +484,10 @@ class OnlineEstimator:
         self.noise = NoiseScale(self.model.n_outputs, config["uncertainty.noise_time_constant"])
         self.gate = ContactGate(_gate_config(config))
         self.gate_enabled = bool(config["gate.enabled"])
-        tau = float(config["adaptation.time_constant"])
-        self._period = PeriodEstimator(config["adaptation.rate_samples"]) if tau > 0.0 else None
         self.forgetting: float | None = None  # β from adaptation.time_constant, once the rate is measured
+        #: Sample period [s] measured from the first :data:`RATE_SAMPLES` samples (None until then).
+        self.sample_period_s: float | None = None
+        self._rate_stamps: list[int] = []
 
     # ------------------------------------------------------------------ streaming
     def process_joint_state(self, msg: JointStateData) -> list[StepResult]:
@@ -442,9 +531,9 @@ class OnlineEstimator:
             RejectedSampleError: If the learner rejects the sample (wrong sizes, non-finite or absurdly
                 large values, regressor overflow); the learned state is then unchanged.
         """
+        if self.sample_period_s is None:
+            self._measure_rate(sample.stamp_ns)
         start = time.perf_counter()
-        if self._period is not None and self.forgetting is None:
-            self._adapt_to_rate(sample.stamp_ns)
         # the relative variance v = z A⁻¹ zᵀ of the a-priori prediction (the state is not changed)
         ahead = predict_with_variance(self.model, sample.x)
         variance = ahead.variance
@@ -474,13 +563,6 @@ class OnlineEstimator:
             self.noise.skip(sample.stamp_ns)
         return StepResult(sample, prediction, time.perf_counter() - start, learned, std, verdict)
 
-    def _adapt_to_rate(self, stamp_ns: int) -> None:
-        """Measure the sample period; once known, set β = exp(−T/τ) in every learner."""
-        assert self._period is not None
-        period = self._period.add(stamp_ns)
-        if period is not None:
-            self._apply_forgetting(forgetting_factor(self.config["adaptation.time_constant"], period))
-
     def _apply_forgetting(self, beta: float) -> None:
         for rls in learners(self.model):
             rls.set_forgetting(beta)
@@ -499,6 +581,26 @@ class OnlineEstimator:
         self.noise.set_time_constant(config["uncertainty.noise_time_constant"])
         self.gate.config = gate_config
         self.gate_enabled = bool(config["gate.enabled"])
+
+    def _measure_rate(self, stamp_ns: int) -> None:
+        """Collect the first sample stamps; once the rate is known, convert what is given in seconds.
+
+        The seconds-based warm-up becomes samples, and with ``adaptation.time_constant`` τ > 0 every
+        learner forgets with β = exp(−T/τ) from then on.
+        """
+        self._rate_stamps.append(int(stamp_ns))
+        period = measured_period_s(self._rate_stamps)
+        if period is None:
+            if len(self._rate_stamps) >= RATE_SAMPLES:
+                self._rate_stamps.clear()  # no positive interval yet (repeated stamps): measure again
+            return
+        self.sample_period_s = period
+        self._rate_stamps.clear()
+        if not self.config["nonparametric.standardizer_warmup"]:
+            self.model.set_standardizer_warmup(standardizer_warmup_samples(self.config, period))
+        tau = float(self.config["adaptation.time_constant"])
+        if tau > 0.0:
+            self._apply_forgetting(forgetting_factor(tau, period))
 
     # ------------------------------------------------------------------ inspection
     @property
@@ -561,6 +663,11 @@ class OnlineEstimator:
 
     def _fingerprint(self) -> str:
         structure = {name: self.config[name] for name in _STRUCTURAL}
+        if not self.config["nonparametric.standardizer_warmup"]:
+            # a warm-up in seconds: its sample count depends on the rate, so the fingerprint names the seconds
+            del structure["nonparametric.standardizer_warmup"]
+            key = "nonparametric.standardizer_warmup_s"
+            structure[key] = self.config[key]
         if self.kind == "SP" and self.config["semiparametric.combination"] != "cascade":
             # only when not the default, so that checkpoints written before the option existed still load
             structure["semiparametric.combination"] = self.config["semiparametric.combination"]
@@ -576,6 +683,12 @@ class OnlineEstimator:
         if self.config["adaptation.time_constant"] > 0.0:
             # only when on, so that checkpoints written before the option existed (or with it off) still load
             structure["adaptation.time_constant"] = self.config["adaptation.time_constant"]
+        if (self.kind != "P" and self.config["robot.output"] == "joint_torques"
+                and self.config["nonparametric.min_scale.joint_torque"]
+                != self.config["nonparametric.min_scale.torque"]):
+            # joint-torque checkpoints written before the key existed used min_scale.torque as this floor
+            key = "nonparametric.min_scale.joint_torque"
+            structure[key] = self.config[key]
         structure["kind"] = self.kind
         structure["base_parameters"] = list(self.parameter_names)
         return json.dumps(structure, sort_keys=True)

@@ -225,6 +225,25 @@ class Standardizer:
         self.scale_ = np.maximum(np.where(constant, 1.0, std), self.min_scale_)
         self._ready = True
 
+    def set_warmup(self, warmup: int) -> None:
+        """Change the length of an unfinished online warm-up (e.g. once the sample rate is measured).
+
+        If ``warmup`` samples or more were already fed, the statistics freeze now.
+
+        Args:
+            warmup: New warm-up length [samples], ≥ 1.
+
+        Raises:
+            ConfigurationError: If ``warmup`` < 1.
+            ValueError: If the standardizer is already ready (a programming error: nothing to change).
+        """
+        warmup = check_positive_int("warmup", warmup)
+        if self._ready:
+            raise ValueError("the standardizer is already ready: its warm-up cannot change")
+        self.warmup = warmup
+        if self.count_ >= warmup:
+            self._finish(self.mean_, self._m2 / self.count_)
+
     def fit(self, X: Any) -> Standardizer:
         """Set the statistics from a batch (n ≥ 1, population variance) and freeze them.
 

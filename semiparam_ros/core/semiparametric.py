@@ -247,6 +247,9 @@ class ParametricModel(_Model):
         """π̂ = π₀ + δ̂, the current parameter estimate (n_params,)."""
         return self.rls.weights[:, 0] + self.prior
 
+    def set_standardizer_warmup(self, warmup: int) -> None:
+        """Do nothing: the rigid-body stage has no standardizer (same interface as NP and SP)."""
+
     def reset(self) -> None:
         """Forget everything learned (π̂ back to the prior π₀)."""
         self.rls.reset()
@@ -395,6 +398,20 @@ class NonparametricModel(_Model):
         """None: the nonparametric model has no physical parameters."""
         return None
 
+    def set_standardizer_warmup(self, warmup: int) -> None:
+        """Set the online warm-up length [samples] if it is still running (else nothing changes).
+
+        For a warm-up given in seconds, once the sample rate is measured; a later :meth:`reset` restarts
+        a warm-up of this length. A standardizer that is fitted, given or already warmed up is kept.
+
+        Raises:
+            ConfigurationError: If ``warmup`` < 1.
+        """
+        check_positive_int("warmup", warmup)
+        for std in (self.standardizer, self._initial_standardizer):
+            if not std.ready:
+                std.set_warmup(warmup)
+
     def reset(self) -> None:
         """Forget the learned weights; the standardizer returns to its initial state (warm-up restarts)."""
         self.rls.reset()
@@ -480,6 +497,14 @@ class _TwoStageModel(_Model):
     def parameters(self) -> np.ndarray:
         """π̂, the rigid-body (base) parameters of the parametric learner (n_params,)."""
         return self.parametric.parameters
+
+    def set_standardizer_warmup(self, warmup: int) -> None:
+        """Set the residual stage's online warm-up length [samples] if it is still running.
+
+        Raises:
+            ConfigurationError: If ``warmup`` < 1.
+        """
+        self.nonparametric.set_standardizer_warmup(warmup)
 
     def reset(self) -> None:
         """Forget both learners (and restart the online standardizer warm-up)."""

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -39,6 +39,7 @@ __all__ = [
     "ProtocolResult",
     "Recovery",
     "SampleArrays",
+    "predict_only",
     "progress_enabled",
     "run_adaptation",
     "run_protocol",
@@ -241,6 +242,40 @@ def test_then_train(model: OnlineModel, X: np.ndarray, Y: np.ndarray,
     return predictions, update_ns
 
 
+def predict_only(model: Any, X: np.ndarray,
+                 progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Predict each sample without learning it (a model frozen after training: generalization).
+
+    Args:
+        model: A trained model with ``predict_one(x)`` (array or object with ``.total``); not modified.
+        X: Inputs, shape ``(n, d)``.
+        progress: Called with the number of samples processed since the last call (every 100).
+
+    Returns:
+        ``(predictions (n, t), predict_ns (n,))``: the predictions and the wall time of each call [ns].
+
+    Raises:
+        TypeError: If the model has no ``predict_one``.
+    """
+    predict = getattr(model, "predict_one", None)
+    if not callable(predict):
+        raise TypeError(f"{type(model).__name__} has no predict_one: it cannot be evaluated frozen")
+    n = X.shape[0]
+    rows: list[np.ndarray] = []
+    predict_ns = np.empty(n, dtype=np.int64)
+    clock = time.perf_counter_ns
+    for i in range(n):
+        t0 = clock()
+        prediction = predict(X[i])
+        predict_ns[i] = clock() - t0
+        rows.append(_total(prediction))
+        if progress is not None and (i + 1) % 100 == 0:
+            progress(100)
+    if progress is not None and n % 100:
+        progress(n % 100)
+    return np.stack(rows) if rows else np.empty((0, 0)), predict_ns
+
+
 @dataclass
 class ProtocolResult:
     """Everything the paper's protocol produces (see :func:`run_protocol`).
@@ -357,11 +392,14 @@ class ProtocolResult:
 
 def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, test_data: SampleArrays, *,
                  output: OutputSpec, splits: int = 10, split_size: int | None = None, window_s: float = 3.0,
-                 first_s: float = 3.0, progress: bool | Progress = False) -> ProtocolResult:
+                 first_s: float = 3.0, progress: bool | Progress = False,
+                 frozen: Collection[str] = (), trained: Collection[str] = ()) -> ProtocolResult:
     """Run the paper's protocol: train every model on the whole train stream, then test-and-update.
 
     Each model is trained in place on all of ``train_data`` (one sample at a time); then for every split of
     ``test_data`` an independent ``copy()`` of the trained model predicts and learns each sample in turn.
+    Models named in ``frozen`` only predict the test parts (:func:`predict_only`, no updates): what the
+    trained model generalizes to, as used without online learning.
 
     Args:
         models: Fresh models by name (the paper: P, NP, SP with zero parameters). Trained in place.
@@ -374,16 +412,24 @@ def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, te
         first_s: Length of the initial segment reported separately [s] (``*_first_<first_s>s`` in the JSON).
         progress: ``True`` for a progress bar on stderr (shown only when stderr is a terminal), or a
             callable receiving processed-sample counts.
+        frozen: Names of ``models`` evaluated without test updates (``update_ns`` then holds the
+            prediction times).
+        trained: Names of ``models`` already fitted to ``train_data`` (e.g. by a batch fit): not trained
+            again (their ``train_ns`` is 0).
 
     Returns:
         The :class:`ProtocolResult`.
 
     Raises:
-        ValueError: If no model is given, the streams disagree in output size or with ``output``, or the
-            test stream is too short for the split request.
+        ValueError: If no model is given, ``frozen`` or ``trained`` names an absent model, the streams
+            disagree in output size or with ``output``, or the test stream is too short for the split
+            request.
     """
     if not models:
         raise ValueError("no models to evaluate")
+    absent = [k for k in (*frozen, *trained) if k not in models]
+    if absent:
+        raise ValueError(f"frozen or trained names models that are not evaluated: {absent}")
     if train_data.n_outputs != test_data.n_outputs or train_data.X.shape[1] != test_data.X.shape[1]:
         raise ValueError("train and test streams differ in input or output size")
     output.check(test_data.n_outputs)
@@ -401,12 +447,19 @@ def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, te
         update_ns: dict[str, np.ndarray] = {}
         for kind, model in models.items():
             t0 = time.perf_counter_ns()
-            train(model, train_data, tick)
-            train_ns[kind] = time.perf_counter_ns() - t0
+            if kind in trained:
+                if tick is not None:
+                    tick(len(train_data))
+            else:
+                train(model, train_data, tick)
+            train_ns[kind] = time.perf_counter_ns() - t0 if kind not in trained else 0
             preds, times = [], []
             for start, stop in bounds:
-                pred, ns = test_then_train(model.copy(), test_data.X[start:stop], test_data.Y[start:stop],
-                                           tick)
+                if kind in frozen:
+                    pred, ns = predict_only(model, test_data.X[start:stop], tick)
+                else:
+                    pred, ns = test_then_train(model.copy(), test_data.X[start:stop],
+                                               test_data.Y[start:stop], tick)
                 preds.append(pred)
                 times.append(ns)
             predictions[kind] = np.stack(preds)

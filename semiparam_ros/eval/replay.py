@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import build_model, build_pipeline, build_regressor
+from semiparam_ros.core.estimator import build_model, build_pipeline, build_regressor, measured_period_s
 from semiparam_ros.eval.diagnostics import FrozenParametricSP
 from semiparam_ros.eval.metrics import OutputSpec
 from semiparam_ros.eval.protocol import (
@@ -137,7 +137,7 @@ def load_samples(path: str | Path, config: EstimatorConfig, topics: Topics | Non
 
 
 def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
-                 n_train: int | None = None) -> dict[str, Any]:
+                 n_train: int | None = None, sample_period_s: float | None = None) -> dict[str, Any]:
     """Fresh learners (zero parameters) of the given kinds, sharing one rigid-body regressor.
 
     Args:
@@ -146,6 +146,8 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
             ``semiparametric.combination`` says), :data:`JOINT_SP` (always the joint fit) and the diagnostic
             :data:`FROZEN_P`.
         n_train: Samples the rigid-body stage of :data:`FROZEN_P` learns (required for it).
+        sample_period_s: Sample period [s] converting a warm-up given in seconds (measure it as the node
+            does: :func:`~semiparam_ros.core.estimator.measured_period_s` of the first stream learned).
 
     Returns:
         Models by kind, in the given order.
@@ -158,21 +160,23 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
     if unknown:
         raise ValueError(f"unknown model kind(s) {unknown}; choose from {[*KINDS, *EXTRA_KINDS]}")
     regressor = build_regressor(config) if any(k != "NP" for k in kinds) else None
+    period = sample_period_s
     models: dict[str, Any] = {}
     for kind in kinds:
         if kind == FROZEN_P:
             if n_train is None:
                 raise ValueError(f"{FROZEN_P} needs the number of training samples")
-            models[kind] = FrozenParametricSP(build_model(config, "SP", regressor), n_train)
+            models[kind] = FrozenParametricSP(build_model(config, "SP", regressor, sample_period_s=period),
+                                              n_train)
         elif kind == JOINT_SP:
             try:
                 joint = config.with_overrides({"semiparametric.combination": "joint"})
             except ValueError as err:
                 raise ValueError(f"model kind {JOINT_SP!r} (semiparametric.combination 'joint'): "
                                  f"{err}") from None
-            models[kind] = build_model(joint, "SP", regressor)
+            models[kind] = build_model(joint, "SP", regressor, sample_period_s=period)
         else:
-            models[kind] = build_model(config, kind, regressor)
+            models[kind] = build_model(config, kind, regressor, sample_period_s=period)
     return models
 
 
@@ -214,7 +218,8 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         if test_skip >= len(test_data):
             raise ValueError(f"test_skip = {test_skip} leaves no test sample (the bag has {len(test_data)})")
         test_data = test_data.slice(test_skip, len(test_data))
-    models = build_models(config, kinds, n_train=len(train_data))
+    models = build_models(config, kinds, n_train=len(train_data),
+                          sample_period_s=measured_period_s(train_data.stamps_ns))
     result = run_protocol(models, train_data, test_data, output=OutputSpec.from_config(config), splits=splits,
                           split_size=split_size, window_s=window_s, first_s=first_s, progress=progress)
     info = {
@@ -333,9 +338,10 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
     beta_np = forgetting if forgetting_nonparametric is None else forgetting_nonparametric
     label = f"β={forgetting:g}" if beta_np == forgetting else f"β_P={forgetting:g}, β_NP={beta_np:g}"
     models: dict[str, Any] = {}
+    period = measured_period_s((pretrain if pretrain is not None else stream).stamps_ns)
     for kind in kinds:
-        models[f"{kind} adaptive ({label})"] = build_models(configs["on"], [kind])[kind]
-        models[f"{kind} no adaptation"] = build_models(configs["off"], [kind])[kind]
+        for key, name in (("on", f"{kind} adaptive ({label})"), ("off", f"{kind} no adaptation")):
+            models[name] = build_models(configs[key], [kind], sample_period_s=period)[kind]
     result = run_adaptation(models, stream, change_from_first, output=OutputSpec.from_config(config),
                             pretrain=pretrain, window_s=window_s,
                             pre_s=pre_s, deadline_s=deadline_s, tolerance=tolerance, progress=progress)

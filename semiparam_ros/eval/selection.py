@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import build_model, build_regressor
+from semiparam_ros.core.estimator import build_model, build_regressor, measured_period_s
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse
 from semiparam_ros.eval.parallel import run_jobs
@@ -233,7 +233,7 @@ def holdout_error(
     """
     output = OutputSpec.from_config(config)
     output.check(held_out.n_outputs)
-    model = build_model(config, kind, regressor)
+    model = build_model(config, kind, regressor, sample_period_s=measured_period_s(train.stamps_ns))
     for x, y in zip(train.X, train.Y, strict=True):
         model.learn_one(x, y)
     pred = np.stack([np.asarray(model.predict_one(x).total) for x in held_out.X])
@@ -384,7 +384,8 @@ def _protocol_job(
     from semiparam_ros.eval.replay import build_models
     from semiparam_ros.eval.report import protocol_report
 
-    models = build_models(config, kinds, n_train=len(train))
+    period = measured_period_s(train.stamps_ns)
+    models = build_models(config, kinds, n_train=len(train), sample_period_s=period)
     result = run_protocol(models, train, test, output=OutputSpec.from_config(config), **options)
     return protocol_report(result, config=config.to_flat())
 

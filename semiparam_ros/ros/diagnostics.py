@@ -88,6 +88,19 @@ class _RingRMSE:
     def count(self) -> int:
         return self._count
 
+    @property
+    def window(self) -> int:
+        return int(self._sq.shape[0])
+
+    def resize(self, window: int) -> None:
+        """Change the window length, keeping the most recent ``min(count, window)`` entries."""
+        keep = min(self._count, max(int(window), 1))
+        order = (self._next - keep + np.arange(keep)) % self._sq.shape[0]
+        sq = np.zeros((max(int(window), 1), self._sq.shape[1]))
+        sq[:keep] = self._sq[order]
+        self._sq, self._count = sq, keep
+        self._next = keep % sq.shape[0]
+
     def clear(self) -> None:
         self._next = 0
         self._count = 0
@@ -117,6 +130,17 @@ class NodeStatistics:
         self.node_drops: dict[str, int] = {}
         self.last_checkpoint_time: float | None = None
         self.checkpoint_errors = 0
+
+    def set_rmse_window(self, rmse_window: int) -> None:
+        """Change the running RMSE window [samples], keeping the most recent errors (e.g. at a new rate)."""
+        with self._lock:
+            self._rmse_total.resize(rmse_window)
+            self._rmse_param.resize(rmse_window)
+
+    @property
+    def rmse_window(self) -> int:
+        """Length of the running RMSE window [samples]."""
+        return self._rmse_total.window
 
     def _reset_period(self) -> None:
         self._n_js = 0

@@ -101,7 +101,7 @@ from threadpoolctl import threadpool_limits
 
 from semiparam_ros.core.checkpoint import atomic_save_npz
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import OnlineEstimator, StepResult
+from semiparam_ros.core.estimator import OnlineEstimator, StepResult, rmse_window_samples
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.rrls import RecursiveRLS
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
@@ -215,7 +215,9 @@ class EstimatorNode(Node):
         self._last_wrench_frame = self._frame_id
         self._last_drop_total = 0
         n_out = 6 if self._output == "wrench" else len(self._joints)
-        self._stats = NodeStatistics(self._output, n_out, int(cfg["diagnostics.rmse_window"]))
+        # in samples; a window given in seconds is converted again once the estimator measured the rate
+        self._stats = NodeStatistics(self._output, n_out, rmse_window_samples(cfg))
+        self._rmse_window_final = bool(cfg["diagnostics.rmse_window"])
 
         # Outputs.
         # Outputs carry no event handlers: every handler is one more entity in each executor wait, and at
@@ -498,6 +500,9 @@ class EstimatorNode(Node):
             self._last_drop_total = drop_total
             self.get_logger().warning(f"dropped input messages: {est.drops}",
                                       throttle_duration_sec=_LOG_THROTTLE_S)
+        if not self._rmse_window_final and est.sample_period_s is not None:
+            self._stats.set_rmse_window(rmse_window_samples(est.config, est.sample_period_s))
+            self._rmse_window_final = True
         if not publish:
             return
         for result in results:

@@ -1,0 +1,81 @@
+"""``real_robots``: P, NP and SP on a real arm's joint-torque logs, beside the usual references.
+
+The references: the CAD model, batch identification (frozen and online), the learners frozen after
+training, and persistence.
+
+Defaults are those of the KUKA LWR4+ logs (``../shared/data/kuka_lwr4``: train on measurements_1, test on
+measurements_3; friction-dominated joints 1, 5, 6, 7 of its README)::
+
+    real_robots --data ../shared/data/kuka_lwr4 --json results/real_robots.json \
+        --markdown results/real_robots.md
+
+Argument parsing only; the work is done by :mod:`semiparam_ros.eval.real_robot`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from semiparam_ros.cli.errors import error_exit
+from semiparam_ros.cli.evaluate import parse_overrides
+
+__all__ = ["build_parser", "main"]
+
+_ROOT = Path(__file__).resolve().parents[2]
+KUKA_FRICTION_JOINTS = ("lwr_0_joint", "lwr_4_joint", "lwr_5_joint", "lwr_6_joint")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``real_robots``."""
+    p = argparse.ArgumentParser(prog="real_robots", description=__doc__.split("\n\n")[0])
+    p.add_argument("--data", type=Path, default=_ROOT.parent / "shared" / "data" / "kuka_lwr4",
+                   help="folder of the logs (default: ../shared/data/kuka_lwr4 beside the repository)")
+    p.add_argument("--train", default="measurements_1", help="training bag inside --data")
+    p.add_argument("--test", default="measurements_3", help="test bag inside --data")
+    p.add_argument("--config", type=Path, default=_ROOT / "config" / "kuka_lwr4.yaml",
+                   help="parameter file (default config/kuka_lwr4.yaml)")
+    p.add_argument("--urdf", type=Path, default=None,
+                   help="URDF (default: --data/kuka_lwr4_cogimon.urdf if present, else the configuration's)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a parameter (repeatable)")
+    p.add_argument("--friction-joints", nargs="*", default=list(KUKA_FRICTION_JOINTS),
+                   help="joints of the friction criterion (default: the KUKA's lwr_0, lwr_4, lwr_5, lwr_6)")
+    p.add_argument("--splits", type=int, default=10, help="test parts of the protocol (default 10)")
+    p.add_argument("--no-inject", action="store_true", help="skip the external-torque measurement")
+    p.add_argument("--json", type=Path, help="write the JSON here")
+    p.add_argument("--markdown", type=Path, help="write the markdown tables here")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``real_robots``.
+
+    Args:
+        argv: Arguments (default: ``sys.argv[1:]``).
+
+    Returns:
+        0 on success, 2 on invalid input, 1 if a file cannot be read or written.
+    """
+    args = build_parser().parse_args(argv)
+    from semiparam_ros.eval.real_robot import run_comparison  # heavy imports after argument parsing
+
+    urdf = args.urdf
+    if urdf is None and (args.data / "kuka_lwr4_cogimon.urdf").is_file():
+        urdf = args.data / "kuka_lwr4_cogimon.urdf"
+    try:
+        text = run_comparison(data=args.data, config=args.config, train=args.train, test=args.test, urdf=urdf,
+                              overrides=parse_overrides(args.overrides), friction_joints=args.friction_joints,
+                              splits=args.splits, inject=not args.no_inject, json_path=args.json,
+                              markdown_path=args.markdown, progress=not args.no_progress)
+    except (ValueError, OSError) as err:
+        return error_exit("real_robots", err)
+    print(text, end="")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
