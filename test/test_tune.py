@@ -9,7 +9,7 @@ import pytest
 
 from semiparam_ros.cli.tune import main as tune_main
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import build_model
+from semiparam_ros.core.estimator import build_model, measured_period_s
 from semiparam_ros.eval.replay import load_samples
 from semiparam_ros.eval.selection import CachedRegressor, holdout_search, split_holdout
 
@@ -33,7 +33,9 @@ def direct_holdout_nrmse(config, samples, holdout=0.2) -> float:
     """The hold-out error computed independently: fresh SP learner, learn the head, predict the tail."""
     n_hold = round(len(samples) * holdout)
     head, tail = slice(0, len(samples) - n_hold), slice(len(samples) - n_hold, len(samples))
-    model = build_model(config, "SP")
+    # the sample period as the product measures it (median step of the first stamps): it converts
+    # adaptation.time_constant to β and a warm-up in seconds to samples
+    model = build_model(config, "SP", sample_period_s=measured_period_s(samples.stamps_ns))
     for x, y in zip(samples.X[head], samples.Y[head], strict=True):
         model.learn_one(x, y)
     pred = np.array([model.predict_one(x).total for x in samples.X[tail]])

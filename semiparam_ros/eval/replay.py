@@ -276,7 +276,7 @@ def adaptation_configs(config: EstimatorConfig, forgetting: float,
             may be 1).
 
     Returns:
-        ``{"on": the given β, "off": β = 1 in both stages}``.
+        ``{"on": the given β, "off": β = 1 in both stages}`` (``adaptation.time_constant`` 0 in both).
 
     Raises:
         ValueError: If ``forgetting`` is out of range.
@@ -284,10 +284,12 @@ def adaptation_configs(config: EstimatorConfig, forgetting: float,
     if not 0.9 <= forgetting < 1.0:
         raise ValueError(f"forgetting for the adaptive model must be in [0.9, 1), got {forgetting}")
     beta_np = forgetting if forgetting_nonparametric is None else forgetting_nonparametric
+    # adaptation.time_constant off in both: β is what this comparison sets, not the measured-rate default
     return {
         "on": config.with_overrides({"parametric.forgetting": forgetting,
-                                     "nonparametric.forgetting": beta_np}),
-        "off": config.with_overrides({"parametric.forgetting": 1.0, "nonparametric.forgetting": 1.0}),
+                                     "nonparametric.forgetting": beta_np, "adaptation.time_constant": 0.0}),
+        "off": config.with_overrides({"parametric.forgetting": 1.0, "nonparametric.forgetting": 1.0,
+                                      "adaptation.time_constant": 0.0}),
     }
 
 
