@@ -210,6 +210,7 @@ def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
             window_s=None if config["acceleration.window"] else config["acceleration.window_s"],
             polyorder=config["acceleration.polyorder"],
             cutoff_hz=config["acceleration.cutoff_hz"],
+            bandwidth_hz=config["acceleration.bandwidth_hz"],
             max_gap_s=bound("acceleration.max_gap_s"),
         ),
         max_abs_position=bound("limits.max_abs_position"),
