@@ -302,3 +302,36 @@ def test_white_noise_gain_is_the_steady_state_filters_and_grows_like_bandwidth_t
     # continuous-time scaling: the q̈ noise std ∝ ω^{3/2} (white-noise density fixed); O(h) corrections
     ratio = steady_state_noise_gain(16.0, dt) / steady_state_noise_gain(8.0, dt)
     assert ratio == pytest.approx(2**1.5, rel=2 * math.pi * 16.0 * dt)
+
+
+def test_pipeline_emits_each_joint_torque_sample_with_its_own_joint_state():
+    """Through the SamplePipeline (joint-torque output): no sample waits for later joint states, the warm-up
+    is counted as 'acceleration_warmup', and q̈ equals the standalone estimator's."""
+    from semiparam_ros.core.messages import JointStateData
+    from semiparam_ros.core.pipeline import DROP_ACCELERATION_WARMUP
+
+    cfg = EstimatorConfig.defaults().with_overrides({
+        "robot.output": "joint_torques", "acceleration.method": "kalman", "acceleration.bandwidth_hz": 8.0})
+    pipe = build_pipeline(cfg)
+    joints = tuple(cfg["robot.joints"])
+    n = len(joints)
+    stamps = jittered_stamps(300, 0.001, 0.2, seed=8)
+    t = (stamps - T0) * 1e-9
+    dq = np.cos(np.outer(t, np.arange(1, n + 1)))
+    twin = make_estimator(n, kalman(8.0, max_gap_s=cfg["acceleration.max_gap_s"]))
+    n_samples = 0
+    for k, s in enumerate(stamps.tolist()):
+        msg = JointStateData(s, joints, np.zeros(n), dq[k], np.full(n, 0.5))
+        out = pipe.add_joint_state(msg)
+        ((ref_stamp, expected),) = twin.update(s, dq[k])
+        assert ref_stamp == s
+        if expected is None:
+            assert out == []
+            continue
+        assert len(out) == 1 and out[0].stamp_ns == s
+        np.testing.assert_array_equal(out[0].ddq, expected)
+        n_samples += 1
+    settle = KALMAN_SETTLE / (2 * math.pi * 8.0)
+    n_warm = int(np.sum(t < settle - 1e-12))
+    assert pipe.drops[DROP_ACCELERATION_WARMUP] == n_warm
+    assert n_samples == len(stamps) - n_warm
