@@ -20,18 +20,19 @@ velocities already received.
     the true acceleration at low frequencies by ``lag_s = (w − 1)Δt/2 + Δt(1 − α)/α`` (≈ the half
     span of the difference plus τ − Δt/2 when Δt ≪ τ).
 
-``method="kalman"`` — causal Kalman filter with a constant-jerk model.
+``method="kalman"`` — causal Kalman filter with a constant-jerk (or constant-snap) model.
     Per joint, the state ``[q̇, q̈, d³q/dt³]`` follows a triple integrator driven by white snap (continuous
-    time, discretised exactly with the actual step); q̇ is measured. One tuning in physical units, the
+    time, discretised exactly with the actual step; ``kalman_model="snap"`` adds one derivative); q̇ is
+    measured. One tuning in physical units, the
     bandwidth ``bandwidth_hz`` (f_b), fixes the ratio of process to measurement noise densities so that
-    the steady-state continuous-time filter is a third-order Butterworth loop at ω = 2π f_b, at any rate.
+    the steady-state continuous-time filter is a Butterworth loop at ω = 2π f_b, at any rate.
     It is emitted at once, for the newest stamp, with no low-frequency lag (a velocity that is a
     quadratic in time is tracked exactly); the price is a larger noise and an amplitude error
     ≈ +2 (f/f_b)² (overshoot) at frequency f (see :class:`KalmanEstimator`).
 
 All estimators decide every input stamp exactly once, in stamp order: an estimate, or ``None`` for
 the samples that cannot get one (the warm-up after start, a reset, or a gap longer than ``max_gap_s``).
-Memory is bounded by ``window`` (by 3 × n_joints numbers for ``kalman``).
+Memory is bounded by ``window`` (by 4 × n_joints + 16 numbers for ``kalman``).
 
 Rate-independent window (``window_s``). A window given in seconds is converted to samples at the
 **measured** joint-state rate: the first :data:`RATE_SAMPLES` stamps are held back, the median of their
@@ -56,6 +57,7 @@ from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
 __all__ = [
     "KALMAN_SETTLE",
+    "KALMAN_STATES",
     "METHODS",
     "RATE_SAMPLES",
     "AccelerationConfig",
@@ -75,9 +77,13 @@ __all__ = [
 
 METHODS = ("savgol", "finite_difference", "kalman")
 
-#: Warm-up of the Kalman estimator in units of 1/ω (ω = 2π·bandwidth_hz): from a diffuse start the
-#: variance of its q̈ estimate falls within 2× of its steady state after ω·t ≈ 3.3 (1 kHz) – 3.8 (100 Hz).
-KALMAN_SETTLE = 4.0
+#: Process models of the Kalman estimator: state length (q̇ and its derivatives), by model name.
+KALMAN_STATES = {"jerk": 3, "snap": 4}
+
+#: Warm-up of the Kalman estimator in units of 1/ω (ω = 2π·bandwidth_hz), by model: from a diffuse start
+#: the variance of its q̈ estimate falls within 2× of its steady state after ω·t ≈ 3.2–3.5 (jerk) and
+#: 4.6–5.0 (snap) at 100 Hz – 1 kHz.
+KALMAN_SETTLE = {"jerk": 4.0, "snap": 5.5}
 
 #: Prior variance of q̈/ω and jerk/ω² at a (re)start, relative to the noise scale of the filter's units
 #: (effectively diffuse: 10⁴× the prior standard deviation of any signal the filter sees).
@@ -109,8 +115,10 @@ class AccelerationConfig:
             across a longer hole is several times less accurate than a restart, which costs
             ``2·(window // 2)`` samples.
         bandwidth_hz: Bandwidth f_b of ``kalman`` in Hz (> 0): the steady-state continuous-time filter
-            is a third-order Butterworth loop at 2π f_b rad/s. Window, window_s, polyorder and cutoff_hz
-            do not apply to ``kalman``.
+            is a Butterworth loop (order 3 or 4, see ``kalman_model``) at 2π f_b rad/s. Window,
+            window_s, polyorder and cutoff_hz do not apply to ``kalman``.
+        kalman_model: Process model of ``kalman``: ``"jerk"`` (constant jerk, state q̇, q̈, q⃛) or
+            ``"snap"`` (constant snap, one derivative more: less bias, more noise at one bandwidth).
 
     Raises:
         ConfigurationError: Any setting out of range (checked on construction).
@@ -123,6 +131,7 @@ class AccelerationConfig:
     max_gap_s: float | None = None
     window_s: float | None = None
     bandwidth_hz: float = 8.0
+    kalman_model: str = "jerk"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -149,6 +158,9 @@ class AccelerationConfig:
                 and self.bandwidth_hz > 0):
             raise ConfigurationError(
                 f"acceleration bandwidth_hz must be a finite number > 0 (Hz), got {self.bandwidth_hz!r}")
+        if self.kalman_model not in KALMAN_STATES:
+            raise ConfigurationError(f"acceleration kalman_model must be one of {tuple(KALMAN_STATES)}, "
+                                     f"got {self.kalman_model!r}")
         if not (self.cutoff_hz > 0):  # also rejects NaN
             raise ConfigurationError(f"acceleration cutoff_hz must be > 0, got {self.cutoff_hz}")
         if self.max_gap_s is not None and not (self.max_gap_s > 0 and math.isfinite(self.max_gap_s)):
@@ -507,25 +519,33 @@ class FiniteDifferenceEstimator(AccelerationEstimator):
         return [(stamp, self._state.copy())]
 
 
-def kalman_matrices(h: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Discrete constant-jerk model for one step, in the filter's scaled units (pure numpy).
+def kalman_matrices(h: float, n_states: int = 3) -> tuple[np.ndarray, np.ndarray, float]:
+    """Discrete integrator-chain model for one step, in the filter's scaled units (pure numpy).
 
-    Time is scaled by ω (``h = ω·Δt``, dimensionless) and the state is ``[q̇, q̈/ω, d³q/dt³/ω²]``
-    (all rad/s); the continuous model is a triple integrator driven by white snap of unit density,
-    observed through ``q̇`` with white noise of unit density. Exact zero-order discretisation:
-    ``F = exp(A h)`` and ``Q = ∫₀ʰ exp(A s) G Gᵀ exp(Aᵀ s) ds``; the per-sample measurement variance of
-    a unit-density white noise averaged over the step is ``R = 1/h``.
+    Time is scaled by ω (``h = ω·Δt``, dimensionless) and the state is ``[q̇, q̈/ω, q⃛/ω², …]`` (all
+    rad/s), ``n_states`` long (3: constant jerk, 4: constant snap); the continuous model is a chain of
+    ``n_states`` integrators driven by white noise of unit density on the last derivative, observed
+    through ``q̇`` with white noise of unit density. Exact zero-order discretisation:
+    ``F = exp(A h)``, ``F_ij = h^(j−i)/(j−i)!``, and ``Q = ∫₀ʰ exp(A s) G Gᵀ exp(Aᵀ s) ds``,
+    ``Q_ij = h^p / (p (m−1−i)! (m−1−j)!)`` with ``p = 2m − 1 − i − j``; the per-sample measurement
+    variance of a unit-density white noise averaged over the step is ``R = 1/h``.
 
     Args:
         h: Scaled step ω·Δt (> 0).
+        n_states: Length m of the state (3 or 4).
 
     Returns:
-        ``(F, Q, R)``: transition (3, 3), process covariance (3, 3), measurement variance.
+        ``(F, Q, R)``: transition (m, m), process covariance (m, m), measurement variance.
     """
-    F = np.array([[1.0, h, 0.5 * h * h], [0.0, 1.0, h], [0.0, 0.0, 1.0]])
-    Q = np.array([[h**5 / 20.0, h**4 / 8.0, h**3 / 6.0],
-                  [h**4 / 8.0, h**3 / 3.0, h**2 / 2.0],
-                  [h**3 / 6.0, h**2 / 2.0, h]])
+    m = int(n_states)
+    F = np.zeros((m, m))
+    Q = np.empty((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            F[i, j] = h ** (j - i) / math.factorial(j - i)
+        for j in range(m):
+            p = 2 * m - 1 - i - j
+            Q[i, j] = h**p / (p * math.factorial(m - 1 - i) * math.factorial(m - 1 - j))
     return F, Q, 1.0 / h
 
 
@@ -534,117 +554,132 @@ def kalman_step_reference(x: np.ndarray, P: np.ndarray, h: float, z: np.ndarray
     """Pure-numpy reference of one predict + update of :class:`KalmanEstimator` (scaled units).
 
     Args:
-        x: State, shape ``(3, n_joints)`` (one column per joint; the covariance is shared, since every
+        x: State, shape ``(m, n_joints)`` (one column per joint; the covariance is shared, since every
             joint has the same model and the same stamps).
-        P: Covariance of each column, shape ``(3, 3)``.
+        P: Covariance of each column, shape ``(m, m)``.
         h: Scaled step ω·Δt (> 0).
         z: Measured velocities (rad/s), shape ``(n_joints,)``.
 
     Returns:
         ``(x, P)`` after the step (new arrays); the covariance by the Joseph form.
     """
-    F, Q, R = kalman_matrices(h)
+    m = x.shape[0]
+    F, Q, R = kalman_matrices(h, m)
     xp = F @ x
     Pp = F @ P @ F.T + Q
-    H = np.array([[1.0, 0.0, 0.0]])
+    H = np.zeros((1, m))
+    H[0, 0] = 1.0
     S = Pp[0, 0] + R
     K = Pp[:, :1] / S
     x_new = xp + K @ (z[None, :] - xp[:1])
-    IKH = np.eye(3) - K @ H
+    IKH = np.eye(m) - K @ H
     return x_new, IKH @ Pp @ IKH.T + R * (K @ K.T)
 
 
 @njit(cache=True, nogil=True)
 def _kalman_step(x: np.ndarray, P: np.ndarray, h: float, z: np.ndarray) -> None:
-    """In-place compiled :func:`kalman_step_reference` (same operations, expanded for 3 × 3)."""
-    h2 = h * h
-    # predict: x ← F x, P ← F P Fᵀ + Q
-    n = x.shape[1]
+    """In-place compiled :func:`kalman_step_reference` (same operations, explicit loops; m = x.shape[0])."""
+    m, n = x.shape
+    fact = np.ones(2 * m)
+    for i in range(1, 2 * m):
+        fact[i] = fact[i - 1] * i
+    hp = np.ones(2 * m)  # powers of h
+    for i in range(1, 2 * m):
+        hp[i] = hp[i - 1] * h
+    F = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            F[i, j] = hp[j - i] / fact[j - i]
+    # predict: x ← F x (in place, rows top-down: row i uses rows ≥ i, not yet overwritten), P ← F P Fᵀ + Q
     for j in range(n):
-        x[0, j] += h * x[1, j] + 0.5 * h2 * x[2, j]
-        x[1, j] += h * x[2, j]
-    FP = np.empty((3, 3))
-    for c in range(3):
-        FP[0, c] = P[0, c] + h * P[1, c] + 0.5 * h2 * P[2, c]
-        FP[1, c] = P[1, c] + h * P[2, c]
-        FP[2, c] = P[2, c]
-    Pp = np.empty((3, 3))
-    for r in range(3):
-        Pp[r, 0] = FP[r, 0] + h * FP[r, 1] + 0.5 * h2 * FP[r, 2]
-        Pp[r, 1] = FP[r, 1] + h * FP[r, 2]
-        Pp[r, 2] = FP[r, 2]
-    h3 = h2 * h
-    Pp[0, 0] += h3 * h2 / 20.0
-    Pp[0, 1] += h2 * h2 / 8.0
-    Pp[1, 0] += h2 * h2 / 8.0
-    Pp[0, 2] += h3 / 6.0
-    Pp[2, 0] += h3 / 6.0
-    Pp[1, 1] += h3 / 3.0
-    Pp[1, 2] += h2 / 2.0
-    Pp[2, 1] += h2 / 2.0
-    Pp[2, 2] += h
+        for i in range(m):
+            acc = 0.0
+            for k in range(i, m):
+                acc += F[i, k] * x[k, j]
+            x[i, j] = acc
+    FP = np.zeros((m, m))
+    for i in range(m):
+        for c in range(m):
+            acc = 0.0
+            for k in range(i, m):
+                acc += F[i, k] * P[k, c]
+            FP[i, c] = acc
+    Pp = np.empty((m, m))
+    for r in range(m):
+        for c in range(m):
+            acc = 0.0
+            for k in range(c, m):
+                acc += FP[r, k] * F[c, k]
+            p = 2 * m - 1 - r - c
+            Pp[r, c] = acc + hp[p] / (p * fact[m - 1 - r] * fact[m - 1 - c])
     # update with the velocity measurement (variance R = 1/h)
     R = 1.0 / h
     S = Pp[0, 0] + R
-    K = np.empty(3)
-    for r in range(3):
+    K = np.empty(m)
+    for r in range(m):
         K[r] = Pp[r, 0] / S
     for j in range(n):
         innov = z[j] - x[0, j]
-        for r in range(3):
+        for r in range(m):
             x[r, j] += K[r] * innov
     # Joseph form: (I − K H) Pp (I − K H)ᵀ + R K Kᵀ, symmetric and positive by construction
-    A = np.empty((3, 3))
-    for r in range(3):
-        for c in range(3):
+    A = np.empty((m, m))
+    for r in range(m):
+        for c in range(m):
             A[r, c] = Pp[r, c] - K[r] * Pp[0, c]
-    for r in range(3):
-        for c in range(r, 3):  # upper triangle, mirrored: exactly symmetric
+    for r in range(m):
+        for c in range(r, m):  # upper triangle, mirrored: exactly symmetric
             v = A[r, c] - A[r, 0] * K[c] + R * K[r] * K[c]
             P[r, c] = v
             P[c, r] = v
 
 
 class KalmanEstimator(AccelerationEstimator):
-    """Causal constant-jerk Kalman filter on the joint velocities (immediate, no low-frequency lag).
+    """Causal Kalman filter on the joint velocities (immediate, no low-frequency lag).
 
-    Model (per joint, continuous time): ``d/dt [q̇, q̈, q⃛] = [q̈, q⃛, w]`` with white snap ``w`` of density
-    ``q_c``, and measurements ``q̇_k + v_k`` with white noise of density ``r_c``. Only the ratio matters
-    for the estimate; it is set to ``q_c / r_c = ω⁶`` (ω = 2π·``bandwidth_hz``), for which the
-    steady-state Kalman–Bucy filter's error dynamics are a third-order Butterworth polynomial at ω: the
-    tuning is in Hz and independent of the sample rate. Each step is discretised exactly with its own
-    interval (:func:`kalman_matrices`), so jittered stamps are handled, and the per-sample measurement
-    variance ``r_c/Δt`` keeps the filter the same continuous-time filter at any rate.
+    Model (per joint, continuous time), ``kalman_model="jerk"``: ``d/dt [q̇, q̈, q⃛] = [q̈, q⃛, w]`` with
+    white snap ``w`` of density ``q_c`` (``"snap"``: one derivative more, white crackle); measurements
+    ``q̇_k + v_k`` with white noise of density ``r_c``. Only the ratio matters for the estimate; it is set
+    to ``q_c / r_c = ω^(2m)`` (m = state length, ω = 2π·``bandwidth_hz``), for which the steady-state
+    Kalman–Bucy filter's error dynamics are an m-th-order Butterworth polynomial at ω: the tuning is in
+    Hz and independent of the sample rate. Each step is discretised exactly with its own interval
+    (:func:`kalman_matrices`), so jittered stamps are handled, and the per-sample measurement variance
+    ``r_c/Δt`` keeps the filter the same continuous-time filter at any rate.
 
     Timing: the estimate refers to the newest stamp (``delay_s = 0``) and ``lag_s = 0``: a velocity that
-    is a quadratic in time (constant jerk) is tracked without error in steady state, so the
-    low-frequency phase lag vanishes. In continuous time (gains ``k = (2ω, 2ω², ω³)``) the q̈ estimate is
-    ``q̈̂ = s·q̇ · (2ω²s + ω³)/(s³ + 2ωs² + 2ω²s + ω³)``, so a sinusoid of frequency ``f ≪ f_b`` has a
-    relative amplitude overshoot ``|q̈̂/q̈| − 1 ≈ 2 (f/f_b)²`` (exactly ``√((1 + 4x²)/(1 + x⁶)) − 1``,
-    ``x = f/f_b``) and a phase lag ≈ ``3 x³`` rad; white velocity noise is
-    passed with a gain that grows like ``f_b^{3/2}`` — the trade-off the bandwidth sets. The sampled
-    filter's exact steady-state response follows from its discrete steady-state gain.
+    is a polynomial of degree m − 1 in time is tracked without error in steady state, so the
+    low-frequency phase lag vanishes. In continuous time, with the Butterworth gains ``k``, the q̈
+    estimate is ``q̈̂ = s·q̇ · (1 − (s^m + k₁ s^(m−1)) / B(s))``, ``B`` the Butterworth polynomial. For
+    ``"jerk"`` (``k = (2ω, 2ω², ω³)``) a sinusoid of frequency ``f ≪ f_b`` has a relative amplitude
+    overshoot ``|q̈̂/q̈| − 1 ≈ 2 (f/f_b)²`` (exactly ``√((1 + 4x²)/(1 + x⁶)) − 1``, ``x = f/f_b``) and a
+    phase lag ≈ ``3 x³`` rad; for ``"snap"`` (``k₁ = 2.613 ω``) the relative error is ≈ ``2.613 x³``
+    (mostly phase lead). White velocity noise is passed with a gain that grows like ``f_b^{3/2}`` —
+    the trade-off the bandwidth sets. The sampled filter's exact steady-state response follows from
+    its discrete steady-state gain.
 
-    Start: the state starts diffuse at the first sample of a (re)start (velocity from that sample, q̈ and
-    jerk with variance :data:`KALMAN_PRIOR_VARIANCE` in scaled units); samples less than
-    ``KALMAN_SETTLE / ω`` after it are decided ``None`` (0.08 s at 8 Hz). Gaps longer than
-    ``max_gap_s`` restart. Cost per sample: O(n_joints) in a compiled kernel (:func:`_kalman_step`,
-    equal to :func:`kalman_step_reference` to rounding); state 3 × n_joints + a shared 3 × 3 covariance.
+    Start: the state starts diffuse at the first sample of a (re)start (velocity from that sample, the
+    higher derivatives with variance :data:`KALMAN_PRIOR_VARIANCE` in scaled units); samples less than
+    ``KALMAN_SETTLE[model] / ω`` after it are decided ``None`` (80 ms for jerk at 8 Hz). Gaps longer
+    than ``max_gap_s`` restart. Cost per sample: O(m² · n_joints) in a compiled kernel
+    (:func:`_kalman_step`, equal to :func:`kalman_step_reference` to rounding); state m × n_joints and a
+    shared m × m covariance.
 
     Args:
         n_joints: Number of joints.
-        config: Settings (``method="kalman"``; ``bandwidth_hz``, ``max_gap_s`` are used).
+        config: Settings (``method="kalman"``; ``bandwidth_hz``, ``kalman_model``, ``max_gap_s`` are used).
     """
 
     def __init__(self, n_joints: int, config: AccelerationConfig) -> None:
         super().__init__(n_joints, config)
         self._omega = 2.0 * math.pi * float(config.bandwidth_hz)
-        self._x = np.zeros((3, self.n_joints))
-        self._P = np.zeros((3, 3))
+        m = KALMAN_STATES[config.kalman_model]
+        self._x = np.zeros((m, self.n_joints))
+        self._P = np.zeros((m, m))
         self._start_stamp: int | None = None
-        self._settle_ns = KALMAN_SETTLE / self._omega * 1e9
+        self._settle_s = KALMAN_SETTLE[config.kalman_model] / self._omega
+        self._settle_ns = self._settle_s * 1e9
         # compile (or load from numba's cache) now, not at the first sample inside a 1 kHz loop
-        _kalman_step(np.zeros((3, self.n_joints)), np.eye(3), 0.1, np.zeros(self.n_joints))
+        _kalman_step(np.zeros((m, self.n_joints)), np.eye(m), 0.1, np.zeros(self.n_joints))
 
     @property
     def window(self) -> int:
@@ -659,7 +694,7 @@ class KalmanEstimator(AccelerationEstimator):
     @property
     def settle_s(self) -> float:
         """Warm-up after a (re)start during which stamps are decided ``None`` (s)."""
-        return KALMAN_SETTLE / self._omega
+        return self._settle_s
 
     def _reset_filter(self) -> None:
         self._start_stamp = None
@@ -686,7 +721,8 @@ class KalmanEstimator(AccelerationEstimator):
             self._x[:] = 0.0
             self._x[0] = dq
             self._P[:] = 0.0
-            self._P[1, 1] = self._P[2, 2] = KALMAN_PRIOR_VARIANCE
+            for i in range(1, self._P.shape[0]):
+                self._P[i, i] = KALMAN_PRIOR_VARIANCE
             self._P[0, 0] = math.nan  # set from the first interval (R = 1/h), see below
             decisions.append((stamp_ns, None))
             return decisions

@@ -137,6 +137,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "at this frequency at any joint-state rate; a signal component at f has a q̈ amplitude "
                   "error ≈ 2(f/bandwidth_hz)^2, velocity noise grows like bandwidth_hz^1.5",
                   min=0.0, max=10000.0, min_exclusive=True),
+    ParameterSpec("acceleration.kalman_model", "string", "jerk",
+                  "process model of the kalman estimator: constant jerk (state q̇, q̈, jerk) or constant snap "
+                  "(one derivative more: q̈ bias ≈ 2.6(f/bandwidth_hz)^3 instead of 2(f/bandwidth_hz)^2, "
+                  "more noise at one bandwidth)", choices=("jerk", "snap")),
     ParameterSpec("acceleration.max_gap_s", "double", 0.1,
                   "restart the acceleration estimator when consecutive joint states are further apart than "
                   "this, instead of fitting across the dropout [s]; 0 = never restart", min=0.0, max=3600.0),
