@@ -61,9 +61,14 @@ VARIANTS = (
     Variant("kalman 10 Hz", {"method": "kalman", "bandwidth_hz": 10.0}),
     Variant("kalman 12 Hz", {"method": "kalman", "bandwidth_hz": 12.0}),
     Variant("kalman 16 Hz", {"method": "kalman", "bandwidth_hz": 16.0}),
+    Variant("kalman snap 4 Hz", {"method": "kalman", "kalman_model": "snap", "bandwidth_hz": 4.0}),
+    Variant("kalman snap 5 Hz", {"method": "kalman", "kalman_model": "snap", "bandwidth_hz": 5.0}),
+    Variant("kalman snap 6 Hz", {"method": "kalman", "kalman_model": "snap", "bandwidth_hz": 6.0}),
+    Variant("kalman snap 8 Hz", {"method": "kalman", "kalman_model": "snap", "bandwidth_hz": 8.0}),
+    Variant("kalman snap 10 Hz", {"method": "kalman", "kalman_model": "snap", "bandwidth_hz": 10.0}),
 )
-SP_VARIANTS = ("savgol 0.08 s (default)", "finite_difference 0.02 s, 20 Hz", "kalman 8 Hz", "kalman 10 Hz",
-               "kalman 12 Hz")
+SP_VARIANTS = ("savgol 0.08 s (default)", "finite_difference 0.02 s, 20 Hz", "kalman 8 Hz", "kalman 12 Hz",
+               "kalman snap 5 Hz", "kalman snap 6 Hz", "kalman snap 8 Hz")
 
 
 def stream(stamps: np.ndarray, dq: np.ndarray, config: AccelerationConfig):
