@@ -35,8 +35,8 @@ EPS = np.finfo(float).eps
 T0 = 5 * 10**9  # a non-zero start stamp (ns)
 
 
-def kalman(bandwidth_hz: float = 8.0, **kw) -> AccelerationConfig:
-    return AccelerationConfig(method="kalman", bandwidth_hz=bandwidth_hz, **kw)
+def kalman(bandwidth_hz: float = 8.0, kalman_model: str = "jerk", **kw) -> AccelerationConfig:
+    return AccelerationConfig(method="kalman", bandwidth_hz=bandwidth_hz, kalman_model=kalman_model, **kw)
 
 
 def jittered_stamps(n: int, dt: float, jitter: float, seed: int) -> np.ndarray:
@@ -334,7 +334,8 @@ def test_pipeline_emits_each_joint_torque_sample_with_its_own_joint_state():
     from semiparam_ros.core.pipeline import DROP_ACCELERATION_WARMUP
 
     cfg = EstimatorConfig.defaults().with_overrides({
-        "robot.output": "joint_torques", "acceleration.method": "kalman", "acceleration.bandwidth_hz": 8.0})
+        "robot.output": "joint_torques", "acceleration.method": "kalman", "acceleration.bandwidth_hz": 8.0,
+        "acceleration.kalman_model": "jerk"})
     pipe = build_pipeline(cfg)
     joints = tuple(cfg["robot.joints"])
     n = len(joints)
@@ -362,9 +363,11 @@ def test_pipeline_emits_each_joint_torque_sample_with_its_own_joint_state():
 
 def test_parameter_table_selects_the_kalman_model():
     cfg = EstimatorConfig.defaults().with_overrides({"acceleration.method": "kalman",
-                                                     "acceleration.kalman_model": "snap"})
+                                                     "acceleration.kalman_model": "jerk"})
     pipe = build_pipeline(cfg)
-    assert pipe.acceleration.kalman_model == "snap"
-    assert pipe.estimator.settle_s == pytest.approx(KALMAN_SETTLE["snap"] / (2 * math.pi * 8.0))
+    assert pipe.acceleration.kalman_model == "jerk"
+    assert pipe.estimator.settle_s == pytest.approx(KALMAN_SETTLE["jerk"] / (2 * math.pi * 6.0))
+    defaults = build_pipeline(EstimatorConfig.defaults().with_overrides({"acceleration.method": "kalman"}))
+    assert defaults.acceleration.kalman_model == "snap" and defaults.acceleration.bandwidth_hz == 6.0
     with pytest.raises(ConfigurationError, match=r"acceleration\.kalman_model"):
         cfg.with_overrides({"acceleration.kalman_model": "crackle"})

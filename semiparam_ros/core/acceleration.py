@@ -20,15 +20,16 @@ velocities already received.
     the true acceleration at low frequencies by ``lag_s = (w − 1)Δt/2 + Δt(1 − α)/α`` (≈ the half
     span of the difference plus τ − Δt/2 when Δt ≪ τ).
 
-``method="kalman"`` — causal Kalman filter with a constant-jerk (or constant-snap) model.
-    Per joint, the state ``[q̇, q̈, d³q/dt³]`` follows a triple integrator driven by white snap (continuous
-    time, discretised exactly with the actual step; ``kalman_model="snap"`` adds one derivative); q̇ is
-    measured. One tuning in physical units, the
-    bandwidth ``bandwidth_hz`` (f_b), fixes the ratio of process to measurement noise densities so that
-    the steady-state continuous-time filter is a Butterworth loop at ω = 2π f_b, at any rate.
-    It is emitted at once, for the newest stamp, with no low-frequency lag (a velocity that is a
-    quadratic in time is tracked exactly); the price is a larger noise and an amplitude error
-    ≈ +2 (f/f_b)² (overshoot) at frequency f (see :class:`KalmanEstimator`).
+``method="kalman"`` — causal Kalman filter with a constant-snap (default) or constant-jerk model.
+    Per joint, the state ``[q̇, q̈, d³q/dt³]`` (``kalman_model="jerk"``) or ``[q̇, q̈, d³q/dt³, d⁴q/dt⁴]``
+    (``"snap"``) follows a chain of integrators driven by white noise (continuous time, discretised
+    exactly with the actual step); q̇ is measured. One tuning in physical units, the bandwidth
+    ``bandwidth_hz`` (f_b), fixes the ratio of process to measurement noise densities so that the
+    steady-state continuous-time filter is a Butterworth loop at ω = 2π f_b, at any rate. The estimate
+    is emitted at once, for the newest stamp, with no low-frequency lag (a velocity that is a
+    polynomial of degree 2 (jerk) or 3 (snap) in time is tracked exactly); the price is a larger noise
+    and an error at frequency f of ≈ 2.6 (f/f_b)³ (snap) or a +2 (f/f_b)² amplitude overshoot (jerk)
+    (see :class:`KalmanEstimator`).
 
 All estimators decide every input stamp exactly once, in stamp order: an estimate, or ``None`` for
 the samples that cannot get one (the warm-up after start, a reset, or a gap longer than ``max_gap_s``).
@@ -130,8 +131,8 @@ class AccelerationConfig:
     cutoff_hz: float = 20.0
     max_gap_s: float | None = None
     window_s: float | None = None
-    bandwidth_hz: float = 8.0
-    kalman_model: str = "jerk"
+    bandwidth_hz: float = 6.0
+    kalman_model: str = "snap"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -659,7 +660,7 @@ class KalmanEstimator(AccelerationEstimator):
 
     Start: the state starts diffuse at the first sample of a (re)start (velocity from that sample, the
     higher derivatives with variance :data:`KALMAN_PRIOR_VARIANCE` in scaled units); samples less than
-    ``KALMAN_SETTLE[model] / ω`` after it are decided ``None`` (80 ms for jerk at 8 Hz). Gaps longer
+    ``KALMAN_SETTLE[model] / ω`` after it are decided ``None`` (146 ms for snap at 6 Hz). Gaps longer
     than ``max_gap_s`` restart. Cost per sample: O(m² · n_joints) in a compiled kernel
     (:func:`_kalman_step`, equal to :func:`kalman_step_reference` to rounding); state m × n_joints and a
     shared m × m covariance.

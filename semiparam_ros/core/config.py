@@ -132,12 +132,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("acceleration.cutoff_hz", "double", 20.0,
                   "low-pass cut-off of the finite-difference estimator [Hz]", min=0.0, max=10000.0,
                   min_exclusive=True),
-    ParameterSpec("acceleration.bandwidth_hz", "double", 8.0,
-                  "bandwidth of the kalman estimator [Hz]: its steady state is a 3rd-order Butterworth loop "
-                  "at this frequency at any joint-state rate; a signal component at f has a q̈ amplitude "
-                  "error ≈ 2(f/bandwidth_hz)^2, velocity noise grows like bandwidth_hz^1.5",
+    ParameterSpec("acceleration.bandwidth_hz", "double", 6.0,
+                  "bandwidth of the kalman estimator [Hz]: its steady state is a Butterworth loop (order 4 "
+                  "for snap, 3 for jerk) at this frequency at any joint-state rate; higher follows faster "
+                  "motion with less bias, lower passes less velocity noise (∝ bandwidth_hz^1.5)",
                   min=0.0, max=10000.0, min_exclusive=True),
-    ParameterSpec("acceleration.kalman_model", "string", "jerk",
+    ParameterSpec("acceleration.kalman_model", "string", "snap",
                   "process model of the kalman estimator: constant jerk (state q̇, q̈, jerk) or constant snap "
                   "(one derivative more: q̈ bias ≈ 2.6(f/bandwidth_hz)^3 instead of 2(f/bandwidth_hz)^2, "
                   "more noise at one bandwidth)", choices=("jerk", "snap")),
