@@ -57,6 +57,7 @@ from numba import njit
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
 __all__ = [
+    "KALMAN_PRIOR_VARIANCE",
     "KALMAN_SETTLE",
     "KALMAN_STATES",
     "METHODS",
@@ -86,8 +87,8 @@ KALMAN_STATES = {"jerk": 3, "snap": 4}
 #: 4.6–5.0 (snap) at 100 Hz – 1 kHz.
 KALMAN_SETTLE = {"jerk": 4.0, "snap": 5.5}
 
-#: Prior variance of q̈/ω and jerk/ω² at a (re)start, relative to the noise scale of the filter's units
-#: (effectively diffuse: 10⁴× the prior standard deviation of any signal the filter sees).
+#: Prior variance of the scaled derivatives beyond q̇ (q̈/ω, q⃛/ω², …) at a (re)start, in the filter's
+#: units (unit noise densities): effectively diffuse, 10⁴ times the standard deviation of any signal seen.
 KALMAN_PRIOR_VARIANCE = 1e8
 
 #: Stamps held back to measure the joint-state rate when the window is given in seconds (19 intervals).
@@ -104,7 +105,7 @@ class AccelerationConfig:
     Attributes:
         method: ``"savgol"`` (centred local polynomial, delayed, zero phase),
             ``"finite_difference"`` (causal, immediate, lagging) or ``"kalman"`` (causal, immediate, no
-            low-frequency lag; constant-jerk Kalman filter).
+            low-frequency lag; Kalman filter, see ``kalman_model``).
         window: Samples used per estimate; odd for ``savgol``; ≥ 2. Ignored when ``window_s`` is set.
         window_s: Window length in seconds (> 0), converted to samples at the measured rate (see the
             module docstring); ``None`` uses ``window``.
