@@ -355,7 +355,7 @@ def test_invalid_updates_raise_and_leave_state_untouched(method):
 @pytest.mark.parametrize(
     "kwargs",
     [
-        {"method": "kalman"},
+        {"method": "kalmann"},  # "kalman" is a method now; a misspelt one is not
         {"window": 8},  # even for savgol
         {"window": 1, "method": "finite_difference"},
         {"window": 5, "polyorder": 5},

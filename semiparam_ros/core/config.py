@@ -114,8 +114,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "largest stamp difference when pairing a wrench with a joint state [s]", min=0.0, max=1.0),
     ParameterSpec("acceleration.method", "string", "savgol",
                   "joint acceleration estimator from velocities: centred local polynomial (delayed by half "
-                  "a window, no phase lag) or causal filtered finite difference",
-                  choices=("savgol", "finite_difference")),
+                  "a window, no phase lag), causal filtered finite difference, or causal constant-jerk "
+                  "Kalman filter (no delay, no low-frequency lag, noisier; see acceleration.bandwidth_hz)",
+                  choices=("savgol", "finite_difference", "kalman")),
     ParameterSpec("acceleration.window_s", "double", 0.08,
                   "length of the acceleration estimator window [s], converted to samples at the joint-state "
                   "rate measured on the first 20 stamps (savgol: 2·round(window_s/(2Δt)) + 1 samples; the "
@@ -131,6 +132,15 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("acceleration.cutoff_hz", "double", 20.0,
                   "low-pass cut-off of the finite-difference estimator [Hz]", min=0.0, max=10000.0,
                   min_exclusive=True),
+    ParameterSpec("acceleration.bandwidth_hz", "double", 6.0,
+                  "bandwidth of the kalman estimator [Hz]: its steady state is a Butterworth loop (order 4 "
+                  "for snap, 3 for jerk) at this frequency at any joint-state rate; higher follows faster "
+                  "motion with less bias, lower passes less velocity noise (∝ bandwidth_hz^1.5)",
+                  min=0.0, max=10000.0, min_exclusive=True),
+    ParameterSpec("acceleration.kalman_model", "string", "snap",
+                  "process model of the kalman estimator: constant jerk (state q̇, q̈, jerk) or constant snap "
+                  "(one derivative more: q̈ bias ≈ 2.6(f/bandwidth_hz)^3 instead of 2(f/bandwidth_hz)^2, "
+                  "more noise at one bandwidth)", choices=("jerk", "snap")),
     ParameterSpec("acceleration.max_gap_s", "double", 0.1,
                   "restart the acceleration estimator when consecutive joint states are further apart than "
                   "this, instead of fitting across the dropout [s]; 0 = never restart", min=0.0, max=3600.0),

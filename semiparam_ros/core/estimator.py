@@ -226,6 +226,8 @@ def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
             window_s=None if config["acceleration.window"] else config["acceleration.window_s"],
             polyorder=config["acceleration.polyorder"],
             cutoff_hz=config["acceleration.cutoff_hz"],
+            bandwidth_hz=config["acceleration.bandwidth_hz"],
+            kalman_model=config["acceleration.kalman_model"],
             max_gap_s=bound("acceleration.max_gap_s"),
         ),
         max_abs_position=bound("limits.max_abs_position"),
