@@ -363,3 +363,27 @@ def test_semiparametric_with_forgetting_tracks_a_payload_change():
     Xt, Yt = X[3000:], Y2[3000:]
     assert rmse(adaptive, Xt, Yt) < 0.5 * rmse(fixed, Xt, Yt)
     assert np.all(np.isfinite(adaptive.parameters))
+
+
+def test_predict_then_learn_the_same_sample_evaluates_the_regressor_once():
+    """The contact gate predicts, then learns the same x: Φ(x) is computed once, and a new x (or the same
+    values in another array) gives the regressor's own answer, so the cache changes no number."""
+    calls = []
+
+    def counting(x):
+        calls.append(np.array(x))
+        return np.array([[x[0], 1.0], [x[0] ** 2, x[0]]])
+
+    model = ParametricModel(counting, 2, 2, lam=1e-3)
+    reference = ParametricModel(lambda x: np.array([[x[0], 1.0], [x[0] ** 2, x[0]]]), 2, 2, lam=1e-3)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        x = rng.normal(size=1)
+        y = rng.normal(size=2)
+        before = len(calls)
+        got = model.predict_one(x).total
+        model.learn_one(x.copy(), y)
+        assert len(calls) == before + 1
+        np.testing.assert_array_equal(got, reference.predict_one(x).total)
+        reference.learn_one(x, y)
+    np.testing.assert_array_equal(model.parameters, reference.parameters)

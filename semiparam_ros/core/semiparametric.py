@@ -150,6 +150,9 @@ class ParametricModel(_Model):
             raise ConfigurationError(f"n_outputs must be >= 1, got {n_outputs!r}")
         self._set_prior(np.zeros(self.n_params) if prior is None else prior)
         self.n_samples_seen = 0
+        # the last x and its regressor: predicting then learning the same sample (the contact gate's
+        # order) evaluates Φ(x) once; the regressor must be a pure function of x
+        self._phi_cache: tuple[np.ndarray, np.ndarray] | None = None
 
     def _set_prior(self, prior: Any) -> None:
         p = np.asarray(prior, dtype=np.float64)
@@ -188,6 +191,14 @@ class ParametricModel(_Model):
 
     # --- internals shared with SemiparametricModel
     def _phi(self, x: np.ndarray) -> np.ndarray:
+        cache = self._phi_cache
+        if cache is not None and np.array_equal(cache[0], x):
+            return cache[1]
+        Phi = self._phi_uncached(x)
+        self._phi_cache = (np.array(x, dtype=np.float64), Phi)
+        return Phi
+
+    def _phi_uncached(self, x: np.ndarray) -> np.ndarray:
         Phi = np.asarray(self.regressor(x), dtype=np.float64)
         if Phi.shape != (self.n_outputs, self.n_params):
             raise ConfigurationError(f"regressor returned shape {Phi.shape}, expected ({self.n_outputs}, "
@@ -637,7 +648,8 @@ class SemiparametricModel(_TwoStageModel):
         var = None
         if var_p is not None:
             assert var_np is not None  # _predict computes it when asked
-            var = var_p + np.nan_to_num(var_np, nan=0.0)
+            # NaN while the residual stage warms up (it predicts 0 then): it adds no variance
+            var = var_p + var_np if self.nonparametric.standardizer.ready else var_p
         return Prediction(yp, r, yp + r, var)
 
     def _step(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:

@@ -54,7 +54,7 @@ def predict_with_variance(model: Any, x: np.ndarray) -> Prediction:
         RejectedSampleError: Wrong size or non-finite x, or a non-finite regressor.
     """
     pred = model.predict_one(x, return_variance=True)
-    var = np.nan_to_num(np.asarray(pred.variance, dtype=np.float64), nan=0.0)
+    var = np.fmax(np.asarray(pred.variance, dtype=np.float64), 0.0)  # NaN (a warm-up) counts as 0
     return Prediction(pred.parametric, pred.residual, pred.total, var)
 
 
@@ -105,8 +105,8 @@ class NoiseScale:
         """
         if self.s2 is None:
             return np.full(self.n_outputs, np.inf)
-        v = np.nan_to_num(np.asarray(variance, dtype=np.float64), nan=0.0)
-        return np.sqrt(self.s2 * (1.0 + np.maximum(v, 0.0)))
+        v = np.fmax(np.asarray(variance, dtype=np.float64), 0.0)  # fmax: NaN counts as 0
+        return np.sqrt(self.s2 * (1.0 + v))
 
     def skip(self, stamp_ns: int) -> None:
         """Let a sample pass without absorbing it (a gated contact): its time step weighs nothing.
@@ -131,8 +131,8 @@ class NoiseScale:
         e = np.asarray(error, dtype=np.float64).reshape(-1)
         if e.shape != (self.n_outputs,) or not np.isfinite(e).all():
             raise RejectedSampleError(f"error must be {self.n_outputs} finite values, got {error!r}")
-        v = np.nan_to_num(np.asarray(variance, dtype=np.float64), nan=0.0)
-        target = e * e / (1.0 + np.maximum(v, 0.0))
+        v = np.fmax(np.asarray(variance, dtype=np.float64), 0.0)  # fmax: NaN counts as 0
+        target = e * e / (1.0 + v)
         if self.s2 is None:
             self.s2 = target
         else:
