@@ -17,14 +17,21 @@ def _regressor(x: np.ndarray) -> np.ndarray:
                      [x[2] * x[3], x[0] - x[1], 1.0, x[1] ** 2, np.sin(x[2])]])
 
 
+PRIOR = np.array([0.5, -1.0, 2.0, 0.0, 3.0])  # a CAD prior π₀ (parametric.prior: urdf)
+
+
 def _models():
     return {
         "P": ParametricModel(_regressor, 5, 3, lam=0.1, forgetting=0.99),
+        "P prior": ParametricModel(_regressor, 5, 3, lam=0.1, forgetting=0.99, prior=PRIOR),
         "NP": NonparametricModel(4, 3, n_features=40, sigma=2.0, lam=0.01, forgetting=0.995,
                                  standardizer_warmup=20),
         "SP": SemiparametricModel(_regressor, 5, 4, 3, lam_parametric=0.1, lam_nonparametric=0.01,
                                   n_features=40, sigma=2.0, forgetting_parametric=0.99,
                                   forgetting_nonparametric=0.995, standardizer_warmup=20),
+        "SP prior": SemiparametricModel(_regressor, 5, 4, 3, lam_parametric=0.1, lam_nonparametric=0.01,
+                                        n_features=40, sigma=2.0, forgetting_parametric=0.99,
+                                        forgetting_nonparametric=0.995, standardizer_warmup=20, prior=PRIOR),
     }
 
 
@@ -46,7 +53,7 @@ def test_parametric_variance_is_the_closed_form_posterior_variance():
         A += Phi.T @ Phi
 
 
-@pytest.mark.parametrize("kind", ["P", "NP", "SP"])
+@pytest.mark.parametrize("kind", ["P", "NP", "SP", "P prior", "SP prior"])
 def test_predict_with_variance_is_predict_one_with_the_warm_up_at_zero(kind):
     rng = np.random.default_rng(3)
     model = _models()[kind]
@@ -68,6 +75,6 @@ def test_predict_with_variance_is_predict_one_with_the_warm_up_at_zero(kind):
             model.predict_learn_one(x, y)
     with pytest.raises(RejectedSampleError):
         predict_with_variance(model, np.full(4, np.nan))
-    if kind != "P":
+    if not kind.startswith("P"):
         with pytest.raises(RejectedSampleError):
             predict_with_variance(model, np.zeros(3))

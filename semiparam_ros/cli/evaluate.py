@@ -12,6 +12,12 @@ Payload scenario (one bag with a pickup; SP with and without forgetting)::
     evaluate --payload bags/icub_payload --forgetting 0.995 --json results/payload.json \
         --plot results/payload.png
 
+Contact evaluation (a ``simulate --scenario contacts`` log: the node's estimator with the gate on and off;
+contact detection per episode, the error after the contacts vs before, payload adoption)::
+
+    evaluate --contacts bags/generated/icub_contacts --json results/contacts.json \
+        --plot results/contacts.png
+
 Argument parsing only; the work is done by :mod:`semiparam_ros.eval`.
 """
 
@@ -89,6 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--test", type=Path, help="test bag (paper: the XZ circles)")
     p.add_argument("--payload", type=Path, help="bag with a payload pickup (adaptation scenario)")
+    p.add_argument("--contacts", type=Path,
+                   help="bag with contact episodes in its scenario.yaml (simulate --scenario contacts): the "
+                   "estimator with the contact gate on and off")
     add_config_arguments(p)
     p.add_argument(
         "--models",
@@ -168,8 +177,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.payload is None and (args.train is None or args.test is None):
-        parser.error("give --train and --test (paper protocol) or --payload (adaptation scenario)")
+    if args.contacts is not None and (args.payload is not None or args.test is not None):
+        parser.error("--contacts is exclusive with --payload and --test")
+    if args.contacts is None and args.payload is None and (args.train is None or args.test is None):
+        parser.error("give --train and --test (paper protocol), --payload (adaptation scenario) or "
+                     "--contacts (contact evaluation)")
     if args.payload is not None and args.test is not None:
         parser.error("--payload and --test are exclusive")
     from semiparam_ros.eval.run import run_evaluate  # heavy imports after argument checks
@@ -179,6 +191,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             train=args.train,
             test=args.test,
             payload=args.payload,
+            contacts=args.contacts,
             config=args.config,
             overrides=parse_overrides(args.overrides),
             joint_states_topic=args.joint_states_topic,

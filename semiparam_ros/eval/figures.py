@@ -5,7 +5,10 @@ time from the start of each test split on a log axis, mean over splits as a line
 deviation shaded, P green, NP red, SP blue (and SPJ, the joint semiparametric fit, purple, labelled
 "SP joint"). :func:`plot_adaptation` draws the payload scenario: windowed
 force and torque RMSE against the time from the pickup, one line per model (with and without adaptation),
-the pre-pickup level and the recovery tolerance band. Groups, units and axis labels come from the report's
+the pre-pickup level and the recovery tolerance band. :func:`plot_contacts` draws the last contact before
+a payload pickup and the pickup on one time axis: the measured output, the predictions with the gate on and
+off, and the external estimate (gate on) with its ±2σ band and, for simulated logs, the true external
+effect. Groups, units and axis labels come from the report's
 output kind (``robot.output``): force and torque for a wrench, joint torque (mean over joints) otherwise.
 """
 
@@ -23,9 +26,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from semiparam_ros.atomic import atomic_open
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.eval.contacts import ContactReport, ContactRun, GroundTruthEpisodes, external_truth
 from semiparam_ros.eval.report import AdaptationReport, ProtocolReport
 
-__all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_protocol"]
+__all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_contacts", "plot_protocol"]
 
 #: The paper's colours: parametric green, nonparametric red, semiparametric blue; the joint semiparametric
 #: fit (not in the paper) purple.
@@ -169,4 +174,78 @@ def plot_adaptation(report: AdaptationReport, path: str | Path, *, title: str | 
                            f"thin lines: {tol:g}× pre-pickup)")
     fig.suptitle(title or "payload pickup: windowed RMSE with and without adaptation", fontsize=10)
     fig.tight_layout()
+    return _save(fig, path, dpi)
+
+
+def plot_contacts(report: ContactReport, truth: GroundTruthEpisodes, runs: Mapping[str, ContactRun],
+                  path: str | Path, *, bag: str | Path | None = None, config: EstimatorConfig | None = None,
+                  before_s: float = 4.0, after_s: float = 15.0, dpi: int = 130) -> Path:
+    """Draw the last contact, the payload pickup and what the estimator made of them, on one time axis.
+
+    The component shown is the one the chosen contact moves most (the largest external estimate of the
+    gate-on run during the episode). Top: measured, predicted with the gate on (blue) and off (red, thin).
+    Bottom: the external estimate ``y − ŷ`` with the gate on, its ±2σ band (published σ) and, when the bag
+    holds it, the simulator's true external effect (black, dashed). Contacts are shaded, the pickup is a
+    vertical line.
+
+    Args:
+        report: The contact report (units, pickup).
+        truth: The true episodes.
+        runs: ``{"on": ..., "off": ...}`` of :func:`~semiparam_ros.eval.contacts.run_contacts`.
+        path: PNG destination.
+        bag: The bag, to read the true external effect (optional).
+        config: Its configuration (needed with ``bag``).
+        before_s: Time shown before the chosen contact [s].
+        after_s: Time shown after the pickup (or the contact, without one) [s].
+        dpi: Resolution.
+
+    Returns:
+        The written path.
+    """
+    on, off = runs["on"], runs["off"]
+    ep = truth.episodes
+    # the last contact before the pickup (the last contact without one)
+    last = int(np.argmax(ep[:, 1]))
+    if truth.pickup_s is not None:
+        before = np.flatnonzero(ep[:, 1] <= truth.pickup_s)
+        last = int(before[np.argmax(ep[before, 1])]) if before.size else last
+    a = ep[last, 0] - before_s
+    b = (truth.pickup_s if truth.pickup_s is not None else ep[last, 1]) + after_s
+    t = on.time_s
+    view = (t >= a) & (t <= b)
+    during = (t >= ep[last, 0]) & (t <= ep[last, 1])
+    k = int(np.argmax(np.max(np.abs(on.external[during]), axis=0))) if during.any() else 0
+    name = report.output.components[k]
+    unit = report.output.units[k]
+    gt = external_truth(bag, on, config, truth.start_stamp_ns) if bag is not None and config is not None \
+        else None
+    fig, axes = plt.subplots(2, 1, figsize=(9.0, 5.6), sharex=True, constrained_layout=True)
+    top, bottom = axes
+    top.plot(t[view], on.y[view, k], color="0.6", lw=0.8, label="measured")
+    top.plot(off.time_s[view], off.predicted[view, k], color="tab:red", lw=0.9, label="predicted, gate off")
+    top.plot(t[view], on.predicted[view, k], color="tab:blue", lw=1.2, label="predicted, gate on")
+    top.set_ylabel(f"{name} [{unit}]")
+    ext, band = on.external[view, k], 2.0 * on.std[view, k]
+    bottom.fill_between(t[view], -band, band, color="tab:blue", alpha=0.2, lw=0, label="±2σ (published)")
+    bottom.plot(t[view], ext, color="tab:blue", lw=0.9, label="external estimate (gate on)")
+    if gt is not None:
+        bottom.plot(t[view], gt[view, k], color="black", lw=1.0, ls="--", label="true external (simulator)")
+    bottom.set_ylabel(f"external {name} [{unit}]")
+    bottom.set_xlabel("time from the start of the log [s]")
+    for ax in axes:
+        for s0, s1 in ep:
+            if s1 >= a and s0 <= b:
+                ax.axvspan(s0, s1, color="tab:orange", alpha=0.15, lw=0)
+        if truth.pickup_s is not None:
+            ax.axvline(truth.pickup_s, color="tab:green", lw=1.2, ls=":")
+        ax.grid(True, alpha=0.3)
+        ax.set_xlim(a, b)
+    label = f"contact {ep[last, 1] - ep[last, 0]:.1f} s, {truth.peak_force[last]:.0f} N"
+    top.text(ep[last, 0], 1.01, label,
+             transform=top.get_xaxis_transform(), fontsize=8, color="tab:orange")
+    if truth.pickup_s is not None:
+        top.text(truth.pickup_s, 1.01, "payload pickup", transform=top.get_xaxis_transform(), fontsize=8,
+                 color="tab:green")
+    top.legend(loc="lower left", fontsize=8, ncol=3, framealpha=0.9)
+    bottom.legend(loc="lower left", fontsize=8, ncol=3, framealpha=0.9)
     return _save(fig, path, dpi)

@@ -41,6 +41,7 @@ __all__ = [
     "SampleArrays",
     "predict_only",
     "progress_enabled",
+    "recovery",
     "run_adaptation",
     "run_protocol",
     "split_bounds",
@@ -618,14 +619,29 @@ def run_adaptation(models: Mapping[str, OnlineModel], stream: SampleArrays, chan
             curve = windowed_rmse(err[:, cols], window)
             curves[kind][group] = curve
             pre_rmse = group_rmse(err[pre][:, cols])
-            summary[kind][group] = _recovery(t, curve, err[:, cols], pre_rmse, after, tolerance, deadline_s)
+            summary[kind][group] = recovery(t, curve, err[:, cols], pre_rmse, after, tolerance, deadline_s)
     return AdaptationResult(kinds=tuple(models), time_s=t, errors=errors, errors_true=errors_true,
                             window=window, curves=curves, summary=summary, change_s=change_s,
                             tolerance=tolerance, deadline_s=deadline_s, pre_s=pre_s, output=output)
 
 
-def _recovery(t: np.ndarray, curve: np.ndarray, err: np.ndarray, pre_rmse: float, after: np.ndarray,
-              tolerance: float, deadline_s: float) -> Recovery:
+def recovery(t: np.ndarray, curve: np.ndarray, err: np.ndarray, pre_rmse: float, after: np.ndarray,
+             tolerance: float, deadline_s: float) -> Recovery:
+    """How a windowed error went through a change at ``t = 0`` (the definition of :func:`run_adaptation`).
+
+    Args:
+        t: (n,) times from the change [s].
+        curve: (n,) sliding-window RMSE of the group [N or N·m].
+        err: (n, c) errors of the group's components [N or N·m].
+        pre_rmse: The pre-change level [N or N·m].
+        after: (n,) mask of the samples from the change on.
+        tolerance: Recovered when the curve stays within ``tolerance × pre_rmse``.
+        deadline_s: Deadline after the change [s].
+
+    Returns:
+        The :class:`Recovery` (``recovery_time_s``: first time from which the curve stays within the bound
+        to the end; ``None`` if never).
+    """
     limit = tolerance * pre_rmse
     idx_after = np.flatnonzero(after)
     bad_after = idx_after[curve[idx_after] > limit]

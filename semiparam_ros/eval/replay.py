@@ -146,8 +146,10 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
             ``semiparametric.combination`` says), :data:`JOINT_SP` (always the joint fit) and the diagnostic
             :data:`FROZEN_P`.
         n_train: Samples the rigid-body stage of :data:`FROZEN_P` learns (required for it).
-        sample_period_s: Sample period [s] converting a warm-up given in seconds (measure it as the node
-            does: :func:`~semiparam_ros.core.estimator.measured_period_s` of the first stream learned).
+        sample_period_s: The stream's sample period [s], measured as the node does
+            (:func:`~semiparam_ros.core.estimator.measured_period_s` of the first stream learned): it
+            converts a warm-up given in seconds, and with ``adaptation.time_constant`` τ > 0 every learner
+            forgets with β = exp(−T/τ), as in the node (``None``: the configured factors, warm-up at 100 Hz).
 
     Returns:
         Models by kind, in the given order.
@@ -276,7 +278,8 @@ def adaptation_configs(config: EstimatorConfig, forgetting: float,
             may be 1).
 
     Returns:
-        ``{"on": the given β, "off": β = 1 in both stages}`` (``adaptation.time_constant`` 0 in both).
+        ``{"on": the given β, "off": β = 1 in both stages}``, both with ``adaptation.time_constant`` 0 (the
+        comparison is of these factors, whatever the base configuration's memory τ).
 
     Raises:
         ValueError: If ``forgetting`` is out of range.

@@ -15,7 +15,8 @@ from typing import Any
 from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.config import EstimatorConfig, load_config, write_config
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.figures import plot_adaptation, plot_protocol
+from semiparam_ros.eval.contacts import contact_report, run_contacts
+from semiparam_ros.eval.figures import plot_adaptation, plot_contacts, plot_protocol
 from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags, load_samples
 from semiparam_ros.eval.report import adaptation_report, protocol_report, write_json
 from semiparam_ros.eval.selection import TUNED_KEYS, grid_table, holdout_search, protocol_search
@@ -24,6 +25,7 @@ from semiparam_ros.eval.tables import (
     checks_table,
     comparisons_table,
     components_table,
+    contacts_table,
     protocol_table,
 )
 
@@ -98,6 +100,7 @@ def run_evaluate(
     test: Path | None,
     payload: Path | None,
     config: Path | None,
+    contacts: Path | None = None,
     overrides: Mapping[str, Any] | None = None,
     joint_states_topic: str | None = None,
     wrench_topic: str | None = None,
@@ -124,6 +127,8 @@ def run_evaluate(
         train: Training bag (paper protocol) or optional pre-training bag (payload scenario).
         test: Test bag (paper protocol).
         payload: Payload bag (adaptation scenario); exclusive with ``test``.
+        contacts: Bag with contact episodes (contact evaluation: the estimator with the gate on and off,
+            :mod:`semiparam_ros.eval.contacts`); exclusive with ``test`` and ``payload``.
         config: Parameter file (``None``: the shipped one).
         overrides: Parameter overrides.
         joint_states_topic: JointState topic (default from the configuration).
@@ -155,7 +160,15 @@ def run_evaluate(
     """
     cfg = load_evaluation_config(config, overrides)
     topics = Topics.from_config(cfg, joint_states_topic, wrench_topic)
-    if payload is not None:
+    if contacts is not None:
+        truth, runs = run_contacts(contacts, cfg, topics=topics)
+        report_c = contact_report(truth, runs, cfg, protocol={
+            "bag": str(contacts), "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench})
+        text = contacts_table(report_c)
+        if plot_path is not None:
+            plot_contacts(report_c, truth, runs, plot_path, bag=contacts, config=cfg)
+        report: Any = report_c
+    elif payload is not None:
         result, info = evaluate_adaptation(
             payload,
             cfg,
@@ -173,7 +186,7 @@ def run_evaluate(
         text = adaptation_table(adaptation)
         if plot_path is not None:
             plot_adaptation(adaptation, plot_path)
-        report: Any = adaptation
+        report = adaptation
     else:
         if train is None or test is None:
             raise ValueError("the paper protocol needs --train and --test")

@@ -10,6 +10,7 @@ import math
 from collections.abc import Sequence
 
 from semiparam_ros.eval.compare import Comparison, format_p
+from semiparam_ros.eval.contacts import ContactReport
 from semiparam_ros.eval.metrics import GROUP_UNITS
 from semiparam_ros.eval.report import AdaptationReport, Check, ProtocolReport
 
@@ -18,6 +19,7 @@ __all__ = [
     "checks_table",
     "comparisons_table",
     "components_table",
+    "contacts_table",
     "fmt",
     "protocol_table",
 ]
@@ -208,3 +210,44 @@ def adaptation_table(report: AdaptationReport) -> str:
                 + " |"
             )
     return "\n".join(lines) + "\n"
+
+
+def contacts_table(report: ContactReport) -> str:
+    """Gate on and off: detection per episode summarized, error after vs before the contacts, payload.
+
+    Args:
+        report: A :class:`~semiparam_ros.eval.contacts.ContactReport`.
+
+    Returns:
+        Markdown: one summary table (a row per gate setting) and one row per episode.
+    """
+    groups = list(report.output.groups)
+    first = groups[0]
+    header = ["gate", "recall", f"recall ≥ {report.strong_force:g} N", "false alarms / min",
+              "median delay [s]"]
+    for g in groups:
+        u = report.output.groups[g].unit
+        header += [f"{g} before [{u}]", f"{g} after [{u}]", f"{g} after/before"]
+    header += [f"{first} adopted [s]", f"{first} back within tolerance [s]"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for key, r in report.runs.items():
+        row = [key, f"{r.recall:.2f}", f"{r.recall_strong:.2f}", f"{r.false_alarms_per_minute:.2f}",
+               f"{r.median_delay_s:.3f}"]
+        for g in groups:
+            row += [fmt(r.before[g]), fmt(r.after[g]), f"{r.ratio(g):.3f}"]
+        adopt = None if r.adoption_s is None else r.adoption_s[first]
+        rec = None if r.recovery is None else r.recovery[first].recovery_time_s
+        row += ["n/a" if r.adoption_s is None else ("never" if adopt is None else f"{adopt:.1f}"),
+                "n/a" if r.recovery is None else ("never" if rec is None else f"{rec:.1f}")]
+        lines.append("| " + " | ".join(row) + " |")
+    text = "\n".join(lines) + "\n"
+    keys = list(report.runs)
+    ep_header = ["episode", "start [s]", "duration [s]", "peak [N]"] + [f"delay, gate {k} [s]" for k in keys]
+    lines = ["| " + " | ".join(ep_header) + " |", "|" + "---|" * len(ep_header)]
+    for i, e in enumerate(report.runs[keys[0]].episodes):
+        row = [str(i + 1), f"{e.start_s:.2f}", f"{e.end_s - e.start_s:.2f}", f"{e.peak_force:.1f}"]
+        for k in keys:
+            ek = report.runs[k].episodes[i]
+            row.append(f"{ek.delay_s:.3f}" if ek.detected else "missed")
+        lines.append("| " + " | ".join(row) + " |")
+    return text + "\nPer episode:\n\n" + "\n".join(lines) + "\n"
