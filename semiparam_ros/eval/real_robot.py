@@ -33,7 +33,8 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import measured_period_s
+from semiparam_ros.core.estimator import OnlineEstimator, measured_period_s
+from semiparam_ros.core.messages import Sample
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.baselines import (
     Persistence,
@@ -55,6 +56,7 @@ __all__ = [
     "LEARNERS",
     "PERSISTENCE",
     "P_RIGID",
+    "SP_NODE",
     "Criterion",
     "InjectedTorque",
     "RealRobotComparison",
@@ -71,6 +73,8 @@ BATCH_ONLINE = "batch LS online"
 PERSISTENCE = "persistence"
 P_RIGID = "P rigid"
 FROZEN_SUFFIX = " frozen"
+#: The node's own step (:class:`OnlineEstimator`: contact gate and σ as configured) around the trained SP.
+SP_NODE = "SP (node, gate on)"
 LEARNERS: tuple[str, ...] = ("P", "NP", "SP")
 
 
@@ -167,6 +171,7 @@ def _models(config: EstimatorConfig, train: SampleArrays) -> tuple[dict[str, Any
 
 
 def injected_torque_recovery(models: Mapping[str, Any], data: SampleArrays, *, frozen: Sequence[str] = (),
+                             gated: Sequence[str] = (), config: EstimatorConfig | None = None,
                              amplitude: float = 1.0, start_s: float = 10.0,
                              duration_s: float = 1.0) -> InjectedTorque:
     """Add a constant external torque to every joint over a window and measure it in each residual.
@@ -180,6 +185,9 @@ def injected_torque_recovery(models: Mapping[str, Any], data: SampleArrays, *, f
         models: Trained models by name.
         data: The stream (joint torques [N·m]).
         frozen: Names of models that do not learn.
+        gated: Names of models run through the node's own step (:class:`OnlineEstimator` with
+            ``config``: the contact gate decides what is learned, on the stream's stamps).
+        config: The configuration of the gated runs (required with ``gated``).
         amplitude: The step [N·m], non-zero.
         start_s: Start from the stream's first sample [s].
         duration_s: Length [s].
@@ -195,13 +203,19 @@ def injected_torque_recovery(models: Mapping[str, Any], data: SampleArrays, *, f
     if amplitude == 0.0 or not math.isfinite(amplitude) or window.sum() < 10:
         raise ConfigurationError("the injected torque needs a non-zero amplitude and a window of ≥ 10 "
                                  f"samples inside the stream (it lasts {t[-1]:.1f} s)")
+    if gated and config is None:
+        raise ConfigurationError("gated models need the configuration of the node's step")
     Y_ext = data.Y + amplitude * window[:, None]
     idx = np.flatnonzero(window)
     end = idx[int(0.9 * len(idx)):]
     mean_fraction: dict[str, float] = {}
     end_fraction: dict[str, float] = {}
     for name, model in models.items():
-        if name in frozen:
+        if name in gated:
+            assert config is not None  # checked above
+            base = _node_predictions(model, config, data, data.Y)
+            ext = _node_predictions(model, config, data, Y_ext)
+        elif name in frozen:
             base = predict_only(model, data.X)[0]
             ext = base  # a frozen model's prediction does not depend on the measured torques
         else:
@@ -211,6 +225,18 @@ def injected_torque_recovery(models: Mapping[str, Any], data: SampleArrays, *, f
         mean_fraction[name] = float(change[idx].mean())
         end_fraction[name] = float(change[end].mean())
     return InjectedTorque(float(amplitude), float(start_s), float(duration_s), mean_fraction, end_fraction)
+
+
+def _node_predictions(model: Any, config: EstimatorConfig, data: SampleArrays, Y: np.ndarray) -> np.ndarray:
+    """A-priori predictions of the node's step (gate, σ, adaptation as configured) from a copy of a model."""
+    est = OnlineEstimator(config)
+    est.model = model.copy()
+    n = data.X.shape[1] // 3
+    out = np.empty_like(Y)
+    for i, (stamp, x, y) in enumerate(zip(data.stamps_ns, data.X, Y, strict=True)):
+        sample = Sample(int(stamp), x[:n], x[n:2 * n], x[2 * n:], y)
+        out[i] = est.step(sample).prediction.total
+    return out
 
 
 def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleArrays, *,
@@ -230,7 +256,8 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
         splits: Test parts of the protocol.
         window_s: Sliding window of the error curves [s].
         first_s: Initial segment reported separately [s].
-        inject: Also run :func:`injected_torque_recovery` (a 1 N·m step for 1 s at 40 % of the test log).
+        inject: Also run :func:`injected_torque_recovery`
+            (a 1 N·m step for 1 s at the middle of the test log, after the gate's warm-up).
         protocol: Extra settings recorded in the report.
         progress: Progress bar (only on a terminal).
 
@@ -266,9 +293,12 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
     injected = None
     if inject:
         duration = len(test) * test.sample_period_s
-        chosen = ("persistence", "SP frozen", "SP", "P", BATCH_ONLINE)
-        injected = injected_torque_recovery({k: models[k] for k in chosen}, test, frozen=sorted(frozen),
-                                            amplitude=1.0, start_s=0.4 * duration, duration_s=1.0)
+        chosen = {k: models[k] for k in ("persistence", "SP frozen", "SP", "P", BATCH_ONLINE)}
+        chosen[SP_NODE] = models["SP"]  # the trained SP, run as the node runs it
+        gate_on = config.with_overrides({"gate.enabled": True})
+        injected = injected_torque_recovery(chosen, test, frozen=sorted(frozen), gated=[SP_NODE],
+                                            config=gate_on, amplitude=1.0, start_s=0.5 * duration,
+                                            duration_s=1.0)
     std = dict(zip(joints, (float(s) for s in test.Y.std(axis=0)), strict=True))
     return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected)
 
