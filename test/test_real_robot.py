@@ -176,7 +176,7 @@ def test_injected_torque_is_whole_in_a_frozen_residual_and_one_sample_in_persist
         injected_torque_recovery({"fixed": fixed}, test, frozen=["fixed"], start_s=100.0)
 
 
-def test_the_node_step_sees_an_injected_torque_whole_with_the_gate_and_equals_test_then_train_without(tmp_path):
+def test_node_step_sees_an_injected_torque_with_the_gate_and_equals_test_then_train_without(tmp_path):
     """The node's own step around a trained SP: gate off, its predictions are test-then-train's (the same
     learner, predict then learn); gate on, a 1 N·m step (≫ 5σ at this noise, shorter than
     gate.max_contact_duration) is not learned, so the residual shows it whole."""
