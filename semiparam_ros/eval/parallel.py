@@ -15,6 +15,7 @@ register_ray; register_ray()`` then ``backend="ray"``); :func:`run_jobs` picks u
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
@@ -60,7 +61,7 @@ def run_jobs(
     n = resolve_jobs(jobs)
     if n == 1 or len(args) <= 1:
         items: Any = args
-        if progress:
+        if progress and sys.stderr.isatty():  # a bar redrawn into a log or a pipe leaves frames
             from tqdm import tqdm
 
             items = tqdm(args, unit=unit)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -31,7 +32,7 @@ def generate(
             arms (:func:`~semiparam_ros.sim.arms.arm_preset_configs`).
         overwrite: Replace existing bag folders of the same names.
         compress: zstd-compress the MCAP chunks.
-        progress: Show a tqdm progress bar on stderr.
+        progress: Show a tqdm progress bar on stderr (only when stderr is a terminal).
 
     Returns:
         The bag folders, in the order of ``configs``.
@@ -40,6 +41,7 @@ def generate(
         ValueError: On an invalid scenario, an existing folder without ``overwrite`` (checked for all
             bags before anything is simulated), or a circle the arm cannot track.
     """
+    show = bool(progress) and sys.stderr.isatty()  # a bar redrawn into a log or a pipe leaves frames
     out = Path(out_dir)
     names = [c.name for c in configs]
     if len(set(names)) != len(names):
@@ -53,7 +55,7 @@ def generate(
     for config in configs:
         if isinstance(config, ArmScenarioConfig):
             count = round(config.duration * config.rate)
-            with tqdm(total=count, desc=config.name, unit="stamp", disable=not progress, leave=True) as bar:
+            with tqdm(total=count, desc=config.name, unit="stamp", disable=not show, leave=True) as bar:
                 arm = simulate_arm(config)
                 paths.append(
                     write_arm_recording(
@@ -65,7 +67,7 @@ def generate(
         n_joint = round((config.duration + 2.0 * LEAD_IN_S) * config.joint_rate)  # lead-in and lead-out
         n_wrench = round(config.duration * config.wrench_rate)
         total = n_wrench + 2 * n_joint + (3 if config.contacts is None else 5) * n_wrench
-        with tqdm(total=total, desc=config.name, unit="msg", disable=not progress, leave=True) as bar:
+        with tqdm(total=total, desc=config.name, unit="msg", disable=not show, leave=True) as bar:
             recording = simulate(config, progress=bar.update)
             paths.append(
                 write_recording(
