@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from test_dynamics import reference_model as dynamics_reference_model
+from test_dynamics import reference_torques, reference_wrench
 
 from semiparam_ros.core.config import EstimatorConfig, load_config
 from semiparam_ros.core.estimator import OnlineEstimator, build_regressor, column_scale
@@ -25,36 +26,16 @@ def ur5() -> EstimatorConfig:
 
 # ---------------------------------------------------------------- independent reference (plain Pinocchio)
 def reference_model(config: EstimatorConfig, sensor: str | None = None) -> pin.Model:
-    """The URDF's model built without the code under test (locked joints at their positions); an F/T
-    sensor joint becomes a revolute joint kept at 0, so RNEA reports the force through it."""
-    root = ET.fromstring(config.urdf_path().read_text())
-    if sensor is not None:
-        for j in root.findall("joint"):
-            if j.get("name") == sensor:
-                j.set("type", "revolute")
-                ET.SubElement(j, "axis", xyz="0 0 1")
-                ET.SubElement(j, "limit", effort="1", velocity="1", lower="-1", upper="1")
-    full = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
-    q0 = pin.neutral(full)
-    for name, val in config.locked.items():
-        q0[full.joints[full.getJointId(name)].idx_q] = val
-    keep = set(config["robot.joints"]) | ({sensor} if sensor else set())
-    model = pin.buildReducedModel(full, [j for j in range(1, full.njoints) if full.names[j] not in keep], q0)
-    model.gravity = pin.Motion(np.asarray(config["robot.gravity"]), np.zeros(3))
-    return model
+    """The URDF's model built without the code under test (test_dynamics' reference, from a config)."""
+    return dynamics_reference_model(config.urdf_path().read_text(), config["robot.joints"], sensor,
+                                    config.locked, gravity=config["robot.gravity"])
 
 
 def reference_rnea(model: pin.Model, joints, q, dq, ddq, sensor: str | None = None) -> np.ndarray:
-    qf, vf, af = pin.neutral(model), np.zeros(model.nv), np.zeros(model.nv)
-    ids = [model.joints[model.getJointId(n)] for n in joints]
-    for i, jm in enumerate(ids):
-        qf[jm.idx_q], vf[jm.idx_v], af[jm.idx_v] = q[i], dq[i], ddq[i]
-    data = model.createData()
-    tau = pin.rnea(model, data, qf, vf, af)
+    """Joint torques [N·m], or the F/T reading [N, N·m] through ``sensor``, from plain RNEA."""
     if sensor is None:
-        return np.array([tau[jm.idx_v] for jm in ids])
-    f = data.f[model.getJointId(sensor)]  # force the proximal side applies on the distal subtree
-    return -np.concatenate([f.linear, f.angular])
+        return reference_torques(model, joints, q, dq, ddq)
+    return reference_wrench(model, joints, sensor, q, dq, ddq)
 
 
 def random_state(config: EstimatorConfig, rng: np.random.Generator):
