@@ -31,9 +31,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.io.bags import BagWriter
 from semiparam_ros.sim.arms import ArmRecording
@@ -41,6 +39,7 @@ from semiparam_ros.sim.writer import (
     GROUND_TRUTH_ACCELERATION_TOPIC,
     GROUND_TRUTH_CONTACT_TOPIC,
     SCENARIO_FILE,
+    write_sidecar,
 )
 
 __all__ = [
@@ -145,6 +144,5 @@ def write_arm_recording(
         entry["count"] = counts.get(topic, 0)
     info = dict(rec.info)
     info["topics"] = topics
-    sidecar = path / SCENARIO_FILE
-    atomic_write_text(sidecar, yaml.safe_dump(info, sort_keys=False, default_flow_style=None, width=110))
+    write_sidecar(path, info)
     return path

@@ -48,6 +48,7 @@ __all__ = [
     "SCENARIO_FILE",
     "WRENCH_TOPIC",
     "write_recording",
+    "write_sidecar",
 ]
 
 JOINT_STATES_TOPIC = "/joint_states"
@@ -60,10 +61,18 @@ GROUND_TRUTH_EXTERNAL_WRENCH_TOPIC = "/ground_truth/external_wrench"
 SCENARIO_FILE = "scenario.yaml"
 
 
-def _write_yaml_atomic(path: Path, data: object) -> None:
-    """Write YAML to ``path`` atomically (:func:`semiparam_ros.atomic.atomic_open`)."""
-    with atomic_open(path, "w") as handle:
-        yaml.safe_dump(data, handle, sort_keys=False, default_flow_style=None, width=110)
+def write_sidecar(bag: Path, info: object) -> None:
+    """Write a bag's ground-truth sidecar ``bag/scenario.yaml`` atomically (every simulated bag's format).
+
+    Args:
+        bag: The bag folder.
+        info: The scenario description (plain YAML-serializable data).
+
+    Raises:
+        OSError: If the file cannot be written (an existing sidecar is then unchanged).
+    """
+    with atomic_open(bag / SCENARIO_FILE, "w") as handle:
+        yaml.safe_dump(info, handle, sort_keys=False, default_flow_style=None, width=110)
 
 
 def write_recording(
@@ -185,5 +194,5 @@ def write_recording(
                 "count": counts.get(topic, 0),
                 "frame_id": frame,
             }
-    _write_yaml_atomic(path / SCENARIO_FILE, info)
+    write_sidecar(path, info)
     return path
