@@ -162,23 +162,22 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
     if unknown:
         raise ValueError(f"unknown model kind(s) {unknown}; choose from {[*KINDS, *EXTRA_KINDS]}")
     regressor = build_regressor(config) if any(k != "NP" for k in kinds) else None
-    period = sample_period_s
     models: dict[str, Any] = {}
     for kind in kinds:
         if kind == FROZEN_P:
             if n_train is None:
                 raise ValueError(f"{FROZEN_P} needs the number of training samples")
-            models[kind] = FrozenParametricSP(build_model(config, "SP", regressor, sample_period_s=period),
-                                              n_train)
+            models[kind] = FrozenParametricSP(
+                build_model(config, "SP", regressor, sample_period_s=sample_period_s), n_train)
         elif kind == JOINT_SP:
             try:
                 joint = config.with_overrides({"semiparametric.combination": "joint"})
             except ValueError as err:
                 raise ValueError(f"model kind {JOINT_SP!r} (semiparametric.combination 'joint'): "
                                  f"{err}") from None
-            models[kind] = build_model(joint, "SP", regressor, sample_period_s=period)
+            models[kind] = build_model(joint, "SP", regressor, sample_period_s=sample_period_s)
         else:
-            models[kind] = build_model(config, kind, regressor, sample_period_s=period)
+            models[kind] = build_model(config, kind, regressor, sample_period_s=sample_period_s)
     return models
 
 
