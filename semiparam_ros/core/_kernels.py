@@ -43,7 +43,7 @@ def _angle(a: float, w0: float) -> tuple[float, float, float]:
     return rr, a * inv, w0 * inv
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath={"contract"})
 def _rotate_in(
     M: np.ndarray,
     W: np.ndarray,
@@ -124,8 +124,10 @@ def _rotate_in(
                     # one query row: its substitution over rows i, i+1 rides in the rotation loop
                     # (same operations, in the same order, as _forward_block with m = 2)
                     Vq = QV[0]
-                    vi = Vq[i] / M[i, i]
-                    vk = (Vq[i + 1] - vi * M[i, i + 1]) / M[i + 1, i + 1]
+                    inv_i = 1.0 / M[i, i]
+                    inv_k = 1.0 / M[i + 1, i + 1]
+                    vi = Vq[i] * inv_i
+                    vk = (Vq[i + 1] - vi * M[i, i + 1]) * inv_k
                     Vv = Vq[i + 2 : b]
                     nb = Vv.shape[0]
                     for j in range(nb):
@@ -147,15 +149,12 @@ def _rotate_in(
                         y1 = c1 * y - ss1 * x
                         Mk[j] = cs2 * z + s2 * y1
                         Wv[j] = c2 * y1 - ss2 * z
-                    Qvar[0] += vi * vi
-                    Qvar[0] += vk * vk
+                    Qvar[0] += vi * vi + vk * vk
                     Pq = QP[0]
                     di = M[i, b:bt]
                     dk = M[i + 1, b:bt]
                     for q in range(bt - b):
-                        Pq[q] += vi * di[q]
-                    for q in range(bt - b):
-                        Pq[q] += vk * dk[q]
+                        Pq[q] += vi * di[q] + vk * dk[q]
                 else:
                     for j in range(Mi.shape[0]):
                         x = Mi[j]
@@ -192,6 +191,7 @@ def _rotate_in(
         M[i, i] = diag * sc
         Mi = M[i, i + 1 :]
         n = Mi.shape[0]
+        fused = False
         if n_act == 0:
             if sc != 1.0:
                 for j in range(n):
@@ -220,14 +220,42 @@ def _rotate_in(
             s2 = coef[1, 1]
             W1 = W[act[0], i + 1 : bt]
             W2 = W[act[1], i + 1 : bt]
-            for j in range(n):
-                x = Mi[j]
+            nb = 0
+            if kq == 1:
+                # one query row: its substitution over row i rides in the rotation loop (as for a pair)
+                fused = True
+                Vq = QV[0]
+                vi = Vq[i] / M[i, i]
+                Vv = Vq[i + 1 : b]
+                nb = Vv.shape[0]
+                for j in range(nb):
+                    x = Mi[j]
+                    y1 = W1[j]
+                    y2 = W2[j]
+                    x1 = cs1 * x + s1 * y1
+                    W1[j] = c1 * y1 - ss1 * x
+                    xn = c2 * x1 + s2 * y2
+                    Mi[j] = xn
+                    W2[j] = c2 * y2 - s2 * x1
+                    Vv[j] -= vi * xn
+            # the rest (all of the row, or its d columns after a fused query), on slices from index 0
+            Mr = Mi[nb:]
+            W1 = W1[nb:]
+            W2 = W2[nb:]
+            for j in range(n - nb):
+                x = Mr[j]
                 y1 = W1[j]
                 y2 = W2[j]
                 x1 = cs1 * x + s1 * y1
                 W1[j] = c1 * y1 - ss1 * x
-                Mi[j] = c2 * x1 + s2 * y2
+                Mr[j] = c2 * x1 + s2 * y2
                 W2[j] = c2 * y2 - s2 * x1
+            if fused:
+                Qvar[0] += vi * vi
+                Pq = QP[0]
+                di = M[i, b:bt]
+                for q in range(bt - b):
+                    Pq[q] += vi * di[q]
         else:
             for p in range(n_act):
                 c = coef[p, 0]
@@ -252,7 +280,7 @@ def _rotate_in(
                     y = W[r, bt + q]
                     scratch[q] = c * x + s * y
                     W[r, bt + q] = c * y - s * x
-        if kq > 0:
+        if kq > 0 and not fused:
             _forward_block(M, i, 1, QV, QP, Qvar, qv)
         i += 1
 
