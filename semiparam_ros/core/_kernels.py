@@ -220,7 +220,6 @@ def _rotate_in(
             s2 = coef[1, 1]
             W1 = W[act[0], i + 1 : bt]
             W2 = W[act[1], i + 1 : bt]
-            nb = 0
             if kq == 1:
                 # one query row: its substitution over row i rides in the rotation loop (as for a pair)
                 fused = True
@@ -238,24 +237,28 @@ def _rotate_in(
                     Mi[j] = xn
                     W2[j] = c2 * y2 - s2 * x1
                     Vv[j] -= vi * xn
-            # the rest (all of the row, or its d columns after a fused query), on slices from index 0
-            Mr = Mi[nb:]
-            W1 = W1[nb:]
-            W2 = W2[nb:]
-            for j in range(n - nb):
-                x = Mr[j]
-                y1 = W1[j]
-                y2 = W2[j]
-                x1 = cs1 * x + s1 * y1
-                W1[j] = c1 * y1 - ss1 * x
-                Mr[j] = c2 * x1 + s2 * y2
-                W2[j] = c2 * y2 - s2 * x1
-            if fused:
+                for j in range(nb, n):  # the t columns of d
+                    x = Mi[j]
+                    y1 = W1[j]
+                    y2 = W2[j]
+                    x1 = cs1 * x + s1 * y1
+                    W1[j] = c1 * y1 - ss1 * x
+                    Mi[j] = c2 * x1 + s2 * y2
+                    W2[j] = c2 * y2 - s2 * x1
                 Qvar[0] += vi * vi
                 Pq = QP[0]
                 di = M[i, b:bt]
                 for q in range(bt - b):
                     Pq[q] += vi * di[q]
+            else:
+                for j in range(n):
+                    x = Mi[j]
+                    y1 = W1[j]
+                    y2 = W2[j]
+                    x1 = cs1 * x + s1 * y1
+                    W1[j] = c1 * y1 - ss1 * x
+                    Mi[j] = c2 * x1 + s2 * y2
+                    W2[j] = c2 * y2 - s2 * x1
         else:
             for p in range(n_act):
                 c = coef[p, 0]
