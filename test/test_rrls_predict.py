@@ -104,6 +104,36 @@ def test_deferred_update_leaves_the_same_state_as_an_immediate_one(beta, kq):
         assert np.array_equal(value, lazy.state_dict()[key]), key
 
 
+
+@pytest.mark.parametrize("beta", [1.0, 0.995])
+@pytest.mark.parametrize("b", [64, 131])
+def test_fused_query_sweeps_at_vector_lengths(beta, b):
+    """Long rows (vectorised loop bodies and their remainders) through every fused sweep of one query row.
+
+    β = 1: the pair sweep (one data row); β < 1: also the two-active-row sweep (data row plus the
+    regularizer row, whose coordinate cycles over all b). The state must be bit-for-bit the immediate
+    update's; the prediction and variance must equal the pure-numpy dot-product substitution on that
+    state within the conditioning bound of the module docstring.
+    """
+    rng = np.random.default_rng(b + int(1000 * beta))
+    t = 6
+    lazy = RecursiveRLS(b, t, 0.8, forgetting=beta)
+    eager = RecursiveRLS(b, t, 0.8, forgetting=beta)
+    for n, (Z, U) in enumerate(random_steps(rng, 2 * b + 7, 1, b, t)):
+        lazy.update(Z, U)
+        eager.predict_update(Z, U)
+        if n % 5 and n < 2 * b:
+            continue
+        zq = rng.standard_normal(b)
+        got, got_var = lazy.predict(zq, return_variance=True)
+        M = np.hstack([eager.R, eager.d])
+        P_ref, var_ref = forward_predict(M, zq)
+        kappa = eager.condition_number()
+        assert np.all(np.abs(got - P_ref[0]) <= bound(eager, zq[None, :], kappa)[0])
+        assert abs(got_var - var_ref[0]) <= 10 * b * EPS * kappa * var_ref[0]
+        for key, value in eager.state_dict().items():
+            assert np.array_equal(value, lazy.state_dict()[key]), key
+
 def test_pending_update_is_a_copy_and_counters_move_at_once():
     rng = np.random.default_rng(6)
     b, t = 8, 2

@@ -20,7 +20,12 @@ a-priori errors ``U − Z W_old`` follow by a k×k forward substitution. Data ro
 regularizer row never enters the data rows' errors.
 
 Loops run over row slices with ranges starting at 0 so LLVM vectorises them (2–4× faster than indexing
-``M[i, j]`` with ``j`` from ``i+1``). Only float64 C-contiguous arrays are used (one compiled signature).
+``M[i, j]`` with ``j`` from ``i+1``; checked in the generated assembly: AVX2 ``vmulpd``/``vfmadd`` on
+``ymm`` registers). The rotation kernel is compiled with ``fastmath={"contract"}`` and nothing else: each
+``a·b + c`` may become one fused multiply-add (one rounding instead of two, so each operation is at least
+as accurate as before; no reassociation, no finite-math or reciprocal approximations). The same expression
+is contracted the same way in every loop, so an update gives the same bits whether or not a query row is
+fused into its sweep (tested). Only float64 C-contiguous arrays are used (one compiled signature).
 """
 
 from __future__ import annotations
@@ -72,9 +77,12 @@ def _rotate_in(
     Query rows (``QV`` (kq, b) as made by :func:`_start_queries`, ``QP`` (kq, t), ``Qvar`` (kq,); kq may
     be 0) are predicted with the *new* factor during the same sweep: each row of ``M`` is final as soon as
     its column is rotated, and the forward substitution of :func:`solve_predict` needs the rows in that
-    same order, so it advances over the row(s) just finished while they are still in cache. The result
-    equals :func:`solve_predict` on the updated ``M`` (the same operations in the same order, blocks of
-    one or two rows instead of four).
+    same order, so it advances over the row(s) just finished while they are still in cache. A single query
+    row is fused into the pair sweep (one data row) and into the two-active-row sweep (data row plus the
+    regularizer row, β < 1): its remainder is loaded and stored once per sweep instead of in a second pass
+    over the row. The result equals :func:`solve_predict` on the updated ``M`` to rounding (blocks of one
+    or two rows instead of four, reciprocals of the finished diagonal in the pair sweep, FMA); the
+    rotations themselves, and so the state, are the same whether or not a query rides along.
     """
     qv = np.empty(2)
     kq = QV.shape[0]
