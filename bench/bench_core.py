@@ -36,12 +36,15 @@ the process CPU time per call and the CPU share (CPU time / wall time) are repor
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import pathlib
 import platform
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 
@@ -70,6 +73,8 @@ REFIT_WINDOW = 1000
 RESULTS = pathlib.Path(__file__).resolve().parent / "results" / "bench_core.json"
 RESULTS_PU = RESULTS.with_name("bench_core_predict_update.json")
 TARGETS_US = {500: 60.0, 1000: 250.0}
+#: the kernels before issue 15 item 1's speed-up (``--predict-update-only`` runs them side by side)
+KERNEL_BASELINE = "13c2755"
 
 
 def time_per_call(step: Callable[[int], object], calls: int, repeats: int) -> dict[str, float]:
@@ -235,35 +240,112 @@ def bench_size(D: int, quick: bool, rng: np.random.Generator) -> dict[str, objec
     return row
 
 
-def predict_update_only(path: pathlib.Path) -> int:
-    """The predict-then-update comparison alone (issue 15's target), printed and saved to ``path``."""
+def load_old_rrls(rev: str, tmp: pathlib.Path) -> type[RecursiveRLS]:
+    """``RecursiveRLS`` of this tree running the kernels of ``core/_kernels.py`` at ``rev``.
+
+    The old kernel module is extracted with ``git show`` into ``tmp`` and the current ``rrls.py`` is
+    imported a second time with its kernel import pointing there, so old and new differ in the compiled
+    kernels only (the Python side is today's) and run in the same process on the same rows.
+    """
+    root = pathlib.Path(__file__).resolve().parents[1]
+    source = subprocess.run(["git", "-C", str(root), "show", f"{rev}:semiparam_ros/core/_kernels.py"],
+                            check=True, capture_output=True, text=True).stdout
+    (tmp / "_old_kernels.py").write_text(source)
+    rrls_src = (root / "semiparam_ros" / "core" / "rrls.py").read_text()
+    marker = "from semiparam_ros.core._kernels import"
+    if marker not in rrls_src:
+        raise RuntimeError("rrls.py no longer imports the kernels as expected")
+    (tmp / "_old_rrls.py").write_text(rrls_src.replace(marker, "from _old_kernels import"))
+    sys.path.insert(0, str(tmp))
+    try:
+        for name in ("_old_kernels", "_old_rrls"):
+            spec = importlib.util.spec_from_file_location(name, tmp / f"{name}.py")
+            assert spec is not None and spec.loader is not None
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(tmp))
+    return sys.modules["_old_rrls"].RecursiveRLS  # type: ignore[no-any-return]
+
+
+def time_interleaved(steps: dict[str, Callable[[int], object]], calls: int, repeats: int,
+                     ) -> dict[str, list[float]]:
+    """Wall µs per call of each step, per repeat, the steps alternating in short repeats (one run)."""
+    for step in steps.values():
+        step(0)
+    out: dict[str, list[float]] = {name: [] for name in steps}
+    i = 1
+    for _ in range(repeats):
+        for name, step in steps.items():
+            t0 = time.perf_counter()
+            for _ in range(calls):
+                step(i)
+                i += 1
+            out[name].append((time.perf_counter() - t0) / calls * 1e6)
+    return out
+
+
+def predict_update_only(path: pathlib.Path, baseline: str = KERNEL_BASELINE) -> int:
+    """The predict-then-update comparison (issue 15's target), old kernels next to new, saved to ``path``.
+
+    For D ∈ {500, 1000} and β ∈ {1 (the target's setting), 0.9995 (the node's: a regularizer row per
+    step)}, four steps alternate in short repeats on the same rows: ``predict_update`` and the habit
+    (``predict(z)`` — with the variance for β < 1, as the node asks — then ``update(z, u)``), each with
+    the new kernels and with the kernels at ``baseline``.
+    """
     rng = np.random.default_rng(0)
     load_before = os.getloadavg()
     rows = []
-    with threadpool_limits(1):
-        for D in (500, 1000):
-            Z, U = features_stream(rng, 4001, D)
-            fused, habit = RecursiveRLS(D, T_OUT, LAM), RecursiveRLS(D, T_OUT, LAM)
+    with tempfile.TemporaryDirectory() as tmp, threadpool_limits(1):
+        OldRLS = load_old_rrls(baseline, pathlib.Path(tmp))
+        for beta in (1.0, 0.9995):
+            for D in (500, 1000):
+                Z, U = features_stream(rng, 4001, D)
+                learners = {f"{age} {kind}": cls(D, T_OUT, LAM, forgetting=beta)
+                            for age, cls in (("old", OldRLS), ("new", RecursiveRLS))
+                            for kind in ("predict_update", "habit")}
+                want_var = beta < 1.0
 
-            def both(i: int, habit: RecursiveRLS = habit, Z: np.ndarray = Z, U: np.ndarray = U) -> None:
-                habit.predict(Z[i % 4000])
-                habit.update(Z[i % 4000], U[i % 4000])
+                def fused(rls: RecursiveRLS, Z: np.ndarray = Z, U: np.ndarray = U) -> Callable[[int], object]:
+                    return lambda i: rls.predict_update(Z[i % 4000], U[i % 4000])
 
-            rows.append({"D": D, "predict_then_update": time_side_by_side(
-                lambda i, fused=fused, Z=Z, U=U: fused.predict_update(Z[i % 4000], U[i % 4000]), both,
-                max(5, int(2e4 / D)), 120)})
-    print("| D | predict_update µs | predict, update µs | ratio wall (median of pairs) | ratio CPU "
-          "| target |")
-    print("|---|---|---|---|---|---|")
-    for r in rows:
-        s = r["predict_then_update"]
-        print(f"| {r['D']} | {s['a_median_us']:.1f} | {s['b_median_us']:.1f} | {s['ratio_median']:.2f} | "
-              f"{s['cpu_ratio_of_medians']:.2f} | ≤ 1.3 |")
+                def habit(rls: RecursiveRLS, Z: np.ndarray = Z, U: np.ndarray = U,
+                          want_var: bool = want_var) -> Callable[[int], object]:
+                    def step(i: int) -> None:
+                        rls.predict(Z[i % 4000], return_variance=want_var)
+                        rls.update(Z[i % 4000], U[i % 4000])
+                    return step
+
+                steps = {name: (fused if name.endswith("predict_update") else habit)(rls)
+                         for name, rls in learners.items()}
+                t = time_interleaved(steps, max(5, int(2e4 / D)), 120)
+                med = {name: statistics.median(v) for name, v in t.items()}
+
+                def ratio(a: str, b: str, t: dict[str, list[float]] = t) -> float:
+                    return statistics.median(y / x for x, y in zip(t[a], t[b], strict=True))
+
+                habit_over_fused = {a: ratio(f"{a} predict_update", f"{a} habit") for a in ("old", "new")}
+                new_over_old = {k: ratio(f"old {k}", f"new {k}") for k in ("predict_update", "habit")}
+                rows.append({"D": D, "beta": beta, "median_us": med,
+                             "ratio_habit_to_predict_update": habit_over_fused, "new_over_old": new_over_old})
     load_after = os.getloadavg()
+    print(f"predict(z) then update(z, u) vs predict_update(z, u), µs (median of 120 alternating repeats), "
+          f"kernels of {baseline} (old) and of this tree (new), same rows, one process\n")
+    print("| β | D | predict_update old | predict_update new | habit old | habit new | ratio old | "
+          "ratio new | target |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        m, q = r["median_us"], r["ratio_habit_to_predict_update"]
+        print(f"| {r['beta']:g} | {r['D']} | {m['old predict_update']:.1f} | {m['new predict_update']:.1f} | "
+              f"{m['old habit']:.1f} | {m['new habit']:.1f} | {q['old']:.2f} | {q['new']:.2f} | "
+              f"{'≤ 1.3' if r['beta'] == 1.0 else '–'} |")
+    print("\n(ratios: median over repeats of habit / predict_update; β < 1: predict with the variance)")
     print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f}")
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"benchmark": "bench_core --predict-update-only", "rows": rows,
-                                "loadavg_before": load_before, "loadavg_after": load_after}, indent=2))
+    path.write_text(json.dumps({"benchmark": "bench_core --predict-update-only", "baseline_kernels": baseline,
+                                "rows": rows, "loadavg_before": load_before, "loadavg_after": load_after},
+                               indent=2))
     print(f"wrote {path}")
     return 0
 
@@ -295,10 +377,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=pathlib.Path, default=None,
                         help=f"output JSON (default {RESULTS}, or {RESULTS_PU} with --predict-update-only)")
     parser.add_argument("--predict-update-only", action="store_true",
-                        help="only predict, update vs predict_update at D = 500, 1000 (≈ 20 s)")
+                        help="only predict, update vs predict_update at D = 500, 1000, β = 1 and 0.9995, "
+                             "old kernels next to new (≈ 1 min)")
+    parser.add_argument("--baseline", default=KERNEL_BASELINE,
+                        help="git revision of the old kernels for --predict-update-only")
     args = parser.parse_args(argv)
     if args.predict_update_only:
-        return predict_update_only(args.json or RESULTS_PU)
+        return predict_update_only(args.json or RESULTS_PU, args.baseline)
     args.json = args.json or RESULTS
     sizes = [100, 500, 1000] if args.quick else [100, 250, 500, 1000, 2000]
     rng = np.random.default_rng(0)
