@@ -74,7 +74,7 @@ def _rotate_in(
     i and i+1 of ``M`` (the new row is loaded and stored once for two rotations: 1.3× faster at b = 1000,
     2× at b = 2000 where ``M`` no longer fits in cache).
 
-    Query rows (``QV`` (kq, b) as made by :func:`_start_queries`, ``QP`` (kq, t), ``Qvar`` (kq,); kq may
+    Query rows (``QV`` (kq, b+t) as made by :func:`_start_queries`, ``QP`` (kq, t), ``Qvar`` (kq,); kq may
     be 0) are predicted with the *new* factor during the same sweep: each row of ``M`` is final as soon as
     its column is rotated, and the forward substitution of :func:`solve_predict` needs the rows in that
     same order, so it advances over the row(s) just finished while they are still in cache. A single query
@@ -136,9 +136,9 @@ def _rotate_in(
                     inv_k = 1.0 / M[i + 1, i + 1]
                     vi = Vq[i] * inv_i
                     vk = (Vq[i + 1] - vi * M[i, i + 1]) * inv_k
-                    Vv = Vq[i + 2 : b]
-                    nb = Vv.shape[0]
-                    for j in range(nb):
+                    # V is b+t wide: one loop over the whole row, the last t entries of V are scratch
+                    Vv = Vq[i + 2 : bt]
+                    for j in range(Mi.shape[0]):
                         x = Mi[j]
                         y = Wv[j]
                         z = Mk[j]
@@ -149,14 +149,6 @@ def _rotate_in(
                         Mk[j] = zn
                         Wv[j] = c2 * y1 - ss2 * z
                         Vv[j] -= vi * xn + vk * zn
-                    for j in range(nb, Mi.shape[0]):
-                        x = Mi[j]
-                        y = Wv[j]
-                        z = Mk[j]
-                        Mi[j] = cs1 * x + s1 * y
-                        y1 = c1 * y - ss1 * x
-                        Mk[j] = cs2 * z + s2 * y1
-                        Wv[j] = c2 * y1 - ss2 * z
                     Qvar[0] += vi * vi + vk * vk
                     Pq = QP[0]
                     di = M[i, b:bt]
@@ -233,9 +225,8 @@ def _rotate_in(
                 fused = True
                 Vq = QV[0]
                 vi = Vq[i] / M[i, i]
-                Vv = Vq[i + 1 : b]
-                nb = Vv.shape[0]
-                for j in range(nb):
+                Vv = Vq[i + 1 : bt]  # b+t wide, as in the pair sweep
+                for j in range(n):
                     x = Mi[j]
                     y1 = W1[j]
                     y2 = W2[j]
@@ -245,14 +236,6 @@ def _rotate_in(
                     Mi[j] = xn
                     W2[j] = c2 * y2 - s2 * x1
                     Vv[j] -= vi * xn
-                for j in range(nb, n):  # the t columns of d
-                    x = Mi[j]
-                    y1 = W1[j]
-                    y2 = W2[j]
-                    x1 = cs1 * x + s1 * y1
-                    W1[j] = c1 * y1 - ss1 * x
-                    Mi[j] = c2 * x1 + s2 * y2
-                    W2[j] = c2 * y2 - s2 * x1
                 Qvar[0] += vi * vi
                 Pq = QP[0]
                 di = M[i, b:bt]
@@ -361,7 +344,7 @@ def qr_rls_steps(
     act = np.empty(kk, dtype=np.int64)
     sqrt_reg = math.sqrt(reg)
     e = np.empty(bt - b)
-    QV = _start_queries(Q, QP, Qvar)
+    QV = _start_queries(Q, QP, Qvar, bt)
     QV0 = QV[:0]
     j = j0
     for step in range(n_steps):
@@ -491,14 +474,20 @@ def _forward_block(M: np.ndarray, i0: int, m: int, V: np.ndarray, P: np.ndarray,
 
 
 @njit(cache=True, nogil=True)
-def _start_queries(Z: np.ndarray, P: np.ndarray, var: np.ndarray) -> np.ndarray:
-    """Working copy of the query rows; zero the outputs of :func:`_forward_block`."""
-    V = np.empty(Z.shape)
+def _start_queries(Z: np.ndarray, P: np.ndarray, var: np.ndarray, width: int) -> np.ndarray:
+    """Working copy of the query rows, ``width ≥ b`` wide (zeros right of b); zero the outputs.
+
+    The rotation sweeps make it ``b + t`` wide so that a fused query runs over the whole row of ``M``
+    in one loop (its last t entries are scratch that is never read).
+    """
+    V = np.empty((Z.shape[0], width))
     for r in range(Z.shape[0]):
         Vr = V[r]
         Zr = Z[r]
         for j in range(Z.shape[1]):
             Vr[j] = Zr[j]
+        for j in range(Z.shape[1], width):
+            Vr[j] = 0.0
         for q in range(P.shape[1]):
             P[r, q] = 0.0
         var[r] = 0.0
@@ -523,7 +512,7 @@ def solve_predict(M: np.ndarray, Z: np.ndarray, P: np.ndarray, var: np.ndarray) 
         var: ``(k,)`` output, ``z A⁻¹ zᵀ`` per row (≥ 0).
     """
     b = M.shape[0]
-    V = _start_queries(Z, P, var)
+    V = _start_queries(Z, P, var, Z.shape[1])
     v = np.empty(4)
     i0 = 0
     while i0 < b:
