@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core._step_kernels import standardized_features
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.features import RandomFourierFeatures, Standardizer
 from semiparam_ros.core.rrls import RecursiveRLS
@@ -449,8 +450,13 @@ class NonparametricModel(_Model):
         self.n_samples_seen = 0
 
     def _features(self, x: np.ndarray) -> np.ndarray:
-        """φ(s(x)) for a validated 1-D x, as a (1, D) row (finite by construction: cos of finite input)."""
-        return self.rff._map(self.standardizer._apply(x[None, :]))
+        """φ(s(x)) for a validated 1-D x, as a (1, D) row (finite by construction: cos of finite input).
+
+        One compiled call (:func:`~semiparam_ros.core._step_kernels.standardized_features`); equal to
+        ``rff.transform(standardizer.transform(x))`` to rounding.
+        """
+        std, rff = self.standardizer, self.rff
+        return standardized_features(x, std.mean_, std.scale_, rff.omega_, rff.offset_, rff._scale)
 
     def _predict(self, xin: np.ndarray, return_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
         if not self.standardizer.ready:
