@@ -37,7 +37,7 @@ def noise_std(s2: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def noise_update(s2: np.ndarray, e: np.ndarray, v: np.ndarray, alpha: float) -> tuple[bool, np.ndarray]:
-    """``(ok, s2 + alpha · (e² / (1 + fmax(v, 0)) − s2))``; ``ok`` false (and ``s2`` copied) if e is not finite."""
+    """``(ok, s2 + alpha · (e² / (1 + fmax(v, 0)) − s2))``; ``ok`` false (s2 copied) if e is not finite."""
     out = s2.copy()
     for k in range(e.shape[0]):
         if not math.isfinite(e[k]):
@@ -66,13 +66,20 @@ def standardized_features(x: np.ndarray, mean: np.ndarray, scale: np.ndarray, om
     """Random Fourier features of one standardized input, ``a·cos(((x − m)/s) Ω + b)``, as a (1, D) row.
 
     Args:
-        x: (n,) input; m = ``mean`` (n,), s = ``scale`` (n,) > 0 the standardizer's statistics.
-        omega: (n, D) frequencies Ω (C-contiguous), ``offset`` (D,) phases b [rad].
+        x: (n,) input, in the units the standardizer was fitted on.
+        mean: (n,) m, the standardizer's mean.
+        scale: (n,) s > 0, the standardizer's scale.
+        omega: (n, D) frequencies Ω (C-contiguous).
+        offset: (D,) phases b [rad].
         amplitude: a = √(2/D).
 
+    Returns:
+        (1, D) features.
+
     The phase ``θ_j = Σ_i z_i Ω_ij + b_j`` (z the standardized input) is accumulated row by row of Ω
-    (contiguous, vectorised); it differs from numpy's BLAS sum by at most ``(n + 1)·ε·(Σ_i |z_i Ω_ij| + |b_j|)``
-    (ε = 2⁻⁵³), and cos is 1-Lipschitz, so each feature by at most ``a`` times that plus cos's own rounding.
+    (contiguous, vectorised); it differs from numpy's BLAS sum by at most
+    ``(n + 1)·ε·(Σ_i |z_i Ω_ij| + |b_j|)`` (ε = 2⁻⁵³), and cos is 1-Lipschitz, so each feature by at most
+    ``a`` times that plus cos's own rounding.
     """
     n, d = omega.shape
     phase = np.zeros(d)
