@@ -20,7 +20,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["exceeds", "noise_std", "noise_update", "standardized_features"]
+__all__ = ["exceeds", "joined_within", "noise_std", "noise_update", "standardized_features", "within"]
 
 
 @njit(cache=True, nogil=True)
@@ -58,6 +58,37 @@ def exceeds(e: np.ndarray, s: np.ndarray, threshold: float) -> bool:
         if abs(e[k]) > threshold * s[k]:
             return True
     return False
+
+
+@njit(cache=True, nogil=True)
+def joined_within(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, y: np.ndarray,
+                  max_abs: float) -> tuple[int, np.ndarray]:
+    """``[q, dq, ddq, y]`` in one new array, and which part holds a value beyond ``max_abs`` (or NaN).
+
+    Returns:
+        ``(bad, xy)``: ``bad`` 0 if every ``|value| <= max_abs``, 1 if the first offender is in
+        ``[q, dq, ddq]``, 2 if it is in ``y``.
+    """
+    n, t = q.shape[0], y.shape[0]
+    xy = np.empty(3 * n + t)
+    xy[:n] = q
+    xy[n : 2 * n] = dq
+    xy[2 * n : 3 * n] = ddq
+    xy[3 * n :] = y
+    for k in range(3 * n + t):
+        if not abs(xy[k]) <= max_abs:
+            return (1 if k < 3 * n else 2), xy
+    return 0, xy
+
+
+@njit(cache=True, nogil=True)
+def within(A: np.ndarray, max_abs: float) -> bool:
+    """``max |A_ij| <= max_abs`` for a 2-D array (false on NaN), i.e. ``np.abs(A).max() <= max_abs``."""
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            if not abs(A[i, j]) <= max_abs:
+                return False
+    return True
 
 
 @njit(cache=True, nogil=True)

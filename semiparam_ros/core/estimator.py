@@ -20,6 +20,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from semiparam_ros.core._step_kernels import joined_within
 from semiparam_ros.core.acceleration import AccelerationConfig
 from semiparam_ros.core.adaptation import forgetting_factor, learners
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
@@ -145,21 +146,13 @@ def regressor_function(regressor: RigidBodyRegressor,
     Returns:
         A function mapping x (3n,) to the base regressor (t × n_base), scaled if asked.
     """
-    n = regressor.n_joints
+    inv = None if scale is None else 1.0 / np.asarray(scale, dtype=np.float64)
 
     def base_regressor(x: np.ndarray) -> np.ndarray:
-        return regressor.base_regressor(x[:n], x[n : 2 * n], x[2 * n : 3 * n])
+        # the learners pass a checked (3n,) float64 x; equal bit for bit to base_regressor(q, dq, ddq) / c
+        return regressor.base_regressor_of_input(x, inv)
 
-    if scale is None:
-        return base_regressor
-    inv = 1.0 / np.asarray(scale, dtype=np.float64)
-
-    def scaled_regressor(x: np.ndarray) -> np.ndarray:
-        Phi = regressor.base_regressor(x[:n], x[n : 2 * n], x[2 * n : 3 * n])
-        Phi *= inv
-        return Phi
-
-    return scaled_regressor
+    return base_regressor
 
 
 def column_scale(config: EstimatorConfig, regressor: RigidBodyRegressor) -> np.ndarray:
@@ -585,12 +578,11 @@ class OnlineEstimator:
         if not (q.shape == dq.shape == ddq.shape == (n,) and y.shape == (t,)):
             raise RejectedSampleError(f"sample must have q, dq, ddq of {n} joints and y of {t} values, got "
                                       f"{q.shape}, {dq.shape}, {ddq.shape} and {y.shape}")
-        xy = np.concatenate((q, dq, ddq, y))
-        # one reduction catches NaN (comparison false), ±inf and values whose squares would overflow
-        if not (np.abs(xy).max() <= MAX_ABS_INPUT):
-            name = "x" if not (np.abs(xy[: 3 * n]).max() <= MAX_ABS_INPUT) else "y"
-            raise RejectedSampleError(f"{name} contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} "
-                                      "in magnitude")
+        # one pass catches NaN (comparison false), ±inf and values whose squares would overflow
+        bad, xy = joined_within(q, dq, ddq, y, MAX_ABS_INPUT)
+        if bad:
+            raise RejectedSampleError(f"{'x' if bad == 1 else 'y'} contains NaN, inf or entries larger than "
+                                      f"{MAX_ABS_INPUT:g} in magnitude")
         return xy[: 3 * n], xy[3 * n :]
 
     def _apply_forgetting(self, beta: float) -> None:

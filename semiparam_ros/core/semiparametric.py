@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core._step_kernels import standardized_features
+from semiparam_ros.core._step_kernels import standardized_features, within
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.features import RandomFourierFeatures, Standardizer
 from semiparam_ros.core.rrls import RecursiveRLS
@@ -291,9 +291,10 @@ class ParametricModel(_Model):
         if Phi.shape != (self.n_outputs, self.n_params):
             raise ConfigurationError(f"regressor returned shape {Phi.shape}, expected ({self.n_outputs}, "
                              f"{self.n_params})")
-        if not (np.abs(Phi).max() <= MAX_ABS_INPUT):
+        Phi = np.ascontiguousarray(Phi)
+        if not within(Phi, MAX_ABS_INPUT):
             raise RejectedSampleError("regressor returned NaN, inf or absurdly large entries")
-        return np.ascontiguousarray(Phi)
+        return Phi
 
     def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None]:
         xv = check_finite_array("x", x, (None,))
