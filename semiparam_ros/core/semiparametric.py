@@ -286,6 +286,12 @@ class ParametricModel(_Model):
         self._phi_cache = (np.array(x, dtype=np.float64), Phi)
         return Phi
 
+    def _phi_fresh(self, x: np.ndarray) -> np.ndarray:
+        """Φ(x) evaluated now (x is new: no comparison with the cache), then cached for a learn of x."""
+        Phi = self._phi_uncached(x)
+        self._phi_cache = (x.copy(), Phi)
+        return Phi
+
     def _phi_uncached(self, x: np.ndarray) -> np.ndarray:
         Phi = np.asarray(self.regressor(x), dtype=np.float64)
         if Phi.shape != (self.n_outputs, self.n_params):
@@ -305,7 +311,7 @@ class ParametricModel(_Model):
         return check_finite_array("x", x, (None,))
 
     def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
-        Phi = self._phi_uncached(xv)
+        Phi = self._phi_fresh(xv)
         yp, var = self._predict_phi(Phi, True)
         pred = Prediction(yp, np.zeros(self.n_outputs), yp.copy(), var)
         return PredictionContext(pred, self, xv, Phi, None)
@@ -788,7 +794,7 @@ class SemiparametricModel(_TwoStageModel):
 
     def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
         par, npm = self.parametric, self.nonparametric
-        Phi = par._phi_uncached(xv)
+        Phi = par._phi_fresh(xv)
         yp, var = par._predict_phi(Phi, True)
         assert var is not None  # asked for
         if npm.standardizer.ready:

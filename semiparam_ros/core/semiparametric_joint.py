@@ -173,7 +173,7 @@ class JointSemiparametricModel(_TwoStageModel):
         return Prediction(par, total - par, total, var), phi
 
     def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
-        Phi = self.parametric._phi_uncached(xv)
+        Phi = self.parametric._phi_fresh(xv)
         pred, phi = self._predict_valid(xv, Phi, True)
         return PredictionContext(pred, self, xv, Phi, phi)
 
