@@ -20,9 +20,10 @@ so a checkpoint is loaded into a model built with the same regressor.
 Predict now, decide, then learn (the contact gate's order): ``predict_ahead(x) -> PredictionContext`` is
 ``predict_one(x, return_variance=True)`` that also keeps what it computed on the way (the regressor
 ``Φ(x)``, the parametric prediction, the random features), and ``learn_ahead(context, y)`` learns (x, y)
-from exactly those — no second regressor, feature map or parametric prediction. The learned state equals
-``learn_one(x, y)``'s to rounding (the a-priori ŷ that feeds SP's residual input comes from the forward
-substitution instead of the rotations; both are ``Φ(x) π̂`` to ≈ cond(R)·ε relative).
+from exactly those — no second regressor, feature map or parametric prediction. The learned state is
+``learn_one(x, y)``'s: bit for bit for P and NP (the same rows), to rounding for SP (the a-priori ŷ that
+feeds the residual input comes from the forward substitution instead of the rotations; both are
+``Φ(x) π̂`` to ≈ cond(R)·ε relative).
 
 Inputs: ``x = [q, q̇, q̈]`` (rad, rad/s, rad/s², joints in configured order); ``y`` the measured output
 (a wrench ``[fx, fy, fz, tx, ty, tz]`` in N and N·m in the sensor frame, or joint torques in N·m).
@@ -128,7 +129,7 @@ class _Model:
         Raises:
             RejectedSampleError: Bad x or regressor output.
         """
-        return self._predict_ahead_valid(self._check_x(x))
+        return self._predict_ahead_valid(self._check_x(x).copy())  # the context must not see x change
 
     def learn_ahead(self, context: PredictionContext, y: Any) -> None:
         """Learn y for the input of ``context`` (from :meth:`predict_ahead`, nothing learned since).
