@@ -196,15 +196,22 @@ def test_cascade_checks_both_stages_before_changing_either(monkeypatch):
     assert all(np.array_equal(before[k], after[k]) for k in before)
 
 
-def test_gated_estimator_step_equals_predict_then_learn_one():
+@pytest.mark.parametrize("kind", ["SP", "SPJ", "P", "NP"])
+def test_gated_estimator_step_equals_predict_then_learn_one(kind):
     """The estimator's gate-on path (the node's) against the two-pass loop it replaces: predict_one with
-    variance, the noise scale and gate by hand, learn_one; predictions and σ to 1e-9 relative (the cascade's
-    rounding, see above), every verdict the same."""
-    cfg = EstimatorConfig.defaults().with_overrides({
-        "nonparametric.n_features": 80, "nonparametric.standardizer_warmup": 50, "gate.warmup": 0.5,
-        "adaptation.time_constant": 0.0})
-    est = OnlineEstimator(cfg)
-    ref = OnlineEstimator(cfg, regressor=est.regressor)
+    variance, the noise scale and gate by hand, learn_one; every verdict the same, predictions and σ
+    bit-identical for P, NP and the joint model and to 1e-9 relative for the cascade (its rounding, see
+    above)."""
+    overrides = {"nonparametric.n_features": 80, "nonparametric.standardizer_warmup": 50, "gate.warmup": 0.5,
+                 "adaptation.time_constant": 0.0}
+    if kind == "SPJ":
+        overrides.update({"semiparametric.combination": "joint", "nonparametric.forgetting": 1.0,
+                          "parametric.forgetting": 1.0})
+    cfg = EstimatorConfig.defaults().with_overrides(overrides)
+    model_kind = "SP" if kind == "SPJ" else kind
+    est = OnlineEstimator(cfg, kind=model_kind)
+    ref = OnlineEstimator(cfg, regressor=est.regressor, kind=model_kind)
+    exact = kind != "SP"
     rng = np.random.default_rng(5)
     n = len(cfg["robot.joints"])
     ref_pi = est.regressor.to_base(est.regressor.urdf_parameters())
@@ -227,10 +234,14 @@ def test_gated_estimator_step_equals_predict_then_learn_one():
             ref.noise.skip(s.stamp_ns)
         assert got.verdict == verdict and got.learned == verdict.learn
         verdicts.add(verdict.value)
-        scale = np.abs(ahead.total).max() + 1.0
-        np.testing.assert_allclose(got.prediction.total, ahead.total, rtol=0, atol=1e-9 * scale)
-        np.testing.assert_allclose(got.std, std, rtol=1e-9)
+        if exact:
+            assert np.array_equal(got.prediction.total, ahead.total) and np.array_equal(got.std, std)
+        else:
+            scale = np.abs(ahead.total).max() + 1.0
+            np.testing.assert_allclose(got.prediction.total, ahead.total, rtol=0, atol=1e-9 * scale)
+            np.testing.assert_allclose(got.std, std, rtol=1e-9)
     assert verdicts == {"warmup", "inlier", "gated"}
+    assert est.n_samples_learned == ref.model.n_samples_seen
 
 
 # ----------------------------------------------------------------------------- compiled kernels
