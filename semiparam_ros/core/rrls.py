@@ -234,16 +234,21 @@ class RecursiveRLS:
         self._defer_checked(self._checked_step(Z2, U2))
 
     @staticmethod
-    def _checked_step(Z2: np.ndarray, U2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _checked_step(Z2: np.ndarray, U2: np.ndarray, *,
+                      owned: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Check the values of one step's (k, b) / (k, t) rows and return copies (the learner is untouched).
 
         With :meth:`_defer_checked`, the two halves of :meth:`_defer`: a caller updating several learners
-        checks every learner's rows first, so that a refused value leaves all of them unchanged.
+        checks every learner's rows first, so that a refused value leaves all of them unchanged. With
+        ``owned`` the arrays themselves are kept (no copy): for arrays nobody writes to afterwards.
 
         Raises:
             RejectedSampleError: On NaN, inf or entries larger than :data:`MAX_ABS_INPUT` in magnitude.
         """
-        ok, Zc, Uc = checked_copies(Z2, U2, MAX_ABS_INPUT)  # copies: the caller may reuse its arrays
+        if owned:
+            ok, Zc, Uc = values_within(Z2, U2, MAX_ABS_INPUT), Z2, U2
+        else:
+            ok, Zc, Uc = checked_copies(Z2, U2, MAX_ABS_INPUT)  # copies: the caller may reuse its arrays
         if not ok:
             raise RejectedSampleError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} "
                                       "in magnitude")

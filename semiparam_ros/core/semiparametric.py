@@ -816,7 +816,9 @@ class SemiparametricModel(_TwoStageModel):
         assert Phi is not None  # a two-stage context always holds the regressor
         yp = context.prediction.parametric
         y0 = par._prior_output(Phi)
-        par_step = par.rls._checked_step(Phi, (yv if y0 is None else yv - y0).reshape(-1, 1))
+        # Φ (also cached by the parametric stage), φ and the targets below are read-only from here on: owned
+        target = yv.copy() if y0 is None else yv - y0
+        par_step = par.rls._checked_step(Phi, target.reshape(-1, 1), owned=True)
         if phi is None:
             # warm-up (see _step and the class docstring for the ŷ block's statistics)
             xv = context._x
@@ -824,7 +826,7 @@ class SemiparametricModel(_TwoStageModel):
             npm.standardizer.partial_fit(np.concatenate([xv, yv if measured else yp]))
             par.rls._defer_checked(par_step)
         else:
-            np_step = npm.rls._checked_step(phi, (yv - yp).reshape(1, -1))
+            np_step = npm.rls._checked_step(phi, (yv - yp).reshape(1, -1), owned=True)
             par.rls._defer_checked(par_step)
             npm.rls._defer_checked(np_step)
         par.n_samples_seen += 1
