@@ -186,7 +186,7 @@ def test_cascade_checks_both_stages_before_changing_either(monkeypatch):
     before = model.state_dict()
     context = model.predict_ahead(X[30])
 
-    def refuse(Z, U):
+    def refuse(Z, U, owned=False):
         raise RejectedSampleError("refused")
 
     monkeypatch.setattr(model.nonparametric.rls, "_checked_step", refuse)
