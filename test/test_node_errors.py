@@ -52,7 +52,8 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
         raise IndexError("injected bug")
 
     monkeypatch.setattr(est.model, "predict_learn_one", buggy)  # the learning path with the gate off
-    monkeypatch.setattr(est.model, "learn_one", buggy)  # and with the contact gate on (predict, then learn)
+    # and with the contact gate on (predict, then learn the prediction's context: the estimator's entry)
+    monkeypatch.setattr(est.model, "_learn_ahead_valid", buggy)
     # through the executor, as live: queued input is processed by an executor callback (the catch-up
     # timer, armed as when a backlog remains), and the error raises out of spin_once
     executor = SingleThreadedExecutor(context=node.context)
@@ -76,7 +77,7 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
         raise RejectedSampleError("x contains NaN")
 
     monkeypatch.setattr(est.model, "predict_learn_one", rejecting)
-    monkeypatch.setattr(est.model, "learn_one", rejecting)
+    monkeypatch.setattr(est.model, "_learn_ahead_valid", rejecting)
     n_rejected = 0
     for _ in range(100):
         msg = next(messages)

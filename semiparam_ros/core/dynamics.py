@@ -900,6 +900,42 @@ class RigidBodyRegressor:
         """
         return self.regressor(q, dq, ddq)[..., self._base.independent]
 
+    def base_regressor_of_input(self, x: np.ndarray, column_factor: np.ndarray | None = None) -> np.ndarray:
+        """Return the base regressor of one learner input ``x = [q, q̇, q̈]``, columns optionally scaled.
+
+        The learners' per-sample path: bit for bit ``base_regressor(q, q̇, q̈) * column_factor``, without
+        :meth:`regressor`'s per-vector conversions and checks and with one array fewer.
+
+        Args:
+            x: (3n,) float64 ``[q, q̇, q̈]`` [rad, rad/s, rad/s²], values checked by the caller (NaN or inf
+                give a non-finite Φ, which the learners refuse).
+            column_factor: Optional (n_base,) factors of the columns (``1/c`` of the column scaling).
+
+        Returns:
+            (n_outputs, n_base), a new array.
+
+        Raises:
+            RejectedSampleError: If x is not a vector of 3n entries.
+        """
+        n = self.n_joints
+        if x.shape != (3 * n,):
+            raise RejectedSampleError(f"x must have shape ({3 * n},) for joints {list(self.joint_names)}, "
+                                      f"got {x.shape}")
+        dq, ddq = x[n : 2 * n], x[2 * n :]
+        self._fill(x[:n], dq, ddq)
+        if self.n_params > self._n_rigid:
+            out = np.empty((self.n_outputs, self.n_params))
+            self._rigid(out)
+            self._extra(out, dq, ddq)
+            Phi = out[:, self._base.independent]
+        else:
+            Phi = self._block()[:, self._base.independent]
+            if self._sign < 0:
+                np.negative(Phi, out=Phi)  # exact: the same bits as negating before the selection
+        if column_factor is not None:
+            Phi *= column_factor
+        return Phi
+
     def to_base(self, pi_full: Any) -> np.ndarray:
         """Map full parameters to base parameters, ``π_b = π[ind] + β π[dep]``.
 

@@ -20,6 +20,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from semiparam_ros.core._step_kernels import joined_within
 from semiparam_ros.core.acceleration import AccelerationConfig
 from semiparam_ros.core.adaptation import forgetting_factor, learners
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
@@ -35,7 +36,8 @@ from semiparam_ros.core.semiparametric import (
     SemiparametricModel,
 )
 from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
-from semiparam_ros.core.uncertainty import NoiseScale, predict_with_variance
+from semiparam_ros.core.uncertainty import NoiseScale
+from semiparam_ros.core.validation import MAX_ABS_INPUT
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = [
@@ -144,21 +146,13 @@ def regressor_function(regressor: RigidBodyRegressor,
     Returns:
         A function mapping x (3n,) to the base regressor (t × n_base), scaled if asked.
     """
-    n = regressor.n_joints
+    inv = None if scale is None else 1.0 / np.asarray(scale, dtype=np.float64)
 
     def base_regressor(x: np.ndarray) -> np.ndarray:
-        return regressor.base_regressor(x[:n], x[n : 2 * n], x[2 * n : 3 * n])
+        # the learners pass a checked (3n,) float64 x; equal bit for bit to base_regressor(q, dq, ddq) / c
+        return regressor.base_regressor_of_input(x, inv)
 
-    if scale is None:
-        return base_regressor
-    inv = 1.0 / np.asarray(scale, dtype=np.float64)
-
-    def scaled_regressor(x: np.ndarray) -> np.ndarray:
-        Phi = regressor.base_regressor(x[:n], x[n : 2 * n], x[2 * n : 3 * n])
-        Phi *= inv
-        return Phi
-
-    return scaled_regressor
+    return base_regressor
 
 
 def column_scale(config: EstimatorConfig, regressor: RigidBodyRegressor) -> np.ndarray:
@@ -481,6 +475,7 @@ class OnlineEstimator:
         self.model = build_model(config, kind, self.regressor)
         self._scale = column_scale(config, self.regressor)
         self.learning_enabled = bool(config["learning_enabled"])
+        self._n_joints = len(config["robot.joints"])
         self.n_samples_learned = 0
         self._rejected = 0
         self.noise = NoiseScale(self.model.n_outputs, config["uncertainty.noise_time_constant"])
@@ -521,7 +516,12 @@ class OnlineEstimator:
         return results
 
     def step(self, sample: Sample) -> StepResult:
-        """Predict y for a sample, then learn it (unless learning is disabled).
+        """Predict y for a sample, then learn it (unless learning is disabled or the gate refuses it).
+
+        The sample is validated once (sizes; NaN, inf or beyond ±1e150); with the gate on, the model's
+        :meth:`predict_ahead` context (regressor, parametric prediction, random features) is learned from
+        directly, so nothing is computed twice. With the gate off the step is the paper's
+        ``predict_learn_one``, bit for bit.
 
         Args:
             sample: A clean sample from the pipeline.
@@ -531,39 +531,59 @@ class OnlineEstimator:
 
         Raises:
             RejectedSampleError: If the learner rejects the sample (wrong sizes, non-finite or absurdly
-                large values, regressor overflow); the learned state is then unchanged.
+                large values, regressor overflow); the learned state, the gate and the noise estimate are
+                then unchanged.
         """
         if self.sample_period_s is None:
             self._measure_rate(sample.stamp_ns)
         start = time.perf_counter()
-        # the relative variance v = z A⁻¹ zᵀ of the a-priori prediction (the state is not changed)
-        ahead = predict_with_variance(self.model, sample.x)
-        variance = ahead.variance
-        assert variance is not None  # predict_with_variance always computes it
+        x, y = self._check_sample(sample)
+        model = self.model
+        # a priori, with the relative variance v = z A⁻¹ zᵀ of each output (the state is not changed)
+        ahead = model._predict_ahead_valid(x)
+        prediction = ahead.prediction
+        variance = prediction.variance
+        assert variance is not None  # a context always carries it
         verdict = None
         if self.learning_enabled and self.gate_enabled:
-            prediction = ahead
-            error = sample.y - prediction.total
+            error = y - prediction.total
             std = self.noise.std(variance)
             verdict = self.gate.decide(sample.stamp_ns, error, std)
             learned = verdict.learn
             if learned:
-                self.model.learn_one(sample.x, sample.y)
+                model._learn_ahead_valid(ahead, y)
                 self.n_samples_learned += 1
         else:
             # gate off: exactly the paper's predict-then-learn (bit-identical predictions)
             learned = self.learning_enabled
             if learned:
-                prediction = self.model.predict_learn_one(sample.x, sample.y)
+                prediction = model.predict_learn_one(x, y)
                 self.n_samples_learned += 1
-            else:
-                prediction = self.model.predict_one(sample.x)
             std = self.noise.std(variance)
+            error = y - prediction.total
         if learned or verdict is None:
-            self.noise.update(sample.stamp_ns, sample.y - prediction.total, variance)
+            self.noise.update(sample.stamp_ns, error, variance)
         else:
             self.noise.skip(sample.stamp_ns)
         return StepResult(sample, prediction, time.perf_counter() - start, learned, std, verdict)
+
+    def _check_sample(self, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
+        """``(x, y)`` of a sample, sizes and values checked once for every stage after it.
+
+        Raises:
+            RejectedSampleError: On a wrong size, or NaN, inf or an entry beyond ±MAX_ABS_INPUT.
+        """
+        n, t = self._n_joints, self.model.n_outputs
+        q, dq, ddq, y = sample.q, sample.dq, sample.ddq, sample.y
+        if not (q.shape == dq.shape == ddq.shape == (n,) and y.shape == (t,)):
+            raise RejectedSampleError(f"sample must have q, dq, ddq of {n} joints and y of {t} values, got "
+                                      f"{q.shape}, {dq.shape}, {ddq.shape} and {y.shape}")
+        # one pass catches NaN (comparison false), ±inf and values whose squares would overflow
+        bad, xy = joined_within(q, dq, ddq, y, MAX_ABS_INPUT)
+        if bad:
+            raise RejectedSampleError(f"{'x' if bad == 1 else 'y'} contains NaN, inf or entries larger than "
+                                      f"{MAX_ABS_INPUT:g} in magnitude")
+        return xy[: 3 * n], xy[3 * n :]
 
     def _apply_forgetting(self, beta: float) -> None:
         for rls in learners(self.model):

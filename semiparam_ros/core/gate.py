@@ -39,6 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from semiparam_ros.core._step_kernels import exceeds
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = ["ContactGate", "GateConfig", "Verdict"]
@@ -130,10 +131,13 @@ class ContactGate:
             verdict = Verdict.WARMUP
             self._excursion_ns = None
         else:
-            e = np.abs(np.asarray(error, dtype=np.float64))
+            e = np.asarray(error, dtype=np.float64)
             s = np.asarray(std, dtype=np.float64)
-            # |e| > threshold·σ, written without a division (σ may be 0 or inf)
-            outlier = bool(np.any(e > cfg.threshold * s))
+            if e.ndim == 1 and e.shape == s.shape:
+                outlier = exceeds(e, s, float(cfg.threshold))  # the expression below, compiled
+            else:
+                # |e| > threshold·σ, written without a division (σ may be 0 or inf)
+                outlier = bool(np.any(np.abs(e) > cfg.threshold * s))
             if not outlier:
                 verdict = Verdict.INLIER
                 self._excursion_ns = None

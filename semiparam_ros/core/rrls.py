@@ -231,15 +231,36 @@ class RecursiveRLS:
 
     def _defer(self, Z2: np.ndarray, U2: np.ndarray) -> None:
         """Validate the values of one step and leave a copy of it pending."""
-        ok, Zc, Uc = checked_copies(Z2, U2, MAX_ABS_INPUT)  # copies: the caller may reuse its arrays
+        self._defer_checked(self._checked_step(Z2, U2))
+
+    @staticmethod
+    def _checked_step(Z2: np.ndarray, U2: np.ndarray, *,
+                      owned: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Check the values of one step's (k, b) / (k, t) rows and return copies (the learner is untouched).
+
+        With :meth:`_defer_checked`, the two halves of :meth:`_defer`: a caller updating several learners
+        checks every learner's rows first, so that a refused value leaves all of them unchanged. With
+        ``owned`` the arrays themselves are kept (no copy): for arrays nobody writes to afterwards.
+
+        Raises:
+            RejectedSampleError: On NaN, inf or entries larger than :data:`MAX_ABS_INPUT` in magnitude.
+        """
+        if owned:
+            ok, Zc, Uc = values_within(Z2, U2, MAX_ABS_INPUT), Z2, U2
+        else:
+            ok, Zc, Uc = checked_copies(Z2, U2, MAX_ABS_INPUT)  # copies: the caller may reuse its arrays
         if not ok:
             raise RejectedSampleError(f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} "
                                       "in magnitude")
+        return Zc, Uc
+
+    def _defer_checked(self, step: tuple[np.ndarray, np.ndarray]) -> None:
+        """Leave one step checked and copied by :meth:`_checked_step` pending (cannot fail)."""
         self._flush()
-        self._pending = (Zc, Uc)
+        self._pending = step
         self._W = None
         self.n_steps += 1
-        self.n_samples_seen += Z2.shape[0]
+        self.n_samples_seen += step[0].shape[0]
 
     def predict_update(self, Z: np.ndarray, U: np.ndarray) -> np.ndarray:
         """Predict the rows with the current weights, then absorb them as one time step (one pass).

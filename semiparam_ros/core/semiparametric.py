@@ -17,6 +17,14 @@ pass over each stage's factor through :meth:`RecursiveRLS.predict_update`), ``pa
 ``save(path)`` / ``load(path)``. ``load`` is an instance method: the regressor callable cannot be stored,
 so a checkpoint is loaded into a model built with the same regressor.
 
+Predict now, decide, then learn (the contact gate's order): ``predict_ahead(x) -> PredictionContext`` is
+``predict_one(x, return_variance=True)`` that also keeps what it computed on the way (the regressor
+``Φ(x)``, the parametric prediction, the random features), and ``learn_ahead(context, y)`` learns (x, y)
+from exactly those — no second regressor, feature map or parametric prediction. The learned state is
+``learn_one(x, y)``'s: bit for bit for P and NP (the same rows), to rounding for SP (the a-priori ŷ that
+feeds the residual input comes from the forward substitution instead of the rotations; both are
+``Φ(x) π̂`` to ≈ cond(R)·ε relative).
+
 Inputs: ``x = [q, q̇, q̈]`` (rad, rad/s, rad/s², joints in configured order); ``y`` the measured output
 (a wrench ``[fx, fy, fz, tx, ty, tz]`` in N and N·m in the sensor frame, or joint torques in N·m).
 Bad ``x``/``y`` (shape, NaN/inf) raise :class:`~semiparam_ros.errors.RejectedSampleError` and leave the
@@ -33,13 +41,14 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core._step_kernels import standardized_features, within
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.features import RandomFourierFeatures, Standardizer
 from semiparam_ros.core.rrls import RecursiveRLS
 from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
-__all__ = ["NonparametricModel", "ParametricModel", "Prediction", "SemiparametricModel"]
+__all__ = ["NonparametricModel", "ParametricModel", "Prediction", "PredictionContext", "SemiparametricModel"]
 
 Regressor = Callable[[np.ndarray], np.ndarray]
 
@@ -62,10 +71,90 @@ class Prediction:
     variance: np.ndarray | None = None
 
 
+class PredictionContext:
+    """An a-priori prediction together with what learning the same sample needs.
+
+    Made by a model's ``predict_ahead(x)`` and consumed by the same model's ``learn_ahead(context, y)``;
+    it is only valid while the model has learned nothing else (checked: a stale or consumed context is
+    a programming error, :class:`ValueError`).
+
+    Attributes:
+        prediction: The prediction of ``predict_one(x, return_variance=True)``, its ``variance`` the
+            relative predictive variance ``v ≥ 0`` per output (a residual stage still in its standardizer
+            warm-up counts 0, as in :func:`~semiparam_ros.core.uncertainty.predict_with_variance`).
+    """
+
+    __slots__ = ("_Phi", "_model", "_phi", "_seen", "_x", "prediction")
+
+    def __init__(self, prediction: Prediction, model: _Model, x: np.ndarray, Phi: np.ndarray | None,
+                 phi: np.ndarray | None) -> None:
+        self.prediction = prediction
+        self._model: _Model | None = model
+        self._seen = model.n_samples_seen
+        self._x = x  # validated input (of the model)
+        self._Phi = Phi  # rigid-body regressor rows (t, p), or None (NP)
+        self._phi = phi  # random features (1, D), or None (P, or a residual stage in its warm-up)
+
+
 class _Model:
     """Shared persistence plumbing; subclasses define ``_kind``, ``_components`` and ``_shape_key``."""
 
     _kind = ""
+    n_outputs: int
+    n_samples_seen: int
+
+    def _take(self, context: PredictionContext) -> PredictionContext:
+        """Check that ``context`` was made by this model in its current state.
+
+        A context is used once: learning it advances ``n_samples_seen``, which makes it stale.
+
+        Raises:
+            ValueError: If it was made by another model, already used, or the model learned since.
+        """
+        if context._model is not self or context._seen != self.n_samples_seen:
+            raise ValueError("stale prediction context: learn_ahead needs the context of this model's last "
+                             "predict_ahead, with nothing learned in between")
+        return context
+
+    def predict_ahead(self, x: Any) -> PredictionContext:
+        """Predict x with the predictive variance and keep what learning x needs (see the module docstring).
+
+        Args:
+            x: The input ``[q, q̇, q̈]`` [rad, rad/s, rad/s²].
+
+        Returns:
+            The context; ``context.prediction`` is ``predict_one(x, return_variance=True)`` (warm-up
+            variance 0 instead of NaN).
+
+        Raises:
+            RejectedSampleError: Bad x or regressor output.
+        """
+        return self._predict_ahead_valid(self._check_x(x).copy())  # the context must not see x change
+
+    def learn_ahead(self, context: PredictionContext, y: Any) -> None:
+        """Learn y for the input of ``context`` (from :meth:`predict_ahead`, nothing learned since).
+
+        Equivalent to ``learn_one(x, y)`` to rounding, without recomputing the regressor, the features or
+        the parametric prediction.
+
+        Args:
+            context: This model's last context.
+            y: The measured output (units of y).
+
+        Raises:
+            RejectedSampleError: Bad y (the model and the context are unchanged).
+            ValueError: A stale or already used context (a programming error).
+        """
+        self._learn_ahead_valid(context, check_finite_array("y", y, (self.n_outputs,)))
+
+    def _check_x(self, x: Any) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:  # pragma: no cover
+        raise NotImplementedError
 
     def copy(self) -> Any:
         """Return a deep copy of the learned state that shares the injected regressor callable."""
@@ -198,19 +287,41 @@ class ParametricModel(_Model):
         self._phi_cache = (np.array(x, dtype=np.float64), Phi)
         return Phi
 
+    def _phi_fresh(self, x: np.ndarray) -> np.ndarray:
+        """Φ(x) evaluated now (x is new: no comparison with the cache), then cached for a learn of x."""
+        Phi = self._phi_uncached(x)
+        self._phi_cache = (x.copy(), Phi)
+        return Phi
+
     def _phi_uncached(self, x: np.ndarray) -> np.ndarray:
         Phi = np.asarray(self.regressor(x), dtype=np.float64)
         if Phi.shape != (self.n_outputs, self.n_params):
             raise ConfigurationError(f"regressor returned shape {Phi.shape}, expected ({self.n_outputs}, "
                              f"{self.n_params})")
-        if not (np.abs(Phi).max() <= MAX_ABS_INPUT):
+        Phi = np.ascontiguousarray(Phi)
+        if not within(Phi, MAX_ABS_INPUT):
             raise RejectedSampleError("regressor returned NaN, inf or absurdly large entries")
-        return np.ascontiguousarray(Phi)
+        return Phi
 
     def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None]:
         xv = check_finite_array("x", x, (None,))
         yv = None if y is None else check_finite_array("y", y, (self.n_outputs,))
         return xv, yv
+
+    def _check_x(self, x: Any) -> np.ndarray:
+        return check_finite_array("x", x, (None,))
+
+    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
+        Phi = self._phi_fresh(xv)
+        yp, var = self._predict_phi(Phi, True)
+        pred = Prediction(yp, np.zeros(self.n_outputs), yp.copy(), var)
+        return PredictionContext(pred, self, xv, Phi, None)
+
+    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
+        Phi = self._take(context)._Phi
+        assert Phi is not None  # a ParametricModel's context always holds the regressor
+        self._update_phi(Phi, yv)
+        self.n_samples_seen += 1
 
     # --- interface
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
@@ -347,8 +458,13 @@ class NonparametricModel(_Model):
         self.n_samples_seen = 0
 
     def _features(self, x: np.ndarray) -> np.ndarray:
-        """φ(s(x)) for a validated 1-D x, as a (1, D) row (finite by construction: cos of finite input)."""
-        return self.rff._map(self.standardizer._apply(x[None, :]))
+        """φ(s(x)) for a validated 1-D x, as a (1, D) row (finite by construction: cos of finite input).
+
+        One compiled call (:func:`~semiparam_ros.core._step_kernels.standardized_features`); equal to
+        ``rff.transform(standardizer.transform(x))`` to rounding.
+        """
+        std, rff = self.standardizer, self.rff
+        return standardized_features(x, std.mean_, std.scale_, rff.omega_, rff.offset_, rff._scale)
 
     def _predict(self, xin: np.ndarray, return_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
         if not self.standardizer.ready:
@@ -370,6 +486,28 @@ class NonparametricModel(_Model):
             return self.rls._predict_update_valid(phi, target.reshape(1, -1))[0]
         self.rls._update_valid(phi, target.reshape(1, -1))
         return np.zeros(0)
+
+    def _check_x(self, x: Any) -> np.ndarray:
+        return check_finite_array("x", x, (self.n_inputs,))
+
+    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
+        t = self.n_outputs
+        if not self.standardizer.ready:
+            r, var, phi = np.zeros(t), np.zeros(t), None
+        else:
+            phi = self._features(xv)
+            P, v = self.rls._predict_valid(phi, True)
+            assert v is not None  # asked for
+            r, var = P[0], np.full(t, float(v[0]))
+        return PredictionContext(Prediction(np.zeros(t), r, r.copy(), var), self, xv, None, phi)
+
+    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
+        phi = self._take(context)._phi
+        if phi is None:
+            self.standardizer.partial_fit(context._x)
+        else:
+            self.rls._update_valid(phi, yv.reshape(1, -1))
+        self.n_samples_seen += 1
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
         """Predict ``φ(s(x)) W`` (zeros during the warm-up).
@@ -498,6 +636,9 @@ class _TwoStageModel(_Model):
     def regressor(self) -> Regressor:
         """The injected regressor callable (shared by copies)."""
         return self.parametric.regressor
+
+    def _check_x(self, x: Any) -> np.ndarray:
+        return check_finite_array("x", x, (self.n_inputs,))
 
     def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         xv = check_finite_array("x", x, (self.n_inputs,))
@@ -651,6 +792,46 @@ class SemiparametricModel(_TwoStageModel):
             # NaN while the residual stage warms up (it predicts 0 then): it adds no variance
             var = var_p + var_np if self.nonparametric.standardizer.ready else var_p
         return Prediction(yp, r, yp + r, var)
+
+    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
+        par, npm = self.parametric, self.nonparametric
+        Phi = par._phi_fresh(xv)
+        yp, var = par._predict_phi(Phi, True)
+        assert var is not None  # asked for
+        if npm.standardizer.ready:
+            phi = npm._features(np.concatenate([xv, yp]))
+            P, v = npm.rls._predict_valid(phi, True)
+            assert v is not None  # asked for
+            r = P[0]
+            var = var + float(v[0])
+        else:
+            phi, r = None, np.zeros(self.n_outputs)  # the warm-up predicts 0 and adds no variance
+        return PredictionContext(Prediction(yp, r, yp + r, var), self, xv, Phi, phi)
+
+    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
+        # learn_one's _step with the regressor, ŷ and features of the prediction; both stages' rows are
+        # checked before either learner changes, so a refused value leaves the model as it was
+        par, npm = self.parametric, self.nonparametric
+        Phi, phi = self._take(context)._Phi, context._phi
+        assert Phi is not None  # a two-stage context always holds the regressor
+        yp = context.prediction.parametric
+        y0 = par._prior_output(Phi)
+        # Φ (also cached by the parametric stage), φ and the targets below are read-only from here on: owned
+        target = yv.copy() if y0 is None else yv - y0
+        par_step = par.rls._checked_step(Phi, target.reshape(-1, 1), owned=True)
+        if phi is None:
+            # warm-up (see _step and the class docstring for the ŷ block's statistics)
+            xv = context._x
+            measured = self.yhat_statistics == "measured"
+            npm.standardizer.partial_fit(np.concatenate([xv, yv if measured else yp]))
+            par.rls._defer_checked(par_step)
+        else:
+            np_step = npm.rls._checked_step(phi, (yv - yp).reshape(1, -1), owned=True)
+            par.rls._defer_checked(par_step)
+            npm.rls._defer_checked(np_step)
+        par.n_samples_seen += 1
+        npm.n_samples_seen += 1
+        self.n_samples_seen += 1
 
     def _step(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
         xv, yv, Phi = self._check(x, y)

@@ -53,6 +53,7 @@ from semiparam_ros.core.semiparametric import (
     NonparametricModel,
     ParametricModel,
     Prediction,
+    PredictionContext,
     Regressor,
     _TwoStageModel,
 )
@@ -145,9 +146,16 @@ class JointSemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
+        pred, _ = self._predict_valid(xv, Phi, return_variance)
+        return pred
+
+    def _predict_valid(self, xv: np.ndarray, Phi: np.ndarray,
+                       return_variance: bool) -> tuple[Prediction, np.ndarray | None]:
+        """:meth:`predict_one` for a validated x and its regressor; also returns the features (or None)."""
         pi = self.parametric.rls.weights[:, 0]
         npm = self.nonparametric
         t, p = self.n_outputs, self.n_params
+        phi = None
         if npm.standardizer.ready:
             phi = npm._features(xv)
             # one forward substitution (O(D²)) instead of the t(1+p)-column weights (O(t(1+p)·D²))
@@ -161,19 +169,39 @@ class JointSemiparametricModel(_TwoStageModel):
         y0 = self.parametric._prior_output(Phi)
         if y0 is not None:
             par, total = par + y0, total + y0
-        var = var_k + self.parametric.rls.variance(eU) if return_variance else None
-        return Prediction(par, total - par, total, var)
+        var = var_k + self.parametric.rls._variance_valid(eU) if return_variance else None
+        return Prediction(par, total - par, total, var), phi
+
+    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
+        Phi = self.parametric._phi_fresh(xv)
+        pred, phi = self._predict_valid(xv, Phi, True)
+        return PredictionContext(pred, self, xv, Phi, phi)
+
+    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
+        Phi = self._take(context)._Phi
+        assert Phi is not None  # a two-stage context always holds the regressor
+        self._learn_valid(context._x, yv, Phi, context._phi)
 
     def _step(self, x: Any, y: Any) -> Prediction:
         xv, yv, Phi = self._check(x, y)
         assert yv is not None
+        phi = self.nonparametric._features(xv) if self.nonparametric.standardizer.ready else None
+        return self._learn_valid(xv, yv, Phi, phi)
+
+    def _learn_valid(self, xv: np.ndarray, yv: np.ndarray, Phi: np.ndarray,
+                     phi: np.ndarray | None) -> Prediction:
+        """Learn validated (x, y) with its regressor and features (None in the warm-up).
+
+        Returns:
+            The a-priori prediction, from the rotations.
+        """
         t, p = self.n_outputs, self.n_params
         pi = self.parametric.rls.weights[:, 0]  # δ̂ = π̂ − π₀
         npm = self.nonparametric
         y0 = self.parametric._prior_output(Phi)
         if y0 is not None:
             yv = yv - y0  # (1) in δ: the targets are what the prior leaves over
-        if not npm.standardizer.ready:
+        if phi is None:
             # warm-up: φ = 0 in (1), so the kernel learner's rotations would push the row [0 | y, Φ] out
             # unchanged; feed it to the π learner directly (with β < 1 the kernel learner's clock starts
             # after the warm-up: until then it holds only its prior, which is left undecayed)
@@ -184,7 +212,6 @@ class JointSemiparametricModel(_TwoStageModel):
                 par = par + y0
             pred = Prediction(par, np.zeros(t), par.copy())
         else:
-            phi = npm._features(xv)
             u = np.concatenate([yv, Phi.reshape(-1)]).reshape(1, -1)
             pk, E = npm.rls._predict_update_rows_out(phi, u)
             par, total, _ = self._combine(Phi, pk[0], pi)

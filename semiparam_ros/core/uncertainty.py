@@ -24,10 +24,11 @@ estimate (a contact is not noise of the model; it would inflate σ and blind the
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
+from semiparam_ros.core._step_kernels import noise_std, noise_update
 from semiparam_ros.core.semiparametric import Prediction
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
@@ -105,6 +106,8 @@ class NoiseScale:
         """
         if self.s2 is None:
             return np.full(self.n_outputs, np.inf)
+        if _is_vector(variance, self.n_outputs):
+            return noise_std(self.s2, variance)  # the expression below, compiled (bit-identical)
         v = np.fmax(np.asarray(variance, dtype=np.float64), 0.0)  # fmax: NaN counts as 0
         return np.sqrt(self.s2 * (1.0 + v))
 
@@ -129,6 +132,16 @@ class NoiseScale:
             RejectedSampleError: Wrong size or non-finite error (the estimate is unchanged).
         """
         e = np.asarray(error, dtype=np.float64).reshape(-1)
+        if self.s2 is not None and _is_vector(e, self.n_outputs) and _is_vector(variance, self.n_outputs):
+            # the expressions below, compiled (bit-identical), for the estimator's (t,) arrays
+            dt = 0.0 if self._last_ns is None else max(stamp_ns - self._last_ns, 0) * 1e-9
+            ok, s2 = noise_update(self.s2, e, variance, -math.expm1(-dt / self.time_constant_s))
+            if not ok:
+                raise RejectedSampleError(f"error must be {self.n_outputs} finite values, got {error!r}")
+            self.s2 = s2
+            self._last_ns = int(stamp_ns)
+            self.n_samples += 1
+            return
         if e.shape != (self.n_outputs,) or not np.isfinite(e).all():
             raise RejectedSampleError(f"error must be {self.n_outputs} finite values, got {error!r}")
         v = np.fmax(np.asarray(variance, dtype=np.float64), 0.0)  # fmax: NaN counts as 0
@@ -141,6 +154,11 @@ class NoiseScale:
             self.s2 = self.s2 + alpha * (target - self.s2)
         self._last_ns = int(stamp_ns)
         self.n_samples += 1
+
+
+def _is_vector(value: Any, n: int) -> TypeGuard[np.ndarray]:
+    """Whether ``value`` is a (n,) float64 ndarray (the compiled kernels' one signature)."""
+    return type(value) is np.ndarray and value.shape == (n,) and value.dtype == np.float64
 
 
 def _check_time_constant(value: float) -> float:

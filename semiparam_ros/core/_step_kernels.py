@@ -1,0 +1,176 @@
+"""Compiled small-vector kernels of the per-sample step: noise scale, predictive σ and the gate's test.
+
+At one sample per millisecond the t ≈ 6-vector work of :class:`~semiparam_ros.core.uncertainty.NoiseScale`
+and :class:`~semiparam_ros.core.gate.ContactGate` costs more in numpy's per-call overhead (a dozen ufunc
+calls and reductions, each ≈ 0.5–1.5 µs with cold caches after the rotations) than in arithmetic. These
+kernels do the same element-wise IEEE operations in the same order (no ``fastmath``), so their results are
+bit-identical to the numpy expressions they replace, which stay in the callers as the reference for any
+other input type and are what the tests compare against. Only float64 1-D arrays are passed.
+
+:func:`standardized_features` is the exception: it fuses the standardization and the random Fourier
+feature map of one input (numpy's version, ``Standardizer._apply`` then ``RandomFourierFeatures._map``, is
+six calls and a BLAS product), and sums the phase in its own order, so it agrees with numpy to rounding
+(the bound is in its docstring and the test), not bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "cos_array", "exceeds", "joined_within", "noise_std", "noise_update", "standardized_features", "within",
+]
+
+
+@njit(cache=True, nogil=True)
+def noise_std(s2: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``sqrt(s2 · (1 + fmax(v, 0)))`` element-wise (a NaN ``v`` counts as 0), a new (t,) array."""
+    out = np.empty(s2.shape[0])
+    for k in range(s2.shape[0]):
+        vk = v[k]
+        if not vk >= 0.0:  # negative or NaN: np.fmax(v, 0) gives 0
+            vk = 0.0
+        out[k] = math.sqrt(s2[k] * (1.0 + vk))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def noise_update(s2: np.ndarray, e: np.ndarray, v: np.ndarray, alpha: float) -> tuple[bool, np.ndarray]:
+    """``(ok, s2 + alpha · (e² / (1 + fmax(v, 0)) − s2))``; ``ok`` false (s2 copied) if e is not finite."""
+    out = s2.copy()
+    for k in range(e.shape[0]):
+        if not math.isfinite(e[k]):
+            return False, out
+    for k in range(e.shape[0]):
+        vk = v[k]
+        if not vk >= 0.0:
+            vk = 0.0
+        target = e[k] * e[k] / (1.0 + vk)
+        out[k] = s2[k] + alpha * (target - s2[k])
+    return True, out
+
+
+@njit(cache=True, nogil=True)
+def exceeds(e: np.ndarray, s: np.ndarray, threshold: float) -> bool:
+    """``any(|e_k| > threshold · s_k)`` (no division: σ may be 0 or inf; a NaN compares false)."""
+    for k in range(e.shape[0]):
+        if abs(e[k]) > threshold * s[k]:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def joined_within(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, y: np.ndarray,
+                  max_abs: float) -> tuple[int, np.ndarray]:
+    """``[q, dq, ddq, y]`` in one new array, and which part holds a value beyond ``max_abs`` (or NaN).
+
+    Returns:
+        ``(bad, xy)``: ``bad`` 0 if every ``|value| <= max_abs``, 1 if the first offender is in
+        ``[q, dq, ddq]``, 2 if it is in ``y``.
+    """
+    n, t = q.shape[0], y.shape[0]
+    xy = np.empty(3 * n + t)
+    xy[:n] = q
+    xy[n : 2 * n] = dq
+    xy[2 * n : 3 * n] = ddq
+    xy[3 * n :] = y
+    for k in range(3 * n + t):
+        if not abs(xy[k]) <= max_abs:
+            return (1 if k < 3 * n else 2), xy
+    return 0, xy
+
+
+@njit(cache=True, nogil=True)
+def within(A: np.ndarray, max_abs: float) -> bool:
+    """``max |A_ij| <= max_abs`` for a 2-D array (false on NaN), i.e. ``np.abs(A).max() <= max_abs``."""
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            if not abs(A[i, j]) <= max_abs:
+                return False
+    return True
+
+
+# cos by Cody–Waite reduction to r ∈ [−π/4, π/4] and fdlibm's minimax kernels (Sun Microsystems, freely
+# distributable; as in musl's __sin/__cos), branch-free so that LLVM vectorises the feature loop: libm's
+# cos is a call per element. k·_PIO2_HI is exact for |k| < 2²⁰ (33-bit constant) and x − k·_PIO2_HI is
+# exact (Sterbenz), so r errs by ≈ ε|r|; the kernels err by < 1 ulp. |x| ≥ _COS_REDUCED_MAX (and NaN, inf)
+# go to math.cos.
+_TWO_OVER_PI = 6.36619772367581382433e-01
+_PIO2_HI = 1.57079632673412561417e+00  # the first 33 bits of π/2
+_PIO2_LO = 6.07710050650619224932e-11  # π/2 − _PIO2_HI
+_S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
+_S4, _S5, _S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
+_C1, _C2, _C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
+_C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
+_COS_REDUCED_MAX = 1e5
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cos_reduced(x: float) -> float:
+    """cos(x) for |x| < _COS_REDUCED_MAX without a call or a branch (0 is used for any other x)."""
+    x = x if abs(x) < _COS_REDUCED_MAX else 0.0
+    k = math.floor(x * _TWO_OVER_PI + 0.5)
+    r = (x - k * _PIO2_HI) - k * _PIO2_LO
+    z = r * r
+    w = z * z
+    sin_r = r + z * r * (_S1 + z * (_S2 + z * (_S3 + z * _S4) + z * w * (_S5 + z * _S6)))
+    poly = z * (_C1 + z * (_C2 + z * _C3)) + w * w * (_C4 + z * (_C5 + z * _C6))
+    half = 0.5 * z
+    t = 1.0 - half
+    cos_r = t + (((1.0 - t) - half) + z * poly)
+    quadrant = np.int64(k) & 3  # cos(r + qπ/2) = cos r, −sin r, −cos r, sin r
+    value = sin_r if quadrant & 1 else cos_r
+    return -value if (quadrant + 1) & 2 else value
+
+
+@njit(cache=True, nogil=True)
+def standardized_features(x: np.ndarray, mean: np.ndarray, scale: np.ndarray, omega: np.ndarray,
+                          offset: np.ndarray, amplitude: float) -> np.ndarray:
+    """Random Fourier features of one standardized input, ``a·cos(((x − m)/s) Ω + b)``, as a (1, D) row.
+
+    Args:
+        x: (n,) input, in the units the standardizer was fitted on.
+        mean: (n,) m, the standardizer's mean.
+        scale: (n,) s > 0, the standardizer's scale.
+        omega: (n, D) frequencies Ω (C-contiguous).
+        offset: (D,) phases b [rad].
+        amplitude: a = √(2/D).
+
+    Returns:
+        (1, D) features.
+
+    The phase ``θ_j = Σ_i z_i Ω_ij + b_j`` (z the standardized input) is accumulated row by row of Ω
+    (contiguous, vectorised); it differs from numpy's BLAS sum by at most
+    ``(n + 1)·ε·(Σ_i |z_i Ω_ij| + |b_j|)`` (ε = 2⁻⁵³), and cos is 1-Lipschitz, so each feature by at most
+    ``a`` times that plus cos's own error (a vectorised cos, ≤ 2ε here; libm's ≤ 1 ulp).
+    """
+    n, d = omega.shape
+    phase = np.zeros(d)
+    for i in range(n):
+        z = (x[i] - mean[i]) / scale[i]
+        row = omega[i]
+        for j in range(d):
+            phase[j] += z * row[j]
+    out = np.empty((1, d))
+    for j in range(d):
+        phase[j] += offset[j]
+        out[0, j] = amplitude * _cos_reduced(phase[j])
+    for j in range(d):
+        if not abs(phase[j]) < _COS_REDUCED_MAX:  # never for sane inputs: libm's cos
+            out[0, j] = amplitude * math.cos(phase[j])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def cos_array(x: np.ndarray) -> np.ndarray:
+    """Return the cosine of every entry of a 1-D array by the feature map's vectorised cos (for tests)."""
+    out = np.empty(x.shape[0])
+    for j in range(x.shape[0]):
+        out[j] = _cos_reduced(x[j])
+    for j in range(x.shape[0]):
+        if not abs(x[j]) < _COS_REDUCED_MAX:
+            out[j] = math.cos(x[j])
+    return out
