@@ -7,14 +7,13 @@ import time
 
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from ros_helpers import CONFIG, make_ros_env, source_bag
 
 from semiparam_ros.core.messages import JointStateData
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.io.bags import read_messages
-from semiparam_ros.ros.estimator_node import EstimatorNode
+from semiparam_ros.ros.estimator_node import EXECUTORS, EstimatorNode
 
 pytestmark = pytest.mark.ros
 
@@ -38,7 +37,8 @@ def _kind(msg):
     return "joint_states" if isinstance(msg, JointStateData) else "wrench"
 
 
-def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypatch):
+@pytest.mark.parametrize("executor_name", list(EXECUTORS))  # the default first
+def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypatch, executor_name):
     messages = read_messages(source_bag(tmp_path))
     est = node.estimator
     for _ in range(400):  # learn a little, through the node's own processing path
@@ -55,7 +55,7 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
     monkeypatch.setattr(est.model, "learn_one", buggy)  # and with the contact gate on (predict, then learn)
     # through the executor, as live: queued input is processed by an executor callback (the catch-up
     # timer, armed as when a backlog remains), and the error raises out of spin_once
-    executor = SingleThreadedExecutor(context=node.context)
+    executor = EXECUTORS[executor_name](context=node.context)
     executor.add_node(node)
     try:
         with pytest.raises(IndexError, match="injected bug"):
