@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
@@ -15,6 +16,7 @@ from sensor_msgs.msg import JointState
 from semiparam_ros.core.config import PARAMETERS, EstimatorConfig, parameter_spec
 from semiparam_ros.core.messages import joint_state_from_msg
 from semiparam_ros.ros.conversions import (
+    SerializedOutput,
     joint_torques_msg,
     parameters_msg,
     parameters_names_from_msg,
@@ -35,6 +37,41 @@ def test_wrench_round_trip_through_cdr():
     np.testing.assert_array_equal(data.wrench, w)
     with pytest.raises(ValueError, match="6 entries"):
         wrench_stamped_msg(0, "s", np.zeros(5))
+
+
+@pytest.mark.parametrize("frame", ["", "s", "ft", "r_arm_ft_sensor", "a_frame_of_nine_chars"])
+def test_serialized_wrench_output_is_what_rclpy_decodes(frame):
+    """Patched CDR bytes decode (rclpy's own deserialiser) to the stamp and values given, bit for bit;
+    frame lengths cover every string padding (whose bytes rclpy leaves unset, so no byte comparison)."""
+    out = SerializedOutput(lambda stamp, w: wrench_stamped_msg(stamp, frame, w), 6)
+    assert out.serialized  # x86/ARM: little-endian CDR
+    rng = np.random.default_rng(0)
+    for stamp in (0, 1_700_000_000_123_456_789, 5_000_000_001, -3, 2**31 * 10**9 - 1):
+        w = rng.normal(size=6) * 10.0 ** rng.integers(-300, 300, size=6)
+        w[rng.integers(6)] = rng.choice([np.nan, np.inf, -np.inf, -0.0])
+        raw = out.fill(stamp, w)
+        assert isinstance(raw, bytes)
+        assert len(raw) == len(serialize_message(wrench_stamped_msg(stamp, frame, w)))  # (padding bytes vary)
+        data = wrench_from_msg(deserialize_message(raw, WrenchStamped))
+        assert data.stamp_ns == max(stamp, 0) and data.frame_id == frame
+        np.testing.assert_array_equal(data.wrench.view(np.int64), w.view(np.int64))  # bit for bit
+    with pytest.raises(ValueError, match="expected 6 values"):
+        out.fill(0, np.zeros(5))
+
+
+@pytest.mark.parametrize("joints", [("a",), ("j1", "joint_2"), ("r_shoulder_pitch", "r_shoulder_roll",
+                                                                 "r_shoulder_yaw", "r_elbow", "x")])
+def test_serialized_joint_torques_output_is_what_rclpy_decodes(joints):
+    out = SerializedOutput(lambda stamp, tau: joint_torques_msg(stamp, joints, tau), len(joints))
+    assert out.serialized
+    for stamp, tau in ((7, np.arange(len(joints)) - 1.5),
+                       (1_700_000_000_000_000_001, np.full(len(joints), 1e-9))):
+        raw = out.fill(stamp, tau)
+        assert len(raw) == len(serialize_message(joint_torques_msg(stamp, joints, tau)))
+        msg = deserialize_message(raw, JointState)
+        assert tuple(msg.name) == joints and len(msg.position) == len(msg.velocity) == 0
+        assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == stamp
+        np.testing.assert_array_equal(np.asarray(msg.effort), tau)
 
 
 def test_stamp_conversion_is_exact_and_clamps_negative():

@@ -15,21 +15,29 @@ kg·m²), followed, with ``robot.output: joint_torques``, by the per-joint frict
 ``<joint>.armature`` (kg·m², when enabled; merged into an inertia combination where not separately
 identifiable), or by ``offset_fx … offset_tz`` (N, N·m) for an F/T sensor offset. A name never contains a
 comma (commas inside a name are replaced by ``;``), so ``label.split(",")`` recovers them.
+
+The node publishes its per-sample outputs through :class:`SerializedOutput`: the message is serialised
+once by rclpy, and each sample only rewrites the stamp and the values in those bytes (publishing bytes
+skips rclpy's conversion of the message object, which costs more than the rest of a publish).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import struct
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from semiparam_ros.core.messages import joint_state_from_msg, ns_to_stamp, wrench_from_msg
 
 __all__ = [
+    "SerializedOutput",
     "joint_state_from_msg",
     "joint_torques_msg",
     "parameters_msg",
@@ -145,3 +153,70 @@ def parameters_names_from_msg(msg: Float64MultiArray) -> list[str]:
     if not msg.layout.dim or not msg.layout.dim[0].label:
         return []
     return msg.layout.dim[0].label.split(",")
+
+
+#: CDR little-endian encapsulation (``CDR_LE``), what rmw_fastrtps and rmw_cyclonedds write on x86/ARM.
+_CDR_LE = b"\x00\x01"
+_STAMP = struct.Struct("<iI")  # builtin_interfaces/Time at the start of the CDR payload
+_PAYLOAD_START = 4  # after the 2-byte encapsulation id and the 2-byte options
+
+
+class SerializedOutput:
+    """A stamped message serialised once, re-emitted with a new stamp and new trailing ``float64`` values.
+
+    The message's first field must be ``std_msgs/Header`` (its stamp is the first 8 bytes of the CDR
+    payload) and the ``n`` values must be stored as ``n`` consecutive ``float64`` (a ``WrenchStamped``'s
+    six components, a ``JointState``'s ``effort``). Their byte offset is found by serialising the message
+    with distinct sentinel values and searching for them, so no layout is hard-coded. Where that fails (a
+    big-endian encapsulation, sentinels not found exactly once) :meth:`fill` falls back to building the
+    message object, which publishes the same content.
+
+    Args:
+        build: ``build(stamp_ns, values)`` → the message (e.g. :func:`wrench_stamped_msg` with a frame).
+        n_values: Number of values per sample.
+
+    Raises:
+        ValueError: If ``n_values`` < 1 (raised by ``build`` too for a wrong length).
+    """
+
+    def __init__(self, build: Callable[[int, np.ndarray], Any], n_values: int) -> None:
+        if n_values < 1:
+            raise ValueError(f"n_values must be ≥ 1, got {n_values}")
+        self._build = build
+        self._n = int(n_values)
+        sentinels = np.pi * (1.0 + np.arange(self._n)) + 1e-3  # values no stamp/string byte pattern repeats
+        raw = bytes(serialize_message(build(0, sentinels)))
+        needle = sentinels.astype("<f8").tobytes()
+        offset = raw.find(needle)
+        self._buffer: bytearray | None = None
+        if raw[:2] == _CDR_LE and offset >= _PAYLOAD_START + _STAMP.size and raw.find(needle, offset + 1) < 0:
+            self._buffer = bytearray(raw)
+            self._values = np.frombuffer(self._buffer, dtype="<f8", count=self._n, offset=offset)
+
+    @property
+    def serialized(self) -> bool:
+        """Whether :meth:`fill` returns serialised bytes (else message objects)."""
+        return self._buffer is not None
+
+    def fill(self, stamp_ns: int, values: np.ndarray) -> bytes | Any:
+        """Return the message for one sample, as CDR bytes ready for ``Publisher.publish``.
+
+        Args:
+            stamp_ns: Header stamp in nanoseconds (negative values are clamped to 0, as in :func:`stamp_msg`).
+            values: The ``n_values`` values (units of the message: N, N·m).
+
+        Returns:
+            Serialised bytes (or the message object in the fallback case).
+
+        Raises:
+            ValueError: If ``values`` does not have ``n_values`` entries.
+        """
+        if self._buffer is None:
+            return self._build(stamp_ns, values)
+        v = np.asarray(values, dtype=np.float64).reshape(-1)
+        if v.shape != (self._n,):
+            raise ValueError(f"expected {self._n} values, got shape {v.shape}")
+        sec, nanosec = ns_to_stamp(max(int(stamp_ns), 0))
+        _STAMP.pack_into(self._buffer, _PAYLOAD_START, sec, nanosec)
+        self._values[:] = v
+        return bytes(self._buffer)
