@@ -78,3 +78,31 @@ def test_drain_takes_every_queued_message_in_order(node_and_publisher):
     node._drain("joint_states")
     stamps = [item.stamp_ns for _, item, _ in node._queue]
     assert stamps == [1_000_000_000 + k for k in range(n)]
+
+
+def test_drain_alternates_the_two_subscriptions(node_and_publisher):
+    """Both streams queued: taken one of each in turn (the other kind first), so neither runs ahead."""
+    from geometry_msgs.msg import WrenchStamped
+
+    node, pub = node_and_publisher
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    source = rclpy.create_node("source_wrench", context=node.context)
+    try:
+        wpub = source.create_publisher(WrenchStamped, node.config["topics.wrench"], qos)
+        _wait_matched(pub)
+        _wait_matched(wpub)
+        n_js, n_w = 30, 20
+        _publish(pub, n_js)
+        for k in range(n_w):
+            w = WrenchStamped()
+            w.header.stamp.sec, w.header.stamp.nanosec = 2, k
+            wpub.publish(w)
+        time.sleep(0.5)
+        node._drain("joint_states")
+        kinds = [kind for kind, _, _ in node._queue]
+        assert kinds == ["wrench", "joint_states"] * n_w + ["joint_states"] * (n_js - n_w)
+        assert [item.stamp_ns for kind, item, _ in node._queue if kind == "wrench"] == [
+            2_000_000_000 + k for k in range(n_w)]
+    finally:
+        source.destroy_node()
