@@ -9,6 +9,7 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from ros_helpers import CONFIG, make_ros_env
 from sensor_msgs.msg import JointState
 
@@ -61,8 +62,9 @@ def test_take_message_returns_message_and_info_then_none(node_and_publisher):
         with sub.handle:
             taken = sub.handle.take_message(sub.msg_type, sub.raw)
         time.sleep(0.01)
-    assert isinstance(taken, tuple) and isinstance(taken[0], JointState)
-    assert (taken[0].header.stamp.sec, taken[0].header.stamp.nanosec) == (1, 0)
+    assert isinstance(taken, tuple) and isinstance(taken[0], bytes)  # the node subscribes serialised
+    msg = deserialize_message(taken[0], JointState)
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1, 0)
     with sub.handle:
         assert sub.handle.take_message(sub.msg_type, sub.raw) is None  # the history is empty now
 

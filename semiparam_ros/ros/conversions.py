@@ -18,7 +18,11 @@ comma (commas inside a name are replaced by ``;``), so ``label.split(",")`` reco
 
 The node publishes its per-sample outputs through :class:`SerializedOutput`: the message is serialised
 once by rclpy, and each sample only rewrites the stamp and the values in those bytes (publishing bytes
-skips rclpy's conversion of the message object, which costs more than the rest of a publish).
+skips rclpy's conversion of the message object, which costs more than the rest of a publish). It
+subscribes to serialised messages too and decodes them with :func:`joint_state_from_cdr` and
+:func:`wrench_from_cdr` (little-endian CDR read with :mod:`struct`, about 5× cheaper than rclpy building
+the message object that :func:`joint_state_from_msg` then reads; any other or unexpected encoding goes
+through rclpy's deserialiser and those functions, so the data is the same either way).
 """
 
 from __future__ import annotations
@@ -30,19 +34,29 @@ from typing import Any
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from semiparam_ros.core.messages import joint_state_from_msg, ns_to_stamp, wrench_from_msg
+from semiparam_ros.core.messages import (
+    JointStateData,
+    WrenchData,
+    joint_state_from_msg,
+    ns_to_stamp,
+    stamp_to_ns,
+    wrench_from_msg,
+)
+from semiparam_ros.errors import RejectedSampleError
 
 __all__ = [
     "SerializedOutput",
+    "joint_state_from_cdr",
     "joint_state_from_msg",
     "joint_torques_msg",
     "parameters_msg",
     "parameters_names_from_msg",
     "stamp_msg",
+    "wrench_from_cdr",
     "wrench_from_msg",
     "wrench_stamped_msg",
 ]
@@ -220,3 +234,116 @@ class SerializedOutput:
         _STAMP.pack_into(self._buffer, _PAYLOAD_START, sec, nanosec)
         self._values[:] = v
         return bytes(self._buffer)
+
+
+class _NotFastPathError(Exception):
+    """The bytes are not what the fast decoder reads: hand them to rclpy's deserialiser."""
+
+
+def _cdr_string(raw: bytes, pos: int) -> tuple[str, int]:
+    """Read a CDR string (4-aligned ``uint32`` length with the NUL, bytes, NUL) at ``pos``."""
+    pos = _align(pos, 4)
+    (n,) = _U32.unpack_from(raw, pos)
+    end = pos + 4 + n
+    if n == 0 or end > len(raw) or raw[end - 1] != 0:
+        raise _NotFastPathError
+    return raw[pos + 4:end - 1].decode(), end
+
+
+def _align(pos: int, size: int) -> int:
+    """Align a buffer offset to ``size`` relative to the CDR payload (which starts at byte 4)."""
+    return pos + (-(pos - _PAYLOAD_START) % size)
+
+
+def _cdr_doubles(raw: bytes, pos: int) -> tuple[np.ndarray, int]:
+    """Read a CDR ``float64[]`` (``uint32`` count, then 8-aligned values; no padding when empty)."""
+    pos = _align(pos, 4)
+    (n,) = _U32.unpack_from(raw, pos)
+    pos += 4
+    if n == 0:
+        return np.empty(0), pos
+    pos = _align(pos, 8)
+    end = pos + 8 * n
+    if end > len(raw):
+        raise _NotFastPathError
+    return np.frombuffer(raw, dtype="<f8", count=n, offset=pos), end
+
+
+_U32 = struct.Struct("<I")
+
+
+def joint_state_from_cdr(raw: bytes) -> JointStateData:
+    """Convert a serialised ``sensor_msgs/JointState`` into :class:`JointStateData`.
+
+    Equal to ``joint_state_from_msg(deserialize_message(raw, JointState))``, which is what runs for any
+    encapsulation other than little-endian CDR or bytes the fast reader does not expect.
+
+    Args:
+        raw: The serialised message (CDR with its 4-byte encapsulation header).
+
+    Returns:
+        The plain-array view (content not validated, as :func:`joint_state_from_msg`).
+
+    Raises:
+        RejectedSampleError: If the bytes are not a JointState (rclpy cannot deserialise them).
+    """
+    try:
+        if raw[:2] != _CDR_LE:
+            raise _NotFastPathError
+        sec, nanosec = _STAMP.unpack_from(raw, _PAYLOAD_START)
+        _, pos = _cdr_string(raw, _PAYLOAD_START + 8)  # frame_id (not used)
+        pos = _align(pos, 4)
+        (n_names,) = _U32.unpack_from(raw, pos)
+        pos += 4
+        if 4 * n_names > len(raw) - pos:
+            raise _NotFastPathError
+        names = []
+        for _ in range(n_names):
+            name, pos = _cdr_string(raw, pos)
+            names.append(name)
+        position, pos = _cdr_doubles(raw, pos)
+        velocity, pos = _cdr_doubles(raw, pos)
+        effort, pos = _cdr_doubles(raw, pos)
+    except (_NotFastPathError, struct.error, UnicodeDecodeError):
+        return joint_state_from_msg(_deserialize(raw, JointState))
+    return JointStateData(stamp_to_ns(sec, nanosec), tuple(names), position, velocity, effort)
+
+
+def wrench_from_cdr(raw: bytes) -> WrenchData:
+    """Convert a serialised ``geometry_msgs/WrenchStamped`` into :class:`WrenchData`.
+
+    Equal to ``wrench_from_msg(deserialize_message(raw, WrenchStamped))`` (which runs for any other
+    encapsulation or unexpected bytes, as in :func:`joint_state_from_cdr`).
+
+    Args:
+        raw: The serialised message.
+
+    Returns:
+        The plain-array view: force in N, torque in N·m, in the frame ``header.frame_id``.
+
+    Raises:
+        RejectedSampleError: If the bytes are not a WrenchStamped.
+    """
+    try:
+        if raw[:2] != _CDR_LE:
+            raise _NotFastPathError
+        sec, nanosec = _STAMP.unpack_from(raw, _PAYLOAD_START)
+        frame, pos = _cdr_string(raw, _PAYLOAD_START + 8)
+        values, _ = _cdr_six(raw, pos)
+    except (_NotFastPathError, struct.error, UnicodeDecodeError):
+        return wrench_from_msg(_deserialize(raw, WrenchStamped))
+    return WrenchData(stamp_to_ns(sec, nanosec), frame, values[:3], values[3:])
+
+
+def _cdr_six(raw: bytes, pos: int) -> tuple[np.ndarray, int]:
+    pos = _align(pos, 8)
+    if pos + 48 > len(raw):
+        raise _NotFastPathError
+    return np.frombuffer(raw, dtype="<f8", count=6, offset=pos), pos + 48
+
+
+def _deserialize(raw: bytes, msg_type: type) -> Any:
+    try:
+        return deserialize_message(raw, msg_type)
+    except Exception as err:  # rclpy raises several types for bytes that are not this message
+        raise RejectedSampleError(f"not a serialised {msg_type.__name__}: {err}") from err

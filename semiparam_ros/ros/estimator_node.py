@@ -42,7 +42,8 @@ and input stays queued in DDS), ``~/reset`` forgets everything learned.
 Threads. One executor thread runs everything that touches the estimator: rclpy's ``EventsExecutor`` by
 default (its event queue and timers live in C++: less CPU and lower latency than the classic executor,
 measured in docs/performance.md), ``--executor single_threaded`` for the classic
-``SingleThreadedExecutor``. A subscription callback converts the message,
+``SingleThreadedExecutor``. A subscription callback converts the message (taken serialised and read by
+:func:`~semiparam_ros.ros.conversions.joint_state_from_cdr` / ``wrench_from_cdr``),
 appends it to a bounded deque (``queue_size``; when full the oldest entry is dropped and counted), takes
 what else is already waiting on that subscription, and runs the estimator on the queue at once (predict,
 publish, then learn): no executor round trip lies between receipt and prediction. At most 50 messages are
@@ -109,9 +110,11 @@ from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 from semiparam_ros.ros.conversions import (
     SerializedOutput,
+    joint_state_from_cdr,
     joint_state_from_msg,
     joint_torques_msg,
     parameters_msg,
+    wrench_from_cdr,
     wrench_from_msg,
     wrench_stamped_msg,
 )
@@ -261,7 +264,7 @@ class EstimatorNode(Node):
                 use_default_callbacks=False)
             self._subscriptions_by_kind[key.split(".")[1]] = self.create_subscription(
                 msg_type, topic, callback, INPUT_QOS, qos_overriding_options=overrides,
-                event_callbacks=events)
+                event_callbacks=events, raw=True)  # serialised: conversions.*_from_cdr decode them
 
         js, wr = (("joint_states", self._subscriptions_by_kind["joint_states"]),
                   ("wrench", self._subscriptions_by_kind["wrench"]))
@@ -322,20 +325,24 @@ class EstimatorNode(Node):
             self._warn_throttled("queue_full",
                                  "input queue full: dropping the oldest message (learning cannot keep up)")
 
-    def _on_joint_state(self, msg: JointState) -> None:
+    def _on_joint_state(self, msg: bytes) -> None:
         self._intake("joint_states", msg)
         self._drain("joint_states")
         self._process_queued()
 
-    def _on_wrench(self, msg: WrenchStamped) -> None:
+    def _on_wrench(self, msg: bytes) -> None:
         self._intake("wrench", msg)
         self._drain("wrench")
         self._process_queued()
 
-    def _intake(self, kind: str, msg: Any) -> None:
+    def _intake(self, kind: str, msg: bytes | Any) -> None:
+        """Convert one input (serialised, as the subscriptions deliver it, or a message object); queue it."""
         self._stats.count_input(kind)
         try:
-            data = joint_state_from_msg(msg) if kind == "joint_states" else wrench_from_msg(msg)
+            if isinstance(msg, bytes):
+                data = joint_state_from_cdr(msg) if kind == "joint_states" else wrench_from_cdr(msg)
+            else:
+                data = joint_state_from_msg(msg) if kind == "joint_states" else wrench_from_msg(msg)
         except RejectedSampleError as err:  # a message the conversion refuses: a counted drop
             self._conversion_failed(kind, err)
             return
