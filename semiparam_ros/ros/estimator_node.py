@@ -36,8 +36,9 @@ Topics (relative names, remap with ``-r``):
   keys listed in :mod:`semiparam_ros.ros.diagnostics`.
 
 Services (``std_srvs/Trigger``): ``~/save`` writes a checkpoint to ``checkpoint.path`` (atomic; the reply
-comes once the file is on disk, or a failure after 5 s if the disk blocks; the executor waits meanwhile
-and input stays queued in DDS), ``~/reset`` forgets everything learned.
+comes once the file is on disk, or a failure after 5 s if the disk blocks; it is served by a hidden helper
+node ``_<name>_save`` in a thread of its own, so learning goes on meanwhile), ``~/reset`` forgets
+everything learned.
 
 Threads. One executor thread runs everything that touches the estimator: rclpy's ``EventsExecutor`` by
 default (its event queue and timers live in C++: less CPU and lower latency than the classic executor,
@@ -84,7 +85,6 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -271,9 +271,19 @@ class EstimatorNode(Node):
         self._drain_order = {"joint_states": (wr, js), "wrench": (js, wr)}
 
         # Services, parameters and timers (wall time, so diagnostics go on when /clock stops).
-        services = MutuallyExclusiveCallbackGroup()
-        self.create_service(Trigger, "~/save", self._on_save, callback_group=services)
-        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
+        # ~/save waits for the file: it is served by a hidden helper node spun in a thread of its own, so
+        # the wait blocks neither executor's learning (and needs no coroutine, which the EventsExecutor
+        # never awaits). The name is resolved here with this node's remappings; the helper takes it as is.
+        self._srv_node = Node(f"_{self.get_name()}_save", namespace=self.get_namespace(),
+                              context=self.context, use_global_arguments=False,
+                              start_parameter_services=False, enable_rosout=False)
+        self._srv_node.create_service(Trigger, self.resolve_service_name("~/save"), self._on_save)
+        self._srv_executor: SingleThreadedExecutor | None = SingleThreadedExecutor(context=self.context)
+        self._srv_executor.add_node(self._srv_node)
+        self._srv_thread = threading.Thread(target=self._spin_save_service, name="estimator-save",
+                                            daemon=True)
+        self._srv_thread.start()
+        self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(make_parameter_validator(lambda: self.config))
         self.add_post_set_parameters_callback(self._on_parameters_set)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -411,13 +421,34 @@ class EstimatorNode(Node):
         self._stats.count_drop("conversion_error")
         self._warn_throttled(f"convert {topic}", lambda: f"cannot convert a {topic} message: {err}")
 
+    def _spin_save_service(self) -> None:
+        executor = self._srv_executor
+        if executor is None:
+            return
+        try:
+            executor.spin()
+        except ExternalShutdownException:
+            pass
+
+    def _stop_save_service(self) -> None:
+        executor = getattr(self, "_srv_executor", None)
+        if executor is None:
+            return
+        self._srv_executor = None
+        executor.shutdown(timeout_sec=1.0)
+        self._srv_thread.join(timeout=2 * _SAVE_TIMEOUT_S)
+        self._srv_node.destroy_node()
+
+    def destroy_node(self) -> None:
+        """Stop the ``~/save`` service thread and its helper node, then destroy the node."""
+        self._stop_save_service()
+        super().destroy_node()
+
     def _on_save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Hand the request to the checkpoint thread and wait (at most ``_SAVE_TIMEOUT_S``) for the file.
 
-        Synchronous, so it answers under every executor (rclpy 7.1.6's ``EventsExecutor`` never awaits a
-        coroutine callback). The executor thread waits meanwhile: input stays queued in DDS (a history
-        of 100 per topic, 100 ms at 1 kHz) and is taken and learned right after the reply; the write
-        itself (snapshot under the model lock, then the file) is the checkpoint thread's.
+        Runs in the save-service thread (see ``_setup``): learning goes on meanwhile, except while the
+        checkpoint thread copies the state under the model lock.
         """
         if self._ckpt_path is None:
             response.success, response.message = False, "checkpoint.path is empty: checkpoints are disabled"
