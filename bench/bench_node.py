@@ -22,7 +22,7 @@ the columns of one run, not runs of different days. Prints markdown tables and w
 Usage::
 
     .venv/bin/python bench/bench_node.py [--quick] [--seconds S] [--hz 1000] [--features 500 1000]
-        [--executors events single_threaded]
+        [--executors events single_threaded] [--save-every S] [--compare-with DIR]
 """
 
 from __future__ import annotations
@@ -103,11 +103,12 @@ TARGETS = {"learned_fraction_min": {"1000": 0.999}, "node_p99_ms_max": {"1000": 
 
 
 def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, tmp: Path,
-        save_every_s: float = 0.0) -> dict:
+        save_every_s: float = 0.0, code: Path | None = None) -> dict:
     """Run the node with ``executor`` and ``features``, replay the messages, measure; return the results.
 
     With ``save_every_s`` > 0 the client calls ``~/save`` (checkpoint in ``tmp``) that often during the
-    playback, and the reply times are recorded: the executor waits for the file meanwhile.
+    playback, and the reply times are recorded. With ``code`` the node is imported from that checkout
+    (``PYTHONPATH`` and working directory) instead of this one: a before/after comparison in one run.
     """
     sys.path.insert(0, str(REPO / "test"))
     import rclpy
@@ -134,7 +135,9 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     if save_every_s > 0:
         cmd += ["-p", f"checkpoint.path:={tmp / f'ckpt_{executor}_{features}.npz'}", "-p",
                 "checkpoint.load_on_start:=false"]
-    node_proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
+    node_env = env if code is None else dict(env, PYTHONPATH=str(code))
+    node_proc = subprocess.Popen(cmd, env=node_env, stdout=log, stderr=subprocess.STDOUT,
+                                 cwd=REPO if code is None else code)
     ps = psutil.Process(node_proc.pid)
 
     context = Context()
@@ -260,6 +263,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     p99s = during("pipeline_latency_p99_ms")
     return {
         "config": {"hz": hz, "n_features": features, "executor": executor, "pairs_sent": n_pairs,
+                   "code": str(code) if code is not None else "this checkout",
                    "messages_sent": report.published},
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                     "processor": platform.processor() or platform.machine(),
@@ -321,6 +325,7 @@ def table(runs: list[dict]) -> str:
     rows = [
         ("D (random features)", lambda r: r["config"]["n_features"]),
         ("executor", lambda r: r["config"]["executor"]),
+        ("code", lambda r: r["config"].get("code", "this checkout")),
         ("pairs sent at 1 kHz", lambda r: r["config"]["pairs_sent"]),
         ("samples learned", lambda r: f"{r['samples_learned']} ({100 * r['learned_fraction']:.2f} %)"),
         ("node CPU (100 % = one core)", lambda r: f"{r['node_cpu_percent']:.0f} %"),
@@ -355,10 +360,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=None)
     parser.add_argument("--hz", type=float, default=1000.0)
     parser.add_argument("--features", type=int, nargs="+", default=[500, 1000])
-    parser.add_argument("--executors", nargs="+", default=["single_threaded", "events"],
+    parser.add_argument("--executors", nargs="+", default=["events", "single_threaded"],
                         choices=["single_threaded", "events"])
     parser.add_argument("--save-every", type=float, default=0.0, metavar="S",
                         help="call ~/save every S seconds during the playback (0: never)")
+    parser.add_argument("--compare-with", type=Path, default=None, metavar="DIR",
+                        help="also run the node of another checkout (e.g. `git worktree add /tmp/base "
+                             "main`), before each run of this one")
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     seconds = args.seconds if args.seconds is not None else (3.0 if args.quick else 15.0)
@@ -373,10 +381,13 @@ def main(argv: list[str] | None = None) -> int:
         messages = load_raw(bag, ["/joint_states", "/wrench"])
         for features in args.features:
             for executor in args.executors:  # the executors of one D back to back: same load
-                res = run(messages, n_pairs, args.hz, features, executor, Path(tmp), args.save_every)
-                print(f"D = {features}, {executor}: learned {100 * res['learned_fraction']:.2f} %, "
-                      f"CPU {res['node_cpu_percent']:.0f} %", flush=True)
-                runs.append(res)
+                for code in ([args.compare_with.resolve()] if args.compare_with else []) + [None]:
+                    res = run(messages, n_pairs, args.hz, features, executor, Path(tmp), args.save_every,
+                              code)
+                    print(f"D = {features}, {executor}, {res['config']['code']}: learned "
+                          f"{100 * res['learned_fraction']:.2f} %, CPU {res['node_cpu_percent']:.0f} %",
+                          flush=True)
+                    runs.append(res)
     print()
     print(table(runs))
     result = {"benchmark": "bench_node", "quick": bool(args.quick), "seconds": seconds, "hz": args.hz,
