@@ -74,8 +74,8 @@ class _RingRMSE:
         self._next = 0
         self._count = 0
 
-    def add(self, y: np.ndarray, prediction: np.ndarray) -> None:
-        """Record the error ``y - prediction``."""
+    def add(self, y: np.ndarray, prediction: np.ndarray | float = 0.0) -> None:
+        """Record the error ``y - prediction`` (``y`` itself when no prediction is given)."""
         row = self._sq[self._next]
         np.subtract(y, prediction, out=row)
         np.square(row, out=row)

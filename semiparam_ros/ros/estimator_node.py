@@ -33,7 +33,10 @@ Topics (relative names, remap with ``-r``):
   reliable + transient local, depth 1): published once per diagnostics period when learning changed them,
   and after start, reset and load;
 * out ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) every ``diagnostics.period`` (wall time),
-  keys listed in :mod:`semiparam_ros.ros.diagnostics`.
+  keys listed in :mod:`semiparam_ros.ros.diagnostics`;
+* the per-sample outputs (predictions, external wrench/torques, σ) are published only while they have a
+  subscriber (no one else can tell), as CDR bytes patched per sample
+  (:class:`~semiparam_ros.ros.conversions.SerializedOutput`).
 
 Services (``std_srvs/Trigger``): ``~/save`` writes a checkpoint to ``checkpoint.path`` (atomic; the reply
 comes once the file is on disk, or a failure after 5 s if the disk blocks; it is served by a hidden helper
