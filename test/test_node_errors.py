@@ -83,3 +83,33 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
         node._process(_kind(msg), msg, time.perf_counter())  # never raises
         n_rejected = est.drops["rejected_sample"]
     assert n_rejected > 0 and est.n_samples_learned == learned_before
+
+
+def test_throttled_warning_is_logged_once_per_period_and_built_only_then(node, monkeypatch):
+    """The node's own throttle: per key at most one warning every _LOG_THROTTLE_S, the text built lazily."""
+    from semiparam_ros.ros import estimator_node
+
+    logged, built = [], []
+
+    class Logger:
+        def warning(self, text):
+            logged.append(text)
+
+    now = [1000.0]
+    monkeypatch.setattr(node, "get_logger", lambda: Logger())
+    monkeypatch.setattr(estimator_node.time, "monotonic", lambda: now[0])
+
+    def text():
+        built.append(1)
+        return "lazy"
+
+    for _ in range(5):
+        node._warn_throttled("a", text)
+        node._warn_throttled("b", "eager")
+    assert logged == ["lazy", "eager"] and len(built) == 1
+    now[0] += estimator_node._LOG_THROTTLE_S - 1e-3
+    node._warn_throttled("a", text)
+    assert logged == ["lazy", "eager"] and len(built) == 1  # still within the period
+    now[0] += 2e-3
+    node._warn_throttled("a", text)
+    assert logged == ["lazy", "eager", "lazy"] and len(built) == 2

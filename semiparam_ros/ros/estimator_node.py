@@ -57,7 +57,8 @@ worked off by a catch-up timer armed only while input is waiting. Why not a lear
 every hand-over costs (measured in docs/design-notes.md).
 A second thread only writes checkpoints (periodically every ``checkpoint.period`` seconds of wall time,
 on ``~/save``, on clean shutdown): it snapshots the learned state under a lock (a memory copy, ~1 ms at
-D = 500) and writes outside it, so neither callbacks nor learning ever wait for the disk. On a clean
+D = 500) and writes outside it, so neither callbacks nor learning ever wait for the disk. A third thread
+spins the hidden helper node serving ``~/save``, whose reply waits for that write. On a clean
 shutdown (Ctrl-C, SIGTERM) the messages still in the input queue are learned first (without publishing;
 at most ``queue_size`` messages, a few hundred ms at D = 500), so the final checkpoint holds everything
 received. A node killed with SIGKILL loses at most the samples learned since the last periodic
