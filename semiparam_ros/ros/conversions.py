@@ -270,6 +270,9 @@ def _cdr_doubles(raw: bytes, pos: int) -> tuple[np.ndarray, int]:
 
 
 _U32 = struct.Struct("<I")
+#: Frame + names section (bytes from the end of the stamp), its names and end offset, of the last JointState
+#: read: a robot sends the same names every time, so one byte comparison replaces decoding them.
+_last_names: tuple[bytes, tuple[str, ...], int] = (b"", (), 0)
 
 
 def joint_state_from_cdr(raw: bytes) -> JointStateData:
@@ -287,26 +290,32 @@ def joint_state_from_cdr(raw: bytes) -> JointStateData:
     Raises:
         RejectedSampleError: If the bytes are not a JointState (rclpy cannot deserialise them).
     """
+    global _last_names
     try:
         if raw[:2] != _CDR_LE:
             raise _NotFastPathError
         sec, nanosec = _STAMP.unpack_from(raw, _PAYLOAD_START)
-        _, pos = _cdr_string(raw, _PAYLOAD_START + 8)  # frame_id (not used)
-        pos = _align(pos, 4)
-        (n_names,) = _U32.unpack_from(raw, pos)
-        pos += 4
-        if 4 * n_names > len(raw) - pos:
-            raise _NotFastPathError
-        names = []
-        for _ in range(n_names):
-            name, pos = _cdr_string(raw, pos)
-            names.append(name)
+        start = _PAYLOAD_START + 8
+        key, names, pos = _last_names
+        if not key or not raw.startswith(key, start):  # frame and names as in the previous message?
+            _, pos = _cdr_string(raw, start)  # frame_id (not used)
+            pos = _align(pos, 4)
+            (n_names,) = _U32.unpack_from(raw, pos)
+            pos += 4
+            if 4 * n_names > len(raw) - pos:
+                raise _NotFastPathError
+            decoded = []
+            for _ in range(n_names):
+                name, pos = _cdr_string(raw, pos)
+                decoded.append(name)
+            names = tuple(decoded)
+            _last_names = (raw[start:pos], names, pos)  # same bytes from `start` parse the same way
         position, pos = _cdr_doubles(raw, pos)
         velocity, pos = _cdr_doubles(raw, pos)
         effort, pos = _cdr_doubles(raw, pos)
     except (_NotFastPathError, struct.error, UnicodeDecodeError):
         return joint_state_from_msg(_deserialize(raw, JointState))
-    return JointStateData(stamp_to_ns(sec, nanosec), tuple(names), position, velocity, effort)
+    return JointStateData(stamp_to_ns(sec, nanosec), names, position, velocity, effort)
 
 
 def wrench_from_cdr(raw: bytes) -> WrenchData:
