@@ -22,7 +22,7 @@ the columns of one run, not runs of different days. Prints markdown tables and w
 Usage::
 
     .venv/bin/python bench/bench_node.py [--quick] [--seconds S] [--hz 1000] [--features 500 1000]
-        [--executors events single_threaded]
+        [--executors events single_threaded] [--save-every S] [--compare-with DIR]
 """
 
 from __future__ import annotations
@@ -102,8 +102,14 @@ TARGETS = {"learned_fraction_min": {"1000": 0.999}, "node_p99_ms_max": {"1000": 
            "node_cpu_percent_max": {"500": 50.0, "1000": 80.0}}
 
 
-def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, tmp: Path) -> dict:
-    """Run the node with ``executor`` and ``features``, replay the messages, measure; return the results."""
+def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, tmp: Path,
+        save_every_s: float = 0.0, code: Path | None = None) -> dict:
+    """Run the node with ``executor`` and ``features``, replay the messages, measure; return the results.
+
+    With ``save_every_s`` > 0 the client calls ``~/save`` (checkpoint in ``tmp``) that often during the
+    playback, and the reply times are recorded. With ``code`` the node is imported from that checkout
+    (``PYTHONPATH`` and working directory) instead of this one: a before/after comparison in one run.
+    """
     sys.path.insert(0, str(REPO / "test"))
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -112,6 +118,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_srvs.srv import Trigger
 
     from semiparam_ros.ros.bag_player import BagPlayer
 
@@ -125,7 +132,12 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     cmd = [sys.executable, "-m", "semiparam_ros.ros.estimator_node", "--executor", executor, "--ros-args",
            "--params-file", str(CONFIG), "-p", f"nonparametric.n_features:={features}",
            "-p", "diagnostics.period:=0.5"]
-    node_proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
+    if save_every_s > 0:
+        cmd += ["-p", f"checkpoint.path:={tmp / f'ckpt_{executor}_{features}.npz'}", "-p",
+                "checkpoint.load_on_start:=false"]
+    node_env = env if code is None else dict(env, PYTHONPATH=str(code))
+    node_proc = subprocess.Popen(cmd, env=node_env, stdout=log, stderr=subprocess.STDOUT,
+                                 cwd=REPO if code is None else code)
     ps = psutil.Process(node_proc.pid)
 
     context = Context()
@@ -152,6 +164,24 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     spinner = threading.Thread(target=client_executor.spin, daemon=True)
     spinner.start()
     player = BagPlayer(node, messages)
+    save_client = node.create_client(Trigger, "/estimator/save")
+    save_times_ms: list[float] = []
+    save_failures: list[str] = []
+    playing = threading.Event()
+
+    def saver() -> None:  # ~/save every save_every_s while the bag plays
+        while True:
+            time.sleep(save_every_s)
+            if not playing.is_set():
+                return
+            t0 = time.perf_counter()
+            future = save_client.call_async(Trigger.Request())
+            while not future.done() and time.perf_counter() - t0 < 30.0:
+                time.sleep(0.001)
+            save_times_ms.append(1e3 * (time.perf_counter() - t0))
+            if not (future.done() and future.result().success):
+                save_failures.append(future.result().message if future.done() else "no reply in 30 s")
+
     try:
         t_start = time.perf_counter()
         ok = player.wait_for_subscribers(timeout=60.0)
@@ -165,7 +195,12 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
             diag_before = diagnostics[-1][1] if diagnostics else {}
         cpu_before = ps.cpu_times()
         wall_before = time.perf_counter()
+        if save_every_s > 0:
+            save_client.wait_for_service(timeout_sec=10.0)
+            threading.Thread(target=saver, daemon=True).start()
+            playing.set()
         report = player.play(hz=hz)
+        playing.clear()
         # wait until the node has drained its queue (predictions stop arriving)
         last = -1
         while True:
@@ -228,6 +263,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     p99s = during("pipeline_latency_p99_ms")
     return {
         "config": {"hz": hz, "n_features": features, "executor": executor, "pairs_sent": n_pairs,
+                   "code": str(code) if code is not None else "this checkout",
                    "messages_sent": report.published},
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                     "processor": platform.processor() or platform.machine(),
@@ -260,6 +296,9 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
         "drops": {k: v for k, v in diag_after.items() if k.startswith("drops.")},
         "rmse_force_N_final": float(diag_after.get("rmse_force_N", "nan")),
         "rmse_parametric_force_N_final": float(diag_after.get("rmse_parametric_force_N", "nan")),
+        "save_every_s": save_every_s,
+        "save_reply_ms": _percentiles(save_times_ms) | {"n": len(save_times_ms)},
+        "save_failures": save_failures,
     }
 
 
@@ -286,6 +325,7 @@ def table(runs: list[dict]) -> str:
     rows = [
         ("D (random features)", lambda r: r["config"]["n_features"]),
         ("executor", lambda r: r["config"]["executor"]),
+        ("code", lambda r: r["config"].get("code", "this checkout")),
         ("pairs sent at 1 kHz", lambda r: r["config"]["pairs_sent"]),
         ("samples learned", lambda r: f"{r['samples_learned']} ({100 * r['learned_fraction']:.2f} %)"),
         ("node CPU (100 % = one core)", lambda r: f"{r['node_cpu_percent']:.0f} %"),
@@ -301,6 +341,9 @@ def table(runs: list[dict]) -> str:
         ("core step predict + learn, mean ms", lambda r: f"{r['core_step_ms']['mean_of_periods']:.3f}"),
         ("queue drops / all drops", lambda r: f"{r['queue_drops']} / {r['drops_total']}"),
         ("player max lag, ms", lambda r: f"{r['player_max_lag_ms']:.1f}"),
+        ("~/save calls: n, reply p50 / max, ms", lambda r: "{} , {:.1f} / {:.1f}".format(
+            r["save_reply_ms"]["n"], r["save_reply_ms"]["p50"], r["save_reply_ms"]["max"])
+            if r.get("save_every_s") else "–"),
         ("load average (1 min) before / after", lambda r: "{:.1f} / {:.1f}".format(
             r["machine"]["load_average_1min_before"], r["machine"]["load_average_1min_after"])),
         ("issue-15 targets", _verdict),
@@ -317,8 +360,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=None)
     parser.add_argument("--hz", type=float, default=1000.0)
     parser.add_argument("--features", type=int, nargs="+", default=[500, 1000])
-    parser.add_argument("--executors", nargs="+", default=["single_threaded", "events"],
+    parser.add_argument("--executors", nargs="+", default=["events", "single_threaded"],
                         choices=["single_threaded", "events"])
+    parser.add_argument("--save-every", type=float, default=0.0, metavar="S",
+                        help="call ~/save every S seconds during the playback (0: never)")
+    parser.add_argument("--compare-with", type=Path, default=None, metavar="DIR",
+                        help="also run the node of another checkout (e.g. `git worktree add /tmp/base "
+                             "main`), before each run of this one")
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     seconds = args.seconds if args.seconds is not None else (3.0 if args.quick else 15.0)
@@ -333,10 +381,13 @@ def main(argv: list[str] | None = None) -> int:
         messages = load_raw(bag, ["/joint_states", "/wrench"])
         for features in args.features:
             for executor in args.executors:  # the executors of one D back to back: same load
-                res = run(messages, n_pairs, args.hz, features, executor, Path(tmp))
-                print(f"D = {features}, {executor}: learned {100 * res['learned_fraction']:.2f} %, "
-                      f"CPU {res['node_cpu_percent']:.0f} %", flush=True)
-                runs.append(res)
+                for code in ([args.compare_with.resolve()] if args.compare_with else []) + [None]:
+                    res = run(messages, n_pairs, args.hz, features, executor, Path(tmp), args.save_every,
+                              code)
+                    print(f"D = {features}, {executor}, {res['config']['code']}: learned "
+                          f"{100 * res['learned_fraction']:.2f} %, CPU {res['node_cpu_percent']:.0f} %",
+                          flush=True)
+                    runs.append(res)
     print()
     print(table(runs))
     result = {"benchmark": "bench_node", "quick": bool(args.quick), "seconds": seconds, "hz": args.hz,

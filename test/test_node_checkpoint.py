@@ -145,3 +145,27 @@ def test_save_kill_restart_gives_the_same_prediction(ros_env, tmp_path, tmp_path
     est.load(ckpt)
     assert est.n_samples_learned == learned_total
     assert not list(ckpt.parent.glob("*.tmp"))  # atomic writes leave no temp files behind
+
+
+@pytest.mark.parametrize("executor", ["events", "single_threaded"])
+def test_save_answers_under_either_executor(ros_env, tmp_path, tmp_path_factory, executor):
+    """~/save (served by the helper node's own thread) replies with the file written, under both executors,
+    and the samples played before it are all in the checkpoint."""
+    bag = source_bag(tmp_path_factory.mktemp("bags"))
+    messages = load_raw(bag, TOPICS, limit=200)
+    offline = offline_replay(bag, 200, {"nonparametric.standardizer_warmup": 50})
+    ckpt = tmp_path / "ckpt.npz"
+    node = NodeProcess(ros_env, [*RELIABLE_INPUTS, f"checkpoint.path:={ckpt}", "checkpoint.period:=0.0",
+                                 "nonparametric.standardizer_warmup:=50"], executor=executor)
+    client = TestClient(ros_env)
+    try:
+        preds = client.collect(WrenchStamped, "/estimator/predicted_wrench")
+        assert client.wait_for_publisher("/estimator/predicted_wrench"), node.output()
+        play(client, node, messages)
+        assert preds.wait_for(lambda m: len(m) >= len(offline.order), timeout=60.0), node.output()
+        reply = client.trigger("/estimator/save", timeout=10.0)
+        assert reply.success, reply.message
+        assert checkpoint_samples(ckpt) == len(offline.order)
+    finally:
+        client.close()
+        node.stop()

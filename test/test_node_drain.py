@@ -9,6 +9,7 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from ros_helpers import CONFIG, make_ros_env
 from sensor_msgs.msg import JointState
 
@@ -61,8 +62,9 @@ def test_take_message_returns_message_and_info_then_none(node_and_publisher):
         with sub.handle:
             taken = sub.handle.take_message(sub.msg_type, sub.raw)
         time.sleep(0.01)
-    assert isinstance(taken, tuple) and isinstance(taken[0], JointState)
-    assert (taken[0].header.stamp.sec, taken[0].header.stamp.nanosec) == (1, 0)
+    assert isinstance(taken, tuple) and isinstance(taken[0], bytes)  # the node subscribes serialised
+    msg = deserialize_message(taken[0], JointState)
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1, 0)
     with sub.handle:
         assert sub.handle.take_message(sub.msg_type, sub.raw) is None  # the history is empty now
 
@@ -78,3 +80,31 @@ def test_drain_takes_every_queued_message_in_order(node_and_publisher):
     node._drain("joint_states")
     stamps = [item.stamp_ns for _, item, _ in node._queue]
     assert stamps == [1_000_000_000 + k for k in range(n)]
+
+
+def test_drain_alternates_the_two_subscriptions(node_and_publisher):
+    """Both streams queued: taken one of each in turn (the other kind first), so neither runs ahead."""
+    from geometry_msgs.msg import WrenchStamped
+
+    node, pub = node_and_publisher
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    source = rclpy.create_node("source_wrench", context=node.context)
+    try:
+        wpub = source.create_publisher(WrenchStamped, node.config["topics.wrench"], qos)
+        _wait_matched(pub)
+        _wait_matched(wpub)
+        n_js, n_w = 30, 20
+        _publish(pub, n_js)
+        for k in range(n_w):
+            w = WrenchStamped()
+            w.header.stamp.sec, w.header.stamp.nanosec = 2, k
+            wpub.publish(w)
+        time.sleep(0.5)
+        node._drain("joint_states")
+        kinds = [kind for kind, _, _ in node._queue]
+        assert kinds == ["wrench", "joint_states"] * n_w + ["joint_states"] * (n_js - n_w)
+        assert [item.stamp_ns for kind, item, _ in node._queue if kind == "wrench"] == [
+            2_000_000_000 + k for k in range(n_w)]
+    finally:
+        source.destroy_node()

@@ -7,14 +7,13 @@ import time
 
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from ros_helpers import CONFIG, make_ros_env, source_bag
 
 from semiparam_ros.core.messages import JointStateData
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.io.bags import read_messages
-from semiparam_ros.ros.estimator_node import EstimatorNode
+from semiparam_ros.ros.estimator_node import EXECUTORS, EstimatorNode
 
 pytestmark = pytest.mark.ros
 
@@ -38,7 +37,8 @@ def _kind(msg):
     return "joint_states" if isinstance(msg, JointStateData) else "wrench"
 
 
-def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypatch):
+@pytest.mark.parametrize("executor_name", list(EXECUTORS))  # the default first
+def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypatch, executor_name):
     messages = read_messages(source_bag(tmp_path))
     est = node.estimator
     for _ in range(400):  # learn a little, through the node's own processing path
@@ -56,7 +56,7 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
     monkeypatch.setattr(est.model, "_learn_ahead_valid", buggy)
     # through the executor, as live: queued input is processed by an executor callback (the catch-up
     # timer, armed as when a backlog remains), and the error raises out of spin_once
-    executor = SingleThreadedExecutor(context=node.context)
+    executor = EXECUTORS[executor_name](context=node.context)
     executor.add_node(node)
     try:
         with pytest.raises(IndexError, match="injected bug"):
@@ -84,3 +84,33 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
         node._process(_kind(msg), msg, time.perf_counter())  # never raises
         n_rejected = est.drops["rejected_sample"]
     assert n_rejected > 0 and est.n_samples_learned == learned_before
+
+
+def test_throttled_warning_is_logged_once_per_period_and_built_only_then(node, monkeypatch):
+    """The node's own throttle: per key at most one warning every _LOG_THROTTLE_S, the text built lazily."""
+    from semiparam_ros.ros import estimator_node
+
+    logged, built = [], []
+
+    class Logger:
+        def warning(self, text):
+            logged.append(text)
+
+    now = [1000.0]
+    monkeypatch.setattr(node, "get_logger", lambda: Logger())
+    monkeypatch.setattr(estimator_node.time, "monotonic", lambda: now[0])
+
+    def text():
+        built.append(1)
+        return "lazy"
+
+    for _ in range(5):
+        node._warn_throttled("a", text)
+        node._warn_throttled("b", "eager")
+    assert logged == ["lazy", "eager"] and len(built) == 1
+    now[0] += estimator_node._LOG_THROTTLE_S - 1e-3
+    node._warn_throttled("a", text)
+    assert logged == ["lazy", "eager"] and len(built) == 1  # still within the period
+    now[0] += 2e-3
+    node._warn_throttled("a", text)
+    assert logged == ["lazy", "eager", "lazy"] and len(built) == 2

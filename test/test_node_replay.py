@@ -41,9 +41,8 @@ def _rmse(errors: list[np.ndarray], cols: slice) -> float:
     return float(np.sqrt(np.mean(np.square(np.array(errors)[:, cols]))))
 
 
-@pytest.mark.parametrize(("combination", "executor"),
-                         [("cascade", "single_threaded"), ("joint", "single_threaded"),
-                          ("cascade", "events")])
+@pytest.mark.parametrize(("combination", "executor"),  # None: the node's default (events)
+                         [("cascade", None), ("joint", None), ("cascade", "single_threaded")])
 def test_replay_matches_offline_core_and_beats_parametric(ros_env, tmp_path_factory, combination,
                                                           executor):
     """Either executor (``--executor``) gives the offline core's numbers to 1e-9."""

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
@@ -14,11 +15,15 @@ from sensor_msgs.msg import JointState
 
 from semiparam_ros.core.config import PARAMETERS, EstimatorConfig, parameter_spec
 from semiparam_ros.core.messages import joint_state_from_msg
+from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.ros.conversions import (
+    SerializedOutput,
+    joint_state_from_cdr,
     joint_torques_msg,
     parameters_msg,
     parameters_names_from_msg,
     stamp_msg,
+    wrench_from_cdr,
     wrench_from_msg,
     wrench_stamped_msg,
 )
@@ -35,6 +40,41 @@ def test_wrench_round_trip_through_cdr():
     np.testing.assert_array_equal(data.wrench, w)
     with pytest.raises(ValueError, match="6 entries"):
         wrench_stamped_msg(0, "s", np.zeros(5))
+
+
+@pytest.mark.parametrize("frame", ["", "s", "ft", "r_arm_ft_sensor", "a_frame_of_nine_chars"])
+def test_serialized_wrench_output_is_what_rclpy_decodes(frame):
+    """Patched CDR bytes decode (rclpy's own deserialiser) to the stamp and values given, bit for bit;
+    frame lengths cover every string padding (whose bytes rclpy leaves unset, so no byte comparison)."""
+    out = SerializedOutput(lambda stamp, w: wrench_stamped_msg(stamp, frame, w), 6)
+    assert out.serialized  # x86/ARM: little-endian CDR
+    rng = np.random.default_rng(0)
+    for stamp in (0, 1_700_000_000_123_456_789, 5_000_000_001, -3, 2**31 * 10**9 - 1):
+        w = rng.normal(size=6) * 10.0 ** rng.integers(-300, 300, size=6)
+        w[rng.integers(6)] = rng.choice([np.nan, np.inf, -np.inf, -0.0])
+        raw = out.fill(stamp, w)
+        assert isinstance(raw, bytes)
+        assert len(raw) == len(serialize_message(wrench_stamped_msg(stamp, frame, w)))  # (padding bytes vary)
+        data = wrench_from_msg(deserialize_message(raw, WrenchStamped))
+        assert data.stamp_ns == max(stamp, 0) and data.frame_id == frame
+        np.testing.assert_array_equal(data.wrench.view(np.int64), w.view(np.int64))  # bit for bit
+    with pytest.raises(ValueError, match="expected 6 values"):
+        out.fill(0, np.zeros(5))
+
+
+@pytest.mark.parametrize("joints", [("a",), ("j1", "joint_2"), ("r_shoulder_pitch", "r_shoulder_roll",
+                                                                 "r_shoulder_yaw", "r_elbow", "x")])
+def test_serialized_joint_torques_output_is_what_rclpy_decodes(joints):
+    out = SerializedOutput(lambda stamp, tau: joint_torques_msg(stamp, joints, tau), len(joints))
+    assert out.serialized
+    for stamp, tau in ((7, np.arange(len(joints)) - 1.5),
+                       (1_700_000_000_000_000_001, np.full(len(joints), 1e-9))):
+        raw = out.fill(stamp, tau)
+        assert len(raw) == len(serialize_message(joint_torques_msg(stamp, joints, tau)))
+        msg = deserialize_message(raw, JointState)
+        assert tuple(msg.name) == joints and len(msg.position) == len(msg.velocity) == 0
+        assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == stamp
+        np.testing.assert_array_equal(np.asarray(msg.effort), tau)
 
 
 def test_stamp_conversion_is_exact_and_clamps_negative():
@@ -121,3 +161,71 @@ def test_statistics_windowed_rmse_latency_and_levels():
         DiagnosticStatus.ERROR
     values = {kv.key: kv.value for kv in msg.status[0].values}
     assert values["queue_drops"] == "2"
+
+
+def _same_data(a, b):
+    """Equal field by field, floats bit for bit (NaN payloads and -0.0 included)."""
+    assert type(a) is type(b) and a.stamp_ns == b.stamp_ns
+    for field in ("names", "frame_id"):
+        assert getattr(a, field, None) == getattr(b, field, None)
+    for field in ("position", "velocity", "effort", "force", "torque"):
+        if hasattr(a, field):
+            x, y = getattr(a, field), getattr(b, field)
+            assert x.dtype == y.dtype == np.float64 and x.shape == y.shape
+            assert x.tobytes() == y.tobytes()
+
+
+def test_cdr_decoders_equal_rclpy_deserialisation(monkeypatch):
+    """The fast CDR readers give exactly what rclpy's deserialiser + the message converters give, on random
+    messages covering every string/sequence alignment, empty and mismatched arrays, NaN/inf, odd stamps."""
+    from semiparam_ros.ros import conversions
+
+    def no_fallback(raw, msg_type):
+        raise AssertionError("the fast path fell back to rclpy")
+
+    monkeypatch.setattr(conversions, "_deserialize", no_fallback)  # every message here takes the fast path
+    rng = np.random.default_rng(1)
+
+    def text(n):
+        return "".join(rng.choice(list("abcxyz_019é")) for _ in range(n))
+
+    def values(n):
+        v = rng.normal(size=n) * 10.0 ** rng.integers(-5, 5, size=n)
+        if n:
+            v[rng.integers(n)] = rng.choice([np.nan, np.inf, -0.0, 1.0])
+        return v
+
+    for _ in range(300):
+        js = JointState(name=[text(int(rng.integers(0, 10))) for _ in range(int(rng.integers(0, 8)))],
+                        position=values(int(rng.integers(0, 8))).tolist(),
+                        velocity=values(int(rng.integers(0, 8))).tolist(),
+                        effort=values(int(rng.integers(0, 3))).tolist())
+        js.header.stamp.sec = int(rng.integers(-2**31, 2**31))
+        js.header.stamp.nanosec = int(rng.integers(0, 10**9))
+        js.header.frame_id = text(int(rng.integers(0, 12)))
+        raw = bytes(serialize_message(js))
+        _same_data(joint_state_from_cdr(raw), joint_state_from_msg(deserialize_message(raw, JointState)))
+        js.header.stamp.nanosec = (js.header.stamp.nanosec + 1) % 10**9  # same names: the cached ones
+        js.position = values(len(js.position)).tolist()
+        raw = bytes(serialize_message(js))
+        _same_data(joint_state_from_cdr(raw), joint_state_from_msg(deserialize_message(raw, JointState)))
+        w = wrench_stamped_msg(int(rng.integers(0, 2**62)), text(int(rng.integers(0, 12))), values(6))
+        raw = bytes(serialize_message(w))
+        _same_data(wrench_from_cdr(raw), wrench_from_msg(deserialize_message(raw, WrenchStamped)))
+
+
+def test_cdr_decoders_fall_back_to_rclpy_and_reject_garbage():
+    # big-endian CDR, written by hand: not the fast path; rclpy's deserialiser reads it
+    import struct
+
+    frame = b"sensor\0"
+    body = struct.pack(">iII", 5, 7, len(frame)) + frame
+    body += b"\0" * (-len(body) % 8) + struct.pack(">6d", *np.arange(6.0) - 2.5)
+    data = wrench_from_cdr(b"\x00\x00\x00\x00" + body)
+    assert (data.stamp_ns, data.frame_id) == (5_000_000_007, "sensor")
+    np.testing.assert_array_equal(data.wrench, np.arange(6.0) - 2.5)
+    for garbage in (b"", b"\x00\x01\x00\x00", b"\x00\x01\x00\x00" + b"\xff" * 13, b"\x07" * 40):
+        with pytest.raises(RejectedSampleError):
+            wrench_from_cdr(garbage)
+        with pytest.raises(RejectedSampleError):
+            joint_state_from_cdr(garbage)

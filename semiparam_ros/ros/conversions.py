@@ -15,26 +15,48 @@ kg·m²), followed, with ``robot.output: joint_torques``, by the per-joint frict
 ``<joint>.armature`` (kg·m², when enabled; merged into an inertia combination where not separately
 identifiable), or by ``offset_fx … offset_tz`` (N, N·m) for an F/T sensor offset. A name never contains a
 comma (commas inside a name are replaced by ``;``), so ``label.split(",")`` recovers them.
+
+The node publishes its per-sample outputs through :class:`SerializedOutput`: the message is serialised
+once by rclpy, and each sample only rewrites the stamp and the values in those bytes (publishing bytes
+skips rclpy's conversion of the message object, which costs more than the rest of a publish). It
+subscribes to serialised messages too and decodes them with :func:`joint_state_from_cdr` and
+:func:`wrench_from_cdr` (little-endian CDR read with :mod:`struct`, about 5× cheaper than rclpy building
+the message object that :func:`joint_state_from_msg` then reads; any other or unexpected encoding goes
+through rclpy's deserialiser and those functions, so the data is the same either way).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import struct
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from semiparam_ros.core.messages import joint_state_from_msg, ns_to_stamp, wrench_from_msg
+from semiparam_ros.core.messages import (
+    JointStateData,
+    WrenchData,
+    joint_state_from_msg,
+    ns_to_stamp,
+    stamp_to_ns,
+    wrench_from_msg,
+)
+from semiparam_ros.errors import RejectedSampleError
 
 __all__ = [
+    "SerializedOutput",
+    "joint_state_from_cdr",
     "joint_state_from_msg",
     "joint_torques_msg",
     "parameters_msg",
     "parameters_names_from_msg",
     "stamp_msg",
+    "wrench_from_cdr",
     "wrench_from_msg",
     "wrench_stamped_msg",
 ]
@@ -145,3 +167,192 @@ def parameters_names_from_msg(msg: Float64MultiArray) -> list[str]:
     if not msg.layout.dim or not msg.layout.dim[0].label:
         return []
     return msg.layout.dim[0].label.split(",")
+
+
+#: CDR little-endian encapsulation (``CDR_LE``), what rmw_fastrtps and rmw_cyclonedds write on x86/ARM.
+_CDR_LE = b"\x00\x01"
+_STAMP = struct.Struct("<iI")  # builtin_interfaces/Time at the start of the CDR payload
+_PAYLOAD_START = 4  # after the 2-byte encapsulation id and the 2-byte options
+
+
+class SerializedOutput:
+    """A stamped message serialised once, re-emitted with a new stamp and new trailing ``float64`` values.
+
+    The message's first field must be ``std_msgs/Header`` (its stamp is the first 8 bytes of the CDR
+    payload) and the ``n`` values must be stored as ``n`` consecutive ``float64`` (a ``WrenchStamped``'s
+    six components, a ``JointState``'s ``effort``). Their byte offset is found by serialising the message
+    with distinct sentinel values and searching for them, so no layout is hard-coded. Where that fails (a
+    big-endian encapsulation, sentinels not found exactly once) :meth:`fill` falls back to building the
+    message object, which publishes the same content.
+
+    Args:
+        build: ``build(stamp_ns, values)`` → the message (e.g. :func:`wrench_stamped_msg` with a frame).
+        n_values: Number of values per sample.
+
+    Raises:
+        ValueError: If ``n_values`` < 1 (raised by ``build`` too for a wrong length).
+    """
+
+    def __init__(self, build: Callable[[int, np.ndarray], Any], n_values: int) -> None:
+        if n_values < 1:
+            raise ValueError(f"n_values must be ≥ 1, got {n_values}")
+        self._build = build
+        self._n = int(n_values)
+        sentinels = np.pi * (1.0 + np.arange(self._n)) + 1e-3  # values no stamp/string byte pattern repeats
+        raw = bytes(serialize_message(build(0, sentinels)))
+        needle = sentinels.astype("<f8").tobytes()
+        offset = raw.find(needle)
+        self._buffer: bytearray | None = None
+        if raw[:2] == _CDR_LE and offset >= _PAYLOAD_START + _STAMP.size and raw.find(needle, offset + 1) < 0:
+            self._buffer = bytearray(raw)
+            self._values = np.frombuffer(self._buffer, dtype="<f8", count=self._n, offset=offset)
+
+    @property
+    def serialized(self) -> bool:
+        """Whether :meth:`fill` returns serialised bytes (else message objects)."""
+        return self._buffer is not None
+
+    def fill(self, stamp_ns: int, values: np.ndarray) -> bytes | Any:
+        """Return the message for one sample, as CDR bytes ready for ``Publisher.publish``.
+
+        Args:
+            stamp_ns: Header stamp in nanoseconds (negative values are clamped to 0, as in :func:`stamp_msg`).
+            values: The ``n_values`` values (units of the message: N, N·m).
+
+        Returns:
+            Serialised bytes (or the message object in the fallback case).
+
+        Raises:
+            ValueError: If ``values`` does not have ``n_values`` entries.
+        """
+        if self._buffer is None:
+            return self._build(stamp_ns, values)
+        v = np.asarray(values, dtype=np.float64).reshape(-1)
+        if v.shape != (self._n,):
+            raise ValueError(f"expected {self._n} values, got shape {v.shape}")
+        sec, nanosec = ns_to_stamp(max(int(stamp_ns), 0))
+        _STAMP.pack_into(self._buffer, _PAYLOAD_START, sec, nanosec)
+        self._values[:] = v
+        return bytes(self._buffer)
+
+
+class _NotFastPathError(Exception):
+    """The bytes are not what the fast decoder reads: hand them to rclpy's deserialiser."""
+
+
+def _cdr_string(raw: bytes, pos: int) -> tuple[str, int]:
+    """Read a CDR string (4-aligned ``uint32`` length with the NUL, bytes, NUL) at ``pos``."""
+    pos = _align(pos, 4)
+    (n,) = _U32.unpack_from(raw, pos)
+    end = pos + 4 + n
+    if n == 0 or end > len(raw) or raw[end - 1] != 0:
+        raise _NotFastPathError
+    return raw[pos + 4:end - 1].decode(), end
+
+
+def _align(pos: int, size: int) -> int:
+    """Align a buffer offset to ``size`` relative to the CDR payload (which starts at byte 4)."""
+    return pos + (-(pos - _PAYLOAD_START) % size)
+
+
+def _cdr_doubles(raw: bytes, pos: int) -> tuple[np.ndarray, int]:
+    """Read a CDR ``float64[]`` (``uint32`` count, then 8-aligned values; no padding when empty)."""
+    pos = _align(pos, 4)
+    (n,) = _U32.unpack_from(raw, pos)
+    pos += 4
+    if n == 0:
+        return np.empty(0), pos
+    pos = _align(pos, 8)
+    end = pos + 8 * n
+    if end > len(raw):
+        raise _NotFastPathError
+    return np.frombuffer(raw, dtype="<f8", count=n, offset=pos), end
+
+
+_U32 = struct.Struct("<I")
+#: Frame + names section (bytes from the end of the stamp), its names and end offset, of the last JointState
+#: read: a robot sends the same names every time, so one byte comparison replaces decoding them.
+_last_names: tuple[bytes, tuple[str, ...], int] = (b"", (), 0)
+
+
+def joint_state_from_cdr(raw: bytes) -> JointStateData:
+    """Convert a serialised ``sensor_msgs/JointState`` into :class:`JointStateData`.
+
+    Equal to ``joint_state_from_msg(deserialize_message(raw, JointState))``, which is what runs for any
+    encapsulation other than little-endian CDR or bytes the fast reader does not expect.
+
+    Args:
+        raw: The serialised message (CDR with its 4-byte encapsulation header).
+
+    Returns:
+        The plain-array view (content not validated, as :func:`joint_state_from_msg`).
+
+    Raises:
+        RejectedSampleError: If the bytes are not a JointState (rclpy cannot deserialise them).
+    """
+    global _last_names
+    try:
+        if raw[:2] != _CDR_LE:
+            raise _NotFastPathError
+        sec, nanosec = _STAMP.unpack_from(raw, _PAYLOAD_START)
+        start = _PAYLOAD_START + 8
+        key, names, pos = _last_names
+        if not key or not raw.startswith(key, start):  # frame and names as in the previous message?
+            _, pos = _cdr_string(raw, start)  # frame_id (not used)
+            pos = _align(pos, 4)
+            (n_names,) = _U32.unpack_from(raw, pos)
+            pos += 4
+            if 4 * n_names > len(raw) - pos:
+                raise _NotFastPathError
+            decoded = []
+            for _ in range(n_names):
+                name, pos = _cdr_string(raw, pos)
+                decoded.append(name)
+            names = tuple(decoded)
+            _last_names = (raw[start:pos], names, pos)  # same bytes from `start` parse the same way
+        position, pos = _cdr_doubles(raw, pos)
+        velocity, pos = _cdr_doubles(raw, pos)
+        effort, pos = _cdr_doubles(raw, pos)
+    except (_NotFastPathError, struct.error, UnicodeDecodeError):
+        return joint_state_from_msg(_deserialize(raw, JointState))
+    return JointStateData(stamp_to_ns(sec, nanosec), names, position, velocity, effort)
+
+
+def wrench_from_cdr(raw: bytes) -> WrenchData:
+    """Convert a serialised ``geometry_msgs/WrenchStamped`` into :class:`WrenchData`.
+
+    Equal to ``wrench_from_msg(deserialize_message(raw, WrenchStamped))`` (which runs for any other
+    encapsulation or unexpected bytes, as in :func:`joint_state_from_cdr`).
+
+    Args:
+        raw: The serialised message.
+
+    Returns:
+        The plain-array view: force in N, torque in N·m, in the frame ``header.frame_id``.
+
+    Raises:
+        RejectedSampleError: If the bytes are not a WrenchStamped.
+    """
+    try:
+        if raw[:2] != _CDR_LE:
+            raise _NotFastPathError
+        sec, nanosec = _STAMP.unpack_from(raw, _PAYLOAD_START)
+        frame, pos = _cdr_string(raw, _PAYLOAD_START + 8)
+        values, _ = _cdr_six(raw, pos)
+    except (_NotFastPathError, struct.error, UnicodeDecodeError):
+        return wrench_from_msg(_deserialize(raw, WrenchStamped))
+    return WrenchData(stamp_to_ns(sec, nanosec), frame, values[:3], values[3:])
+
+
+def _cdr_six(raw: bytes, pos: int) -> tuple[np.ndarray, int]:
+    pos = _align(pos, 8)
+    if pos + 48 > len(raw):
+        raise _NotFastPathError
+    return np.frombuffer(raw, dtype="<f8", count=6, offset=pos), pos + 48
+
+
+def _deserialize(raw: bytes, msg_type: type) -> Any:
+    try:
+        return deserialize_message(raw, msg_type)
+    except Exception as err:  # rclpy raises several types for bytes that are not this message
+        raise RejectedSampleError(f"not a serialised {msg_type.__name__}: {err}") from err

@@ -74,8 +74,11 @@ class _RingRMSE:
         self._next = 0
         self._count = 0
 
-    def add(self, error: np.ndarray) -> None:
-        self._sq[self._next] = np.square(error)
+    def add(self, y: np.ndarray, prediction: np.ndarray | float = 0.0) -> None:
+        """Record the error ``y - prediction`` (``y`` itself when no prediction is given)."""
+        row = self._sq[self._next]
+        np.subtract(y, prediction, out=row)
+        np.square(row, out=row)
         self._next = (self._next + 1) % self._sq.shape[0]
         self._count = min(self._count + 1, self._sq.shape[0])
 
@@ -201,14 +204,14 @@ class NodeStatistics:
             self._e2e_max = max(self._e2e_max, e2e_s)
             self._e2e_ring[self._e2e_count % _E2E_RING] = e2e_s
             self._e2e_count += 1
-            self._rmse_total.add(y - total)
-            self._rmse_param.add(y - parametric)
+            self._rmse_total.add(y, total)
+            self._rmse_param.add(y, parametric)
 
-    def add_learning_cpu(self, seconds: float) -> None:
-        """Add the CPU time spent running the estimator on one queued message [s]."""
+    def add_learning_cpu(self, seconds: float, n_messages: int = 1) -> None:
+        """Add the CPU time spent running the estimator on ``n_messages`` queued messages [s]."""
         with self._lock:
             self._learning_cpu += seconds
-            self._processed += 1
+            self._processed += n_messages
 
     def clear_errors(self) -> None:
         """Forget the RMSE windows (after a model reset)."""

@@ -33,15 +33,21 @@ Topics (relative names, remap with ``-r``):
   reliable + transient local, depth 1): published once per diagnostics period when learning changed them,
   and after start, reset and load;
 * out ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) every ``diagnostics.period`` (wall time),
-  keys listed in :mod:`semiparam_ros.ros.diagnostics`.
+  keys listed in :mod:`semiparam_ros.ros.diagnostics`;
+* the per-sample outputs (predictions, external wrench/torques, σ) are published only while they have a
+  subscriber (no one else can tell), as CDR bytes patched per sample
+  (:class:`~semiparam_ros.ros.conversions.SerializedOutput`).
 
 Services (``std_srvs/Trigger``): ``~/save`` writes a checkpoint to ``checkpoint.path`` (atomic; the reply
-comes once the file is on disk), ``~/reset`` forgets everything learned.
+comes once the file is on disk, or a failure after 5 s if the disk blocks; it is served by a hidden helper
+node ``_<name>_save`` in a thread of its own, so learning goes on meanwhile), ``~/reset`` forgets
+everything learned.
 
-Threads. One executor thread runs everything that touches the estimator: the classic
-``SingleThreadedExecutor`` by default, ``--executor events`` for rclpy's ``EventsExecutor`` (its event queue
-and timers live in C++; in rclpy 7.1.6 it never awaits async service callbacks, so ``~/save`` does not
-answer under it — the comparison is in docs/performance.md). A subscription callback converts the message,
+Threads. One executor thread runs everything that touches the estimator: rclpy's ``EventsExecutor`` by
+default (its event queue and timers live in C++: less CPU and lower latency than the classic executor,
+measured in docs/performance.md), ``--executor single_threaded`` for the classic
+``SingleThreadedExecutor``. A subscription callback converts the message (taken serialised and read by
+:func:`~semiparam_ros.ros.conversions.joint_state_from_cdr` / ``wrench_from_cdr``),
 appends it to a bounded deque (``queue_size``; when full the oldest entry is dropped and counted), takes
 what else is already waiting on that subscription, and runs the estimator on the queue at once (predict,
 publish, then learn): no executor round trip lies between receipt and prediction. At most 50 messages are
@@ -51,7 +57,8 @@ worked off by a catch-up timer armed only while input is waiting. Why not a lear
 every hand-over costs (measured in docs/design-notes.md).
 A second thread only writes checkpoints (periodically every ``checkpoint.period`` seconds of wall time,
 on ``~/save``, on clean shutdown): it snapshots the learned state under a lock (a memory copy, ~1 ms at
-D = 500) and writes outside it, so neither callbacks nor learning ever wait for the disk. On a clean
+D = 500) and writes outside it, so neither callbacks nor learning ever wait for the disk. A third thread
+spins the hidden helper node serving ``~/save``, whose reply waits for that write. On a clean
 shutdown (Ctrl-C, SIGTERM) the messages still in the input queue are learned first (without publishing;
 at most ``queue_size`` messages, a few hundred ms at D = 500), so the final checkpoint holds everything
 received. A node killed with SIGKILL loses at most the samples learned since the last periodic
@@ -68,6 +75,9 @@ from __future__ import annotations
 
 import argparse
 import collections
+import concurrent.futures
+import gc
+import math
 import sys
 import threading
 import time
@@ -79,7 +89,6 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -93,7 +102,6 @@ from rclpy.qos import (
     ReliabilityPolicy,
 )
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -103,12 +111,14 @@ from semiparam_ros.core.checkpoint import atomic_save_npz
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult, rmse_window_samples
 from semiparam_ros.core.messages import JointStateData, WrenchData
-from semiparam_ros.core.rrls import RecursiveRLS
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 from semiparam_ros.ros.conversions import (
+    SerializedOutput,
+    joint_state_from_cdr,
     joint_state_from_msg,
     joint_torques_msg,
     parameters_msg,
+    wrench_from_cdr,
     wrench_from_msg,
     wrench_stamped_msg,
 )
@@ -142,6 +152,7 @@ _SHUTDOWN_BUDGET_S = 10.0  # time allowed to learn the queue at shutdown (1000 m
 _CATCH_UP_PERIOD_S = 1e-4  # the backlog timer fires at every executor turn while armed
 _SPIN_TIMEOUT_S = 0.1  # EventsExecutor.spin_once timeout (see spin())
 _MAX_DRAIN = 64  # messages taken per subscription callback at most (bounds the executor's time away)
+_SAVE_TIMEOUT_S = 5.0  # ~/save waits this long for the checkpoint thread, then replies failure
 
 
 class StartupError(RuntimeError):
@@ -172,6 +183,7 @@ class EstimatorNode(Node):
     # ================================================================== set-up
     def _setup(self) -> None:
         self._stopping = threading.Event()
+        self._last_warning: dict[str, float] = {}  # key → monotonic time of the last throttled warning
         self._ckpt_thread: threading.Thread | None = None
         try:
             self.config: EstimatorConfig = declare_parameters(self)
@@ -208,7 +220,7 @@ class EstimatorNode(Node):
         self._version = 0  # bumped whenever the learned state changes (learning, reset)
         self._published_version = -1
         self._ckpt_event = threading.Event()
-        self._ckpt_requests: list[Future] = []
+        self._ckpt_requests: list[concurrent.futures.Future[tuple[bool, str]]] = []
         self._ckpt_lock = threading.Lock()
         self._ckpt_reset_pending = False
         self._saved_version = 0
@@ -226,7 +238,9 @@ class EstimatorNode(Node):
             return self.create_publisher(msg_type, topic, qos,
                                          event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
-        self._out_msgs = tuple(WrenchStamped() for _ in range(5))  # refilled per sample
+        self._out_frame: str | None = None  # frame of self._out_template (wrench output)
+        self._out_template = (None if self._output == "wrench" else SerializedOutput(
+            lambda stamp, tau: joint_torques_msg(stamp, self._joints, tau), len(self._joints)))
         if self._output == "wrench":
             self._pub_total = publisher(WrenchStamped, "~/predicted_wrench", _OUTPUT_QOS)
             self._pub_param = publisher(WrenchStamped, "~/predicted_wrench/parametric", _OUTPUT_QOS)
@@ -254,12 +268,26 @@ class EstimatorNode(Node):
                 use_default_callbacks=False)
             self._subscriptions_by_kind[key.split(".")[1]] = self.create_subscription(
                 msg_type, topic, callback, INPUT_QOS, qos_overriding_options=overrides,
-                event_callbacks=events)
+                event_callbacks=events, raw=True)  # serialised: conversions.*_from_cdr decode them
+
+        js, wr = (("joint_states", self._subscriptions_by_kind["joint_states"]),
+                  ("wrench", self._subscriptions_by_kind["wrench"]))
+        self._drain_order = {"joint_states": (wr, js), "wrench": (js, wr)}
 
         # Services, parameters and timers (wall time, so diagnostics go on when /clock stops).
-        services = MutuallyExclusiveCallbackGroup()
-        self.create_service(Trigger, "~/save", self._on_save, callback_group=services)
-        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
+        # ~/save waits for the file: it is served by a hidden helper node spun in a thread of its own, so
+        # the wait blocks neither executor's learning (and needs no coroutine, which the EventsExecutor
+        # never awaits). The name is resolved here with this node's remappings; the helper takes it as is.
+        self._srv_node = Node(f"_{self.get_name()}_save", namespace=self.get_namespace(),
+                              context=self.context, use_global_arguments=False,
+                              start_parameter_services=False, enable_rosout=False)
+        self._srv_node.create_service(Trigger, self.resolve_service_name("~/save"), self._on_save)
+        self._srv_executor: SingleThreadedExecutor | None = SingleThreadedExecutor(context=self.context)
+        self._srv_executor.add_node(self._srv_node)
+        self._srv_thread = threading.Thread(target=self._spin_save_service, name="estimator-save",
+                                            daemon=True)
+        self._srv_thread.start()
+        self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(make_parameter_validator(lambda: self.config))
         self.add_post_set_parameters_callback(self._on_parameters_set)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -281,16 +309,24 @@ class EstimatorNode(Node):
             f"{'enabled' if est.learning_enabled else 'disabled'}; inputs {', '.join(inputs)}")
 
     def _warm_up_kernels(self) -> None:
-        """Load the compiled kernels before input arrives, on a throw-away learner of two features.
+        """Run every compiled kernel of a step once before input arrives, on a throw-away estimator.
 
-        Compilation depends only on the array types, so a tiny problem loads the same machine code as the
-        real model (a 6-row parametric block and single residual rows) without copying a model that can
-        hold hundreds of MB.
+        The same configuration with 4 random features, fed 40 synthetic samples (a slow ramp of every
+        joint, zero wrench, 1 ms apart): compilation depends only on the array types, so this loads the
+        machine code the real model runs (without it the first real sample took ≈ 20 ms instead of
+        ≈ 0.3 ms) without copying a model that can hold hundreds of MB.
         """
-        y_dim = 6 if self._output == "wrench" else len(self._joints)
-        scratch = RecursiveRLS(2, y_dim, 1.0)
-        scratch.predict_update(np.zeros((y_dim, 2)), np.zeros((y_dim, y_dim)))
-        scratch.predict_update(np.zeros(2), np.zeros(y_dim))
+        cfg = self.config
+        scratch = OnlineEstimator(cfg.with_overrides({"nonparametric.n_features": 4,
+                                                      "nonparametric.standardizer_warmup": 2}))
+        joints, n = self._joints, len(self._joints)
+        frame = self._frame_id or "warm_up"
+        for k in range(40):
+            stamp = 1_000_000_000 + k * 1_000_000
+            scratch.process_joint_state(JointStateData(stamp, joints, np.full(n, 1e-3 * k), np.full(n, 1.0),
+                                                       np.zeros(n)))
+            if self._output == "wrench":
+                scratch.process_wrench(WrenchData(stamp, frame, np.zeros(3), np.zeros(3)))
 
     # ================================================================== executor side
     def _enqueue(self, kind: str, item: JointStateData | WrenchData) -> None:
@@ -300,51 +336,61 @@ class EstimatorNode(Node):
         self._queue.append((kind, item, time.perf_counter()))
         if dropped:
             self._stats.count_drop("queue_full")
-            self.get_logger().warning(
-                "input queue full: dropping the oldest message (learning cannot keep up)",
-                throttle_duration_sec=_LOG_THROTTLE_S)
+            self._warn_throttled("queue_full",
+                                 "input queue full: dropping the oldest message (learning cannot keep up)")
 
-    def _on_joint_state(self, msg: JointState) -> None:
+    def _on_joint_state(self, msg: bytes) -> None:
         self._intake("joint_states", msg)
         self._drain("joint_states")
         self._process_queued()
 
-    def _on_wrench(self, msg: WrenchStamped) -> None:
+    def _on_wrench(self, msg: bytes) -> None:
         self._intake("wrench", msg)
         self._drain("wrench")
         self._process_queued()
 
-    def _intake(self, kind: str, msg: Any) -> None:
+    def _intake(self, kind: str, msg: bytes | Any) -> None:
+        """Convert one input (serialised, as the subscriptions deliver it, or a message object); queue it."""
         self._stats.count_input(kind)
         try:
-            data = joint_state_from_msg(msg) if kind == "joint_states" else wrench_from_msg(msg)
+            if isinstance(msg, bytes):
+                data = joint_state_from_cdr(msg) if kind == "joint_states" else wrench_from_cdr(msg)
+            else:
+                data = joint_state_from_msg(msg) if kind == "joint_states" else wrench_from_msg(msg)
         except RejectedSampleError as err:  # a message the conversion refuses: a counted drop
             self._conversion_failed(kind, err)
             return
         self._enqueue(kind, data)
 
     def _drain(self, kind: str) -> None:
-        """Take the messages already waiting on this subscription without another executor wait.
+        """Take the messages already waiting on both subscriptions without another executor wait.
 
         The executor takes one message per subscription per wait, and building its wait set costs far
         more than taking a message; when input is queued in DDS (a burst, or the learner held the GIL)
-        this catches up at the cost of a take each.
+        this catches up at the cost of a take each. The two subscriptions are taken alternately (the
+        other one first: the callback just took one of ``kind``), at most ``_MAX_DRAIN`` rounds, so
+        neither stream runs ahead of the other by more than one message (a joint-state stream far
+        ahead would outrun the pipeline's pairing buffer and leave wrenches unpaired).
 
         Not public rclpy API: rclpy (Jazzy) has no public "take" on a subscription, so this makes the
         call the executor itself makes (``sub.handle.take_message(sub.msg_type, sub.raw)``). Kept because
         it is measured ≈ 8× cheaper per queued message than one executor wait each (bench/bench_drain.py,
         results in bench/results/bench_drain.json); test/test_node_drain.py fails if the call changes.
         """
-        sub = self._subscriptions_by_kind[kind]
+        order = self._drain_order[kind]
         for _ in range(_MAX_DRAIN):
-            try:
-                with sub.handle:
-                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            except Exception:  # the subscription is being destroyed: the executor will notice
+            took = False
+            for sub_kind, sub in order:
+                try:
+                    with sub.handle:
+                        taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                except Exception:  # the subscription is being destroyed: the executor will notice
+                    return
+                if taken is not None:
+                    took = True
+                    self._intake(sub_kind, taken[0])
+            if not took:
                 return
-            if taken is None:
-                return
-            self._intake(kind, taken[0])
 
     def _incompatible_qos_logger(self, topic: str) -> Callable[[Any], None]:
         def warn(event: Any) -> None:
@@ -357,28 +403,69 @@ class EstimatorNode(Node):
     def _message_lost_counter(self, topic: str) -> Callable[[Any], None]:
         def count(event: Any) -> None:
             self._stats.count_drop("dds_message_lost", int(event.total_count_change))
-            self.get_logger().warning(
+            self._warn_throttled(f"lost {topic}", lambda: (
                 f"{event.total_count_change} messages on {self.resolve_topic_name(topic)} were lost in the "
-                "middleware (history overflow: the node is not taking them fast enough)",
-                throttle_duration_sec=_LOG_THROTTLE_S)
+                "middleware (history overflow: the node is not taking them fast enough)"))
 
         return count
 
+    def _warn_throttled(self, key: str, text: str | Callable[[], str]) -> None:
+        """Log a warning at most every ``_LOG_THROTTLE_S`` per ``key``; the text is built only when logged.
+
+        rclpy's own ``throttle_duration_sec`` inspects the caller's frame and source file on every call,
+        logged or not (≈ 0.35 ms): at 1 kHz of bad input that alone would stall the node.
+        """
+        now = time.monotonic()
+        if now - self._last_warning.get(key, -math.inf) < _LOG_THROTTLE_S:
+            return
+        self._last_warning[key] = now
+        self.get_logger().warning(text() if callable(text) else text)
+
     def _conversion_failed(self, topic: str, err: Exception) -> None:
         self._stats.count_drop("conversion_error")
-        self.get_logger().warning(f"cannot convert a {topic} message: {err}",
-                                  throttle_duration_sec=_LOG_THROTTLE_S)
+        self._warn_throttled(f"convert {topic}", lambda: f"cannot convert a {topic} message: {err}")
 
-    async def _on_save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def _spin_save_service(self) -> None:
+        executor = self._srv_executor
+        if executor is None:
+            return
+        try:
+            executor.spin()
+        except ExternalShutdownException:
+            pass
+
+    def _stop_save_service(self) -> None:
+        executor = getattr(self, "_srv_executor", None)
+        if executor is None:
+            return
+        self._srv_executor = None
+        executor.shutdown(timeout_sec=1.0)
+        self._srv_thread.join(timeout=2 * _SAVE_TIMEOUT_S)
+        self._srv_node.destroy_node()
+
+    def destroy_node(self) -> None:
+        """Stop the ``~/save`` service thread and its helper node, then destroy the node."""
+        self._stop_save_service()
+        super().destroy_node()
+
+    def _on_save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """Hand the request to the checkpoint thread and wait (at most ``_SAVE_TIMEOUT_S``) for the file.
+
+        Runs in the save-service thread (see ``_setup``): learning goes on meanwhile, except while the
+        checkpoint thread copies the state under the model lock.
+        """
         if self._ckpt_path is None:
             response.success, response.message = False, "checkpoint.path is empty: checkpoints are disabled"
             return response
-        future = Future(executor=self.executor)
-        future.add_done_callback(lambda _f: None)  # makes set_result() wake the executor
+        future: concurrent.futures.Future[tuple[bool, str]] = concurrent.futures.Future()
         with self._ckpt_lock:
             self._ckpt_requests.append(future)
         self._ckpt_event.set()
-        ok, message = await future
+        try:
+            ok, message = future.result(timeout=_SAVE_TIMEOUT_S)
+        except concurrent.futures.TimeoutError:
+            ok, message = False, (f"checkpoint to {self._ckpt_path} not written within {_SAVE_TIMEOUT_S:g} s "
+                                  "(the disk is slow or blocked); the write goes on in the background")
         response.success, response.message = ok, message
         return response
 
@@ -463,14 +550,15 @@ class EstimatorNode(Node):
         Called right after each input is queued (no executor round trip between receipt and prediction)
         and, while a backlog remains, by the catch-up timer.
         """
-        for _ in range(_BATCH):
-            if not self._queue:
-                break
-            kind, data, t_recv = self._queue.popleft()
-            cpu = time.thread_time()
-            self._process(kind, data, t_recv)
-            self._stats.add_learning_cpu(time.thread_time() - cpu)
-        if self._queue:
+        queue = self._queue
+        if queue:
+            cpu = time.thread_time()  # a system call (≈ 1 µs): once per batch, not per message
+            n = min(len(queue), _BATCH)
+            for _ in range(n):
+                kind, data, t_recv = queue.popleft()
+                self._process(kind, data, t_recv)
+            self._stats.add_learning_cpu(time.thread_time() - cpu, n)
+        if queue:
             if self._catch_up.is_canceled():
                 self._catch_up.reset()
         elif not self._catch_up.is_canceled():
@@ -487,8 +575,10 @@ class EstimatorNode(Node):
                         self._last_wrench_frame = data.frame_id  # type: ignore[union-attr]
                 else:
                     results = est.process_joint_state(data)  # type: ignore[arg-type]
-                if any(r.learned for r in results):
-                    self._version += 1
+                for r in results:
+                    if r.learned:
+                        self._version += 1
+                        break
                 drop_total = est.n_dropped  # refused samples too: they must raise the level to WARN
         except Exception as err:
             # Bad input never gets here (the pipeline drops it, the estimator counts what the learner
@@ -498,8 +588,7 @@ class EstimatorNode(Node):
         if drop_total != self._last_drop_total:
             self._stats.count_pipeline_drops(drop_total - self._last_drop_total)
             self._last_drop_total = drop_total
-            self.get_logger().warning(f"dropped input messages: {est.drops}",
-                                      throttle_duration_sec=_LOG_THROTTLE_S)
+            self._warn_throttled("pipeline drops", lambda: f"dropped input messages: {est.drops}")
         if not self._rmse_window_final and est.sample_period_s is not None:
             self._stats.set_rmse_window(rmse_window_samples(est.config, est.sample_period_s))
             self._rmse_window_final = True
@@ -512,24 +601,25 @@ class EstimatorNode(Node):
                                    pred.total, pred.parametric)
 
     def _publish_result(self, result: StepResult) -> None:
+        """Publish one sample's outputs, each only if someone subscribes to it (nobody else can tell)."""
         stamp = result.sample.stamp_ns
         pred = result.prediction
-        external = result.sample.y - pred.total
-        if self._output == "wrench":
+        if self._output == "wrench" and self._out_frame != self._last_wrench_frame:
             frame = self._last_wrench_frame
-            out = self._out_msgs
-            self._pub_total.publish(wrench_stamped_msg(stamp, frame, pred.total, out[0]))
-            self._pub_external.publish(wrench_stamped_msg(stamp, frame, external, out[3]))
-            for k, (pub, value) in enumerate(((self._pub_param, pred.parametric),
-                                              (self._pub_resid, pred.residual),
-                                              (self._pub_std, result.std)), start=1):
-                if value is not None and pub is not None and pub.get_subscription_count() > 0:
-                    pub.publish(wrench_stamped_msg(stamp, frame, value, out[4 if k == 3 else k]))
-        else:
-            self._pub_total.publish(joint_torques_msg(stamp, self._joints, pred.total))
-            self._pub_external.publish(joint_torques_msg(stamp, self._joints, external))
-            if result.std is not None and self._pub_std.get_subscription_count() > 0:
-                self._pub_std.publish(joint_torques_msg(stamp, self._joints, result.std))
+            self._out_template = SerializedOutput(
+                lambda stamp_ns, w: wrench_stamped_msg(stamp_ns, frame, w), 6)
+            self._out_frame = frame
+        fill = self._out_template.fill  # type: ignore[union-attr]
+        pub = self._pub_total
+        if pub.get_subscription_count():
+            pub.publish(fill(stamp, pred.total))
+        pub = self._pub_external
+        if pub.get_subscription_count():
+            pub.publish(fill(stamp, result.sample.y - pred.total))
+        for pub, value in ((self._pub_param, pred.parametric), (self._pub_resid, pred.residual),
+                           (self._pub_std, result.std)):
+            if value is not None and pub is not None and pub.get_subscription_count():
+                pub.publish(fill(stamp, value))
 
     # ================================================================== checkpoint thread
     def _checkpoint_loop(self) -> None:
@@ -649,9 +739,9 @@ class EstimatorNode(Node):
 
 
 #: Executors ``main`` can spin the node with (``--executor NAME``); the first is the default.
-EXECUTORS: dict[str, Callable[[], Executor]] = {
-    "single_threaded": SingleThreadedExecutor,
+EXECUTORS: dict[str, Callable[..., Executor]] = {
     "events": EventsExecutor,
+    "single_threaded": SingleThreadedExecutor,
 }
 
 
@@ -712,6 +802,10 @@ def main(args: list[str] | None = None) -> int:
         # small machine extra threads only compete with DDS and the checkpoint writer.
         with threadpool_limits(1):
             node = EstimatorNode()
+            # Everything built so far (modules, compiled kernels, the model: ≈ 130 000 tracked objects)
+            # lives as long as the process: out of the collector's reach, a full collection takes
+            # ≈ 0.5 ms instead of ≈ 100 ms (a latency spike every few minutes at 1 kHz).
+            gc.freeze()
             executor = EXECUTORS[options.executor]()
             executor.add_node(node)
             spin(executor)
