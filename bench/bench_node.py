@@ -22,7 +22,8 @@ the columns of one run, not runs of different days. Prints markdown tables and w
 Usage::
 
     .venv/bin/python bench/bench_node.py [--quick] [--seconds S] [--hz 1000] [--features 500 1000]
-        [--executors events single_threaded] [--save-every S] [--compare-with DIR]
+        [--executors events single_threaded] [--acceleration savgol kalman]
+        [--save-every S] [--compare-with DIR]
 """
 
 from __future__ import annotations
@@ -103,12 +104,14 @@ TARGETS = {"learned_fraction_min": {"1000": 0.999}, "node_p99_ms_max": {"1000": 
 
 
 def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, tmp: Path,
-        save_every_s: float = 0.0, code: Path | None = None) -> dict:
+        save_every_s: float = 0.0, code: Path | None = None, acceleration: str = "savgol") -> dict:
     """Run the node with ``executor`` and ``features``, replay the messages, measure; return the results.
 
     With ``save_every_s`` > 0 the client calls ``~/save`` (checkpoint in ``tmp``) that often during the
     playback, and the reply times are recorded. With ``code`` the node is imported from that checkout
     (``PYTHONPATH`` and working directory) instead of this one: a before/after comparison in one run.
+    ``acceleration`` is the node's ``acceleration.method`` (``savgol``: centred, delayed by half its
+    window; ``kalman``: causal, no delay).
     """
     sys.path.insert(0, str(REPO / "test"))
     import rclpy
@@ -131,7 +134,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     log = open(log_path, "w")
     cmd = [sys.executable, "-m", "semiparam_ros.ros.estimator_node", "--executor", executor, "--ros-args",
            "--params-file", str(CONFIG), "-p", f"nonparametric.n_features:={features}",
-           "-p", "diagnostics.period:=0.5"]
+           "-p", "diagnostics.period:=0.5", "-p", f"acceleration.method:={acceleration}"]
     if save_every_s > 0:
         cmd += ["-p", f"checkpoint.path:={tmp / f'ckpt_{executor}_{features}.npz'}", "-p",
                 "checkpoint.load_on_start:=false"]
@@ -263,6 +266,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     p99s = during("pipeline_latency_p99_ms")
     return {
         "config": {"hz": hz, "n_features": features, "executor": executor, "pairs_sent": n_pairs,
+                   "acceleration": acceleration,
                    "code": str(code) if code is not None else "this checkout",
                    "messages_sent": report.published},
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
@@ -325,6 +329,7 @@ def table(runs: list[dict]) -> str:
     rows = [
         ("D (random features)", lambda r: r["config"]["n_features"]),
         ("executor", lambda r: r["config"]["executor"]),
+        ("acceleration estimator", lambda r: r["config"].get("acceleration", "savgol")),
         ("code", lambda r: r["config"].get("code", "this checkout")),
         ("pairs sent at 1 kHz", lambda r: r["config"]["pairs_sent"]),
         ("samples learned", lambda r: f"{r['samples_learned']} ({100 * r['learned_fraction']:.2f} %)"),
@@ -362,6 +367,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--features", type=int, nargs="+", default=[500, 1000])
     parser.add_argument("--executors", nargs="+", default=["events", "single_threaded"],
                         choices=["single_threaded", "events"])
+    parser.add_argument("--acceleration", nargs="+", default=["savgol"], choices=["savgol", "kalman"],
+                        help="the node's acceleration.method; each is run (default: savgol only)")
     parser.add_argument("--save-every", type=float, default=0.0, metavar="S",
                         help="call ~/save every S seconds during the playback (0: never)")
     parser.add_argument("--compare-with", type=Path, default=None, metavar="DIR",
@@ -381,13 +388,14 @@ def main(argv: list[str] | None = None) -> int:
         messages = load_raw(bag, ["/joint_states", "/wrench"])
         for features in args.features:
             for executor in args.executors:  # the executors of one D back to back: same load
-                for code in ([args.compare_with.resolve()] if args.compare_with else []) + [None]:
-                    res = run(messages, n_pairs, args.hz, features, executor, Path(tmp), args.save_every,
-                              code)
-                    print(f"D = {features}, {executor}, {res['config']['code']}: learned "
-                          f"{100 * res['learned_fraction']:.2f} %, CPU {res['node_cpu_percent']:.0f} %",
-                          flush=True)
-                    runs.append(res)
+                for acceleration in args.acceleration:
+                    for code in ([args.compare_with.resolve()] if args.compare_with else []) + [None]:
+                        res = run(messages, n_pairs, args.hz, features, executor, Path(tmp), args.save_every,
+                                  code, acceleration)
+                        print(f"D = {features}, {executor}, {acceleration}, {res['config']['code']}: learned "
+                              f"{100 * res['learned_fraction']:.2f} %, CPU {res['node_cpu_percent']:.0f} %",
+                              flush=True)
+                        runs.append(res)
     print()
     print(table(runs))
     result = {"benchmark": "bench_node", "quick": bool(args.quick), "seconds": seconds, "hz": args.hz,
