@@ -152,6 +152,7 @@ _SHUTDOWN_BUDGET_S = 10.0  # time allowed to learn the queue at shutdown (1000 m
 _CATCH_UP_PERIOD_S = 1e-4  # the backlog timer fires at every executor turn while armed
 _SPIN_TIMEOUT_S = 0.1  # EventsExecutor.spin_once timeout (see spin())
 _MAX_DRAIN = 64  # messages taken per subscription callback at most (bounds the executor's time away)
+_WARM_UP_MAX_SAMPLES = 2000  # synthetic 1 kHz samples the kernel warm-up feeds at most (_warm_up_kernels)
 _SAVE_TIMEOUT_S = 5.0  # ~/save waits this long for the checkpoint thread, then replies failure
 
 
@@ -308,25 +309,34 @@ class EstimatorNode(Node):
             f"parameters, D = {cfg['nonparametric.n_features']} random features; learning "
             f"{'enabled' if est.learning_enabled else 'disabled'}; inputs {', '.join(inputs)}")
 
-    def _warm_up_kernels(self) -> None:
+    def _warm_up_kernels(self) -> int:
         """Run every compiled kernel of a step once before input arrives, on a throw-away estimator.
 
-        The same configuration with 4 random features, fed 40 synthetic samples (a slow ramp of every
-        joint, zero wrench, 1 ms apart): compilation depends only on the array types, so this loads the
-        machine code the real model runs (without it the first real sample took ≈ 20 ms instead of
-        ≈ 0.3 ms) without copying a model that can hold hundreds of MB.
+        The same configuration with 4 random features, fed synthetic samples (a slow ramp of every joint,
+        zero wrench, 1 ms apart) until three of them went through the whole step: the acceleration
+        estimator's warm-up (a Savitzky–Golay window, the Kalman filter's settling time) decides how many
+        that takes, at most :data:`_WARM_UP_MAX_SAMPLES`. Compilation depends only on the array types,
+        so this loads the machine code the real model runs (without it the first real sample took
+        ≈ 20–40 ms instead of ≈ 0.3 ms) without copying a model that can hold hundreds of MB.
+
+        Returns:
+            The number of synthetic samples that went through the step (≥ 3 unless the cap was reached).
         """
         cfg = self.config
         scratch = OnlineEstimator(cfg.with_overrides({"nonparametric.n_features": 4,
                                                       "nonparametric.standardizer_warmup": 2}))
         joints, n = self._joints, len(self._joints)
         frame = self._frame_id or "warm_up"
-        for k in range(40):
+        stepped = 0
+        for k in range(_WARM_UP_MAX_SAMPLES):
             stamp = 1_000_000_000 + k * 1_000_000
-            scratch.process_joint_state(JointStateData(stamp, joints, np.full(n, 1e-3 * k), np.full(n, 1.0),
-                                                       np.zeros(n)))
+            stepped += len(scratch.process_joint_state(
+                JointStateData(stamp, joints, np.full(n, 1e-3 * k), np.full(n, 1.0), np.zeros(n))))
             if self._output == "wrench":
-                scratch.process_wrench(WrenchData(stamp, frame, np.zeros(3), np.zeros(3)))
+                stepped += len(scratch.process_wrench(WrenchData(stamp, frame, np.zeros(3), np.zeros(3))))
+            if stepped >= 3:
+                break
+        return stepped
 
     # ================================================================== executor side
     def _enqueue(self, kind: str, item: JointStateData | WrenchData) -> None:
