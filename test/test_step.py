@@ -255,27 +255,12 @@ def test_standardized_features_match_the_numpy_map_within_the_rounding_bound():
         z = std.transform(x)
         ref = rff.transform(z)
         # phase error ≤ (n + 1)·ε·(Σ|z_i Ω_ij| + |b_j|) each side, cos 1-Lipschitz, plus each cos's own
-        # error (the kernel's < 2ε, libm's ≤ 1 ulp: see the next test)
+        # error (the kernel calls libm's cos, numpy its own SIMD one: ≤ 1 ulp ≤ 2ε near 1 each, < 3ε
+        # apart in practice, as ε·|cos| ≤ ε below 0.5)
         phase = np.abs(z) @ np.abs(rff.omega_) + np.abs(rff.offset_)
         bound = rff._scale * (2 * (7 + 1) * EPS * phase + 3 * EPS)
         assert got.shape == (1, 1000)
         assert np.all(np.abs(got[0] - ref) <= bound)
-
-
-def test_vectorised_cos_against_libm():
-    """The feature map's cos: reduction error ≤ ε·|r| ≤ ε·π/4 (k·π/2's high part and the first subtraction
-    are exact), fdlibm's kernels < 1 ulp (≤ ε on [−1, 1]), libm's reference ≤ 1 ulp: < 3ε in all; measured
-    0.5ε on these points. Beyond ±1e5, NaN and ±inf: libm's own result."""
-    rng = np.random.default_rng(6)
-    x = np.concatenate([rng.uniform(-1e5, 1e5, 200_000), rng.uniform(-10.0, 10.0, 100_000),
-                        np.arange(-5000, 5000) * (np.pi / 4), np.arange(-5000, 5000) * (np.pi / 2) + 1e-9,
-                        [0.0, -0.0, 99_999.99, -99_999.99, 1e5, -1e5, 3e8, 1e300, -1e300]])
-    got = kernels.cos_array(x)
-    ref = np.array([math.cos(v) for v in x])
-    assert np.all(np.abs(got - ref) <= 3 * EPS)
-    assert np.array_equal(got[-3:], ref[-3:])  # the libm branch
-    special = kernels.cos_array(np.array([np.nan, np.inf, -np.inf]))
-    assert np.all(np.isnan(special))
 
 
 def test_noise_and_gate_kernels_are_the_numpy_expressions_bit_for_bit():

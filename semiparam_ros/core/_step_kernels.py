@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
-    "cos_array", "exceeds", "joined_within", "noise_std", "noise_update", "standardized_features", "within",
+    "exceeds", "joined_within", "noise_std", "noise_update", "standardized_features", "within",
 ]
 
 
@@ -93,39 +93,6 @@ def within(A: np.ndarray, max_abs: float) -> bool:
     return True
 
 
-# cos by Cody–Waite reduction to r ∈ [−π/4, π/4] and fdlibm's minimax kernels (Sun Microsystems, freely
-# distributable; as in musl's __sin/__cos), branch-free so that LLVM vectorises the feature loop: libm's
-# cos is a call per element. k·_PIO2_HI is exact for |k| < 2²⁰ (33-bit constant) and x − k·_PIO2_HI is
-# exact (Sterbenz), so r errs by ≈ ε|r|; the kernels err by < 1 ulp. |x| ≥ _COS_REDUCED_MAX (and NaN, inf)
-# go to math.cos.
-_TWO_OVER_PI = 6.36619772367581382433e-01
-_PIO2_HI = 1.57079632673412561417e+00  # the first 33 bits of π/2
-_PIO2_LO = 6.07710050650619224932e-11  # π/2 − _PIO2_HI
-_S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
-_S4, _S5, _S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
-_C1, _C2, _C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
-_C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
-_COS_REDUCED_MAX = 1e5
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _cos_reduced(x: float) -> float:
-    """cos(x) for |x| < _COS_REDUCED_MAX without a call or a branch (0 is used for any other x)."""
-    x = x if abs(x) < _COS_REDUCED_MAX else 0.0
-    k = math.floor(x * _TWO_OVER_PI + 0.5)
-    r = (x - k * _PIO2_HI) - k * _PIO2_LO
-    z = r * r
-    w = z * z
-    sin_r = r + z * r * (_S1 + z * (_S2 + z * (_S3 + z * _S4) + z * w * (_S5 + z * _S6)))
-    poly = z * (_C1 + z * (_C2 + z * _C3)) + w * w * (_C4 + z * (_C5 + z * _C6))
-    half = 0.5 * z
-    t = 1.0 - half
-    cos_r = t + (((1.0 - t) - half) + z * poly)
-    quadrant = np.int64(k) & 3  # cos(r + qπ/2) = cos r, −sin r, −cos r, sin r
-    value = sin_r if quadrant & 1 else cos_r
-    return -value if (quadrant + 1) & 2 else value
-
-
 @njit(cache=True, nogil=True)
 def standardized_features(x: np.ndarray, mean: np.ndarray, scale: np.ndarray, omega: np.ndarray,
                           offset: np.ndarray, amplitude: float) -> np.ndarray:
@@ -145,7 +112,7 @@ def standardized_features(x: np.ndarray, mean: np.ndarray, scale: np.ndarray, om
     The phase ``θ_j = Σ_i z_i Ω_ij + b_j`` (z the standardized input) is accumulated row by row of Ω
     (contiguous, vectorised); it differs from numpy's BLAS sum by at most
     ``(n + 1)·ε·(Σ_i |z_i Ω_ij| + |b_j|)`` (ε = 2⁻⁵³), and cos is 1-Lipschitz, so each feature by at most
-    ``a`` times that plus cos's own error (a vectorised cos, ≤ 2ε here; libm's ≤ 1 ulp).
+    ``a`` times that (cos is libm's, as numpy's).
     """
     n, d = omega.shape
     phase = np.zeros(d)
@@ -156,21 +123,5 @@ def standardized_features(x: np.ndarray, mean: np.ndarray, scale: np.ndarray, om
             phase[j] += z * row[j]
     out = np.empty((1, d))
     for j in range(d):
-        phase[j] += offset[j]
-        out[0, j] = amplitude * _cos_reduced(phase[j])
-    for j in range(d):
-        if not abs(phase[j]) < _COS_REDUCED_MAX:  # never for sane inputs: libm's cos
-            out[0, j] = amplitude * math.cos(phase[j])
-    return out
-
-
-@njit(cache=True, nogil=True)
-def cos_array(x: np.ndarray) -> np.ndarray:
-    """Return the cosine of every entry of a 1-D array by the feature map's vectorised cos (for tests)."""
-    out = np.empty(x.shape[0])
-    for j in range(x.shape[0]):
-        out[j] = _cos_reduced(x[j])
-    for j in range(x.shape[0]):
-        if not abs(x[j]) < _COS_REDUCED_MAX:
-            out[j] = math.cos(x[j])
+        out[0, j] = amplitude * math.cos(phase[j] + offset[j])
     return out
