@@ -73,8 +73,9 @@ REFIT_WINDOW = 1000
 RESULTS = pathlib.Path(__file__).resolve().parent / "results" / "bench_core.json"
 RESULTS_PU = RESULTS.with_name("bench_core_predict_update.json")
 TARGETS_US = {500: 60.0, 1000: 250.0}
-#: the kernels before issue 15 item 1's speed-up (``--predict-update-only`` runs them side by side)
-KERNEL_BASELINE = "13c2755"
+#: the learner before the last pass on issue 15 item 1 (``--predict-update-only`` runs it side by side;
+#: 13c2755 is the code before item 1's work)
+KERNEL_BASELINE = "f23efe1"
 
 
 def time_per_call(step: Callable[[int], object], calls: int, repeats: int) -> dict[str, float]:
@@ -241,17 +242,20 @@ def bench_size(D: int, quick: bool, rng: np.random.Generator) -> dict[str, objec
 
 
 def load_old_rrls(rev: str, tmp: pathlib.Path) -> type[RecursiveRLS]:
-    """``RecursiveRLS`` of this tree running the kernels of ``core/_kernels.py`` at ``rev``.
+    """``RecursiveRLS`` of ``core/rrls.py`` and ``core/_kernels.py`` at ``rev`` (Python side and kernels).
 
-    The old kernel module is extracted with ``git show`` into ``tmp`` and the current ``rrls.py`` is
-    imported a second time with its kernel import pointing there, so old and new differ in the compiled
-    kernels only (the Python side is today's) and run in the same process on the same rows.
+    Both modules are extracted with ``git show`` into ``tmp`` and imported under other names (the old
+    ``rrls.py`` with its kernel import pointing at the old kernels), so old and new run in the same
+    process on the same rows.
     """
     root = pathlib.Path(__file__).resolve().parents[1]
-    source = subprocess.run(["git", "-C", str(root), "show", f"{rev}:semiparam_ros/core/_kernels.py"],
-                            check=True, capture_output=True, text=True).stdout
-    (tmp / "_old_kernels.py").write_text(source)
-    rrls_src = (root / "semiparam_ros" / "core" / "rrls.py").read_text()
+
+    def show(path: str) -> str:
+        return subprocess.run(["git", "-C", str(root), "show", f"{rev}:{path}"],
+                              check=True, capture_output=True, text=True).stdout
+
+    (tmp / "_old_kernels.py").write_text(show("semiparam_ros/core/_kernels.py"))
+    rrls_src = show("semiparam_ros/core/rrls.py")
     marker = "from semiparam_ros.core._kernels import"
     if marker not in rrls_src:
         raise RuntimeError("rrls.py no longer imports the kernels as expected")
@@ -287,12 +291,12 @@ def time_interleaved(steps: dict[str, Callable[[int], object]], calls: int, repe
 
 
 def predict_update_only(path: pathlib.Path, baseline: str = KERNEL_BASELINE) -> int:
-    """The predict-then-update comparison (issue 15's target), old kernels next to new, saved to ``path``.
+    """The predict-then-update comparison (issue 15's target), old learner next to new, saved to ``path``.
 
     For D ∈ {500, 1000} and β ∈ {1 (the target's setting), 0.9995 (the node's: a regularizer row per
     step)}, four steps alternate in short repeats on the same rows: ``predict_update`` and the habit
     (``predict(z)`` — with the variance for β < 1, as the node asks — then ``update(z, u)``), each with
-    the new kernels and with the kernels at ``baseline``.
+    this tree's learner and with the learner (``rrls.py`` and its kernels) at ``baseline``.
     """
     rng = np.random.default_rng(0)
     load_before = os.getloadavg()
@@ -331,7 +335,7 @@ def predict_update_only(path: pathlib.Path, baseline: str = KERNEL_BASELINE) -> 
                              "ratio_habit_to_predict_update": habit_over_fused, "new_over_old": new_over_old})
     load_after = os.getloadavg()
     print(f"predict(z) then update(z, u) vs predict_update(z, u), µs (median of 120 alternating repeats), "
-          f"kernels of {baseline} (old) and of this tree (new), same rows, one process\n")
+          f"learner of {baseline} (old) and of this tree (new), same rows, one process\n")
     print("| β | D | predict_update old | predict_update new | habit old | habit new | ratio old | "
           "ratio new | target |")
     print("|---|---|---|---|---|---|---|---|---|")
@@ -378,9 +382,9 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"output JSON (default {RESULTS}, or {RESULTS_PU} with --predict-update-only)")
     parser.add_argument("--predict-update-only", action="store_true",
                         help="only predict, update vs predict_update at D = 500, 1000, β = 1 and 0.9995, "
-                             "old kernels next to new (≈ 1 min)")
+                             "the learner at --baseline next to this tree's (≈ 1 min)")
     parser.add_argument("--baseline", default=KERNEL_BASELINE,
-                        help="git revision of the old kernels for --predict-update-only")
+                        help="git revision of the old learner for --predict-update-only")
     args = parser.parse_args(argv)
     if args.predict_update_only:
         return predict_update_only(args.json or RESULTS_PU, args.baseline)

@@ -21,6 +21,7 @@ from semiparam_ros.core._kernels import solve_predict
 from semiparam_ros.core.rrls import RecursiveRLS
 from semiparam_ros.core.semiparametric import NonparametricModel, ParametricModel, SemiparametricModel
 from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
+from semiparam_ros.errors import RejectedSampleError
 
 sys.path.insert(0, os.path.dirname(__file__))
 from reference_rrls import forward_predict
@@ -162,6 +163,86 @@ def test_rejected_update_raises_at_once_and_keeps_the_pending_one():
     assert np.array_equal(a.predict(Z), ref.predict(Z))
     for key, value in ref.state_dict().items():
         assert np.array_equal(value, a.state_dict()[key]), key
+
+
+@pytest.mark.parametrize("beta", [1.0, 0.98])
+def test_single_row_fast_path_gives_the_general_paths_bits(beta):
+    """One contiguous float64 row (staged update, one-call prediction) against (1, b) blocks, bit for bit.
+
+    The fast path runs the same kernels on the same operands as the general one (``_check_rows`` and
+    ``_predict_valid`` with k = 1), so predictions, variances and the state must be identical; consecutive
+    updates with no prediction between them (the two stage buffers alternating) included.
+    """
+    rng = np.random.default_rng(11)
+    b, t = 37, 4
+    fast = RecursiveRLS(b, t, 0.4, forgetting=beta)
+    slow = RecursiveRLS(b, t, 0.4, forgetting=beta)
+    for n, (Z, U) in enumerate(random_steps(rng, 60, 1, b, t)):
+        fast.update(Z[0], U[0])  # (b,), (t,): the staged path
+        slow.update(Z, U.copy())  # (1, b), (1, t): _check_rows and a checked copy
+        if n % 3 == 2:
+            continue  # leave two updates in a row to the next one's flush
+        zq = rng.standard_normal(b)
+        if n % 2:
+            fast.R, slow.R  # noqa: B018 (flush both: the prediction then takes the solve-only kernel)
+        got, got_var = fast.predict(zq, return_variance=True)
+        want, want_var = slow._predict_valid(zq[None, :], True)
+        assert np.array_equal(got, want[0]) and got_var == want_var[0]
+        assert got.shape == (t,) and np.shape(got_var) == ()
+        assert fast.n_samples_seen == slow.n_samples_seen and fast.n_steps == slow.n_steps
+    for key, value in slow.state_dict().items():
+        assert np.array_equal(value, fast.state_dict()[key]), key
+
+
+@pytest.mark.parametrize("beta", [1.0, 0.98])
+def test_refused_single_rows_leave_the_staged_step_pending(beta):
+    """A refused row (update or query; NaN, inf or > MAX_ABS_INPUT) raises and changes nothing.
+
+    In particular a staged single-row update stays pending and is applied exactly once, whichever stage
+    buffer the refused row was checked in.
+    """
+    rng = np.random.default_rng(12)
+    b, t = 9, 3
+    a = RecursiveRLS(b, t, forgetting=beta)
+    ref = RecursiveRLS(b, t, forgetting=beta)
+    bad = [np.nan, np.inf, -np.inf, 2e150]
+    for n, (Z, U) in enumerate(random_steps(rng, 12, 1, b, t)):
+        a.update(Z[0], U[0])
+        ref.update(Z[0], U[0])  # the same staged path, never shown a refused row
+        z_bad, u_bad = Z[0].copy(), U[0].copy()
+        if n % 2:
+            z_bad[n % b] = bad[n % 4]
+        else:
+            u_bad[n % t] = bad[n % 4]
+        with pytest.raises(RejectedSampleError, match="NaN"):
+            a.update(z_bad, u_bad)
+        q_bad = rng.standard_normal(b)
+        q_bad[(3 * n) % b] = bad[(n + 1) % 4]
+        with pytest.raises(RejectedSampleError, match="NaN"):
+            a.predict(q_bad)  # with the staged update pending
+        assert a.n_samples_seen == ref.n_samples_seen and a.n_steps == ref.n_steps
+        if n % 3 == 0:
+            zq = rng.standard_normal(b)
+            assert np.array_equal(a.predict(zq), ref.predict(zq))  # both run the pending update now
+            with pytest.raises(RejectedSampleError, match="NaN"):
+                a.predict(q_bad)  # nothing pending: the solve-only kernel refuses it too
+    for key, value in ref.state_dict().items():
+        assert np.array_equal(value, a.state_dict()[key]), key
+
+
+def test_single_row_predictions_are_fresh_arrays():
+    """Each prediction is a new array: later updates and predictions do not overwrite a returned one."""
+    rng = np.random.default_rng(13)
+    b, t = 7, 3
+    rls = RecursiveRLS(b, t)
+    kept = []
+    for Z, U in random_steps(rng, 6, 1, b, t):
+        rls.update(Z[0], U[0])
+        p, v = rls.predict(rng.standard_normal(b), return_variance=True)
+        kept.append((p, p.copy(), v, float(v)))
+    for p, p0, v, v0 in kept:
+        assert np.array_equal(p, p0) and float(v) == v0
+    assert not any(np.shares_memory(x[0], y[0]) for i, x in enumerate(kept) for y in kept[i + 1:])
 
 
 def test_single_row_shapes():

@@ -35,7 +35,10 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["back_substitute", "checked_copies", "qr_rls_steps", "solve_predict", "values_within"]
+__all__ = [
+    "back_substitute", "checked_copies", "predict_row", "predict_row_pending", "qr_rls_steps",
+    "solve_predict", "stage_row", "values_within",
+]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -542,3 +545,63 @@ def checked_copies(Z: np.ndarray, U: np.ndarray, max_abs: float) -> tuple[bool, 
     own copies (≈ 3 µs against ≈ 1.8 µs for one row at b = 1000), so only the check is compiled.
     """
     return values_within(Z, U, max_abs), Z.copy(), U.copy()
+
+
+@njit(cache=True, nogil=True)
+def stage_row(z: np.ndarray, u: np.ndarray, Z: np.ndarray, U: np.ndarray, max_abs: float) -> bool:
+    """Check one row ``z`` (b,), ``u`` (t,) and copy it into ``Z`` (1, b), ``U`` (1, t) — the deferred update.
+
+    One compiled call instead of a check plus two numpy copies (the learner's preallocated buffers).
+
+    Returns:
+        Whether every entry satisfies ``|v| ≤ max_abs`` (false for NaN); on false nothing is written.
+    """
+    for q in range(z.shape[0]):
+        if not (abs(z[q]) <= max_abs):
+            return False
+    for q in range(u.shape[0]):
+        if not (abs(u[q]) <= max_abs):
+            return False
+    Zr = Z[0]
+    Ur = U[0]
+    for q in range(z.shape[0]):
+        Zr[q] = z[q]
+    for q in range(u.shape[0]):
+        Ur[q] = u[q]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def predict_row(M: np.ndarray, z: np.ndarray, p: np.ndarray, max_abs: float) -> float:
+    """:func:`solve_predict` for one query row ``z`` (b,) into ``p`` (t,), with the value check.
+
+    Returns:
+        ``z A⁻¹ zᵀ`` (≥ 0), or −1 if an entry of ``z`` has ``|v| > max_abs`` or is NaN (``p`` unwritten).
+    """
+    for q in range(z.shape[0]):
+        if not (abs(z[q]) <= max_abs):
+            return -1.0
+    var = np.empty(1)
+    solve_predict(M, z.reshape(1, z.shape[0]), p.reshape(1, p.shape[0]), var)
+    return var[0]
+
+
+@njit(cache=True, nogil=True)
+def predict_row_pending(M: np.ndarray, Z: np.ndarray, U: np.ndarray, scale: float, reg: float, j0: int,
+                        z: np.ndarray, p: np.ndarray, max_abs: float) -> tuple[int, float]:
+    """One time step ``(Z, U)`` (as :func:`qr_rls_steps`, one step) with the query row ``z`` (b,) fused.
+
+    The query is checked first: if an entry has ``|v| > max_abs`` or is NaN, ``M`` is untouched and
+    ``(−2, −1)`` is returned. Otherwise ``p`` (t,) receives ``z W_new`` and the result is
+    ``(j, z A_new⁻¹ zᵀ)`` with ``j`` the next regularizer coordinate (−1 if ``Z``/``U`` were rejected,
+    ``M`` again untouched). Same operations as :func:`qr_rls_steps` with ``Q = z``: the same bits.
+    """
+    for q in range(z.shape[0]):
+        if not (abs(z[q]) <= max_abs):
+            return -2, -1.0
+    t = M.shape[1] - M.shape[0]
+    none = np.empty((0, t))
+    var = np.empty(1)
+    j = qr_rls_steps(M, Z, U, Z.shape[0], scale, reg, j0, none, max_abs, none, z.reshape(1, z.shape[0]),
+                     p.reshape(1, t), var)
+    return j, var[0]

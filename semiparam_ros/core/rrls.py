@@ -62,8 +62,11 @@ from scipy.linalg import solve_triangular
 from semiparam_ros.core._kernels import (
     back_substitute,
     checked_copies,
+    predict_row,
+    predict_row_pending,
     qr_rls_steps,
     solve_predict,
+    stage_row,
     values_within,
 )
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
@@ -81,6 +84,7 @@ _SMALL_SOLVE = 64
 #: larger blocks through the weights.
 _MAX_SOLVED_ROWS = 8
 _STATE_VERSION = 1
+_F64 = np.dtype(np.float64)  # builtin dtypes are singletons: ``a.dtype is _F64`` is the fast exact test
 
 
 class RecursiveRLS:
@@ -130,6 +134,11 @@ class RecursiveRLS:
         self._no_pred = np.empty((0, self.n_outputs))
         self._no_query = np.empty((0, self.n_features))
         self._row_shape = (self.n_features,)
+        self._out_shape = (self.n_outputs,)
+        # the single-row update is staged in one of these (checked and copied by one compiled call): two,
+        # so that a row is staged, and may be refused, while the previous one is still pending in the other
+        self._stages = tuple((np.empty((1, self.n_features)), np.empty((1, self.n_outputs)))
+                             for _ in range(2))
         self._no_var = np.empty(0)
         self.reset()
 
@@ -226,6 +235,22 @@ class RecursiveRLS:
             RejectedSampleError: Wrong shapes, or non-finite / absurdly large (> 1e150) entries; the
                 learner is left unchanged.
         """
+        if (type(Z) is np.ndarray and type(U) is np.ndarray and Z.shape == self._row_shape
+                and U.shape == self._out_shape and Z.dtype is _F64 and U.dtype is _F64
+                and Z.flags.c_contiguous and U.flags.c_contiguous):
+            # the common single-row step: one compiled call checks and copies into a stage buffer that the
+            # pending step (if any) does not use; a refused row leaves that step pending
+            stage = self._stages[1] if self._pending is self._stages[0] else self._stages[0]
+            if not stage_row(Z, U, stage[0], stage[1], MAX_ABS_INPUT):
+                raise RejectedSampleError(
+                    f"Z or U contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")
+            if self._pending is not None:
+                self._flush()
+            self._pending = stage
+            self._W = None
+            self.n_steps += 1
+            self.n_samples_seen += 1
+            return
         Z2, U2, _ = self._check_rows(Z, U)
         self._defer(Z2, U2)
 
@@ -397,11 +422,40 @@ class RecursiveRLS:
         Raises:
             RejectedSampleError: Wrong shape or non-finite entries.
         """
+        if (type(Z) is np.ndarray and Z.shape == self._row_shape and Z.dtype is _F64
+                and Z.flags.c_contiguous):
+            return self._predict_row(Z, return_variance)
         Z2, single = self._check_features(Z)
         P, var = self._predict_valid(Z2, return_variance)
         if single:
             return (P[0], var[0]) if return_variance else P[0]  # type: ignore[index]
         return (P, var) if return_variance else P  # type: ignore[return-value]
+
+    def _predict_row(self, z: np.ndarray, want_variance: bool) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """:meth:`predict` of one C-contiguous float64 (b,) row: the kernels check its values.
+
+        The same kernels and operations as :meth:`_predict_valid` with k = 1 (so the same bits), in one
+        compiled call that checks the row before it touches the state.
+        """
+        P = np.empty(self.n_outputs)
+        pending = self._pending
+        if pending is not None:
+            j, var = predict_row_pending(self._M, pending[0], pending[1], self._scale, self._reg, self._j,
+                                         z, P, MAX_ABS_INPUT)
+            if j < 0:
+                if j == -1:  # the pending rows were checked when they were staged
+                    raise RuntimeError("a pending update was refused by the kernel")
+                raise RejectedSampleError(
+                    f"Z contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")
+            self._pending = None
+            self._W = None
+            self._j = j
+        else:
+            var = predict_row(self._M, z, P, MAX_ABS_INPUT)
+            if var < 0.0:
+                raise RejectedSampleError(
+                    f"Z contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")
+        return (P, np.float64(var)) if want_variance else P
 
     def _predict_valid(self, Z2: np.ndarray, want_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """:meth:`predict` for a validated C-contiguous float64 (k, b) array: ``(Z W, var or None)``."""
