@@ -455,7 +455,8 @@ class RecursiveRLS:
             if var < 0.0:
                 raise RejectedSampleError(
                     f"Z contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")
-        return (P, np.float64(var)) if want_variance else P
+        # the variance is a () scalar, as var[0] of the general path
+        return (P, np.float64(var)) if want_variance else P  # type: ignore[return-value]
 
     def _predict_valid(self, Z2: np.ndarray, want_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """:meth:`predict` for a validated C-contiguous float64 (k, b) array: ``(Z W, var or None)``."""
