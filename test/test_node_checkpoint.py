@@ -67,6 +67,20 @@ def play(client: TestClient, node: NodeProcess, messages: list[RawMessage], hz: 
     player.play(hz=hz)
 
 
+def learn_and_save(client: TestClient, node: NodeProcess, messages: list[RawMessage], n_samples: int,
+                   ckpt, timeout: float = 30.0):
+    """Play ``messages``, wait for their ``n_samples`` predictions, call ``~/save`` and check the file holds
+    every one of them; return the predictions collector."""
+    preds = client.collect(WrenchStamped, "/estimator/predicted_wrench")
+    assert client.wait_for_publisher("/estimator/predicted_wrench"), node.output()
+    play(client, node, messages)
+    assert preds.wait_for(lambda m: len(m) >= n_samples, timeout=60.0), node.output()
+    reply = client.trigger("/estimator/save", timeout=timeout)
+    assert reply.success, reply.message
+    assert checkpoint_samples(ckpt) == n_samples
+    return preds
+
+
 def test_save_kill_restart_gives_the_same_prediction(ros_env, tmp_path, tmp_path_factory):
     bag = source_bag(tmp_path_factory.mktemp("bags"))
     messages = load_raw(bag, TOPICS, limit=N_MESSAGES)
@@ -82,13 +96,7 @@ def test_save_kill_restart_gives_the_same_prediction(ros_env, tmp_path, tmp_path
     node = NodeProcess(ros_env, [*params, "checkpoint.period:=0.0"], tag="first")
     client = TestClient(ros_env)
     try:
-        preds = client.collect(WrenchStamped, "/estimator/predicted_wrench")
-        assert client.wait_for_publisher("/estimator/predicted_wrench"), node.output()
-        play(client, node, messages)
-        assert preds.wait_for(lambda m: len(m) >= len(offline.order), timeout=60.0), node.output()
-        reply = client.trigger("/estimator/save")
-        assert reply.success, reply.message
-        assert checkpoint_samples(ckpt) == len(offline.order)
+        preds = learn_and_save(client, node, messages, len(offline.order), ckpt)
         results = client.set_parameters("/estimator", {"learning_enabled": False})
         assert results[0].successful, results[0].reason
         play(client, node, probe)
@@ -159,13 +167,7 @@ def test_save_answers_under_either_executor(ros_env, tmp_path, tmp_path_factory,
                                  "nonparametric.standardizer_warmup:=50"], executor=executor)
     client = TestClient(ros_env)
     try:
-        preds = client.collect(WrenchStamped, "/estimator/predicted_wrench")
-        assert client.wait_for_publisher("/estimator/predicted_wrench"), node.output()
-        play(client, node, messages)
-        assert preds.wait_for(lambda m: len(m) >= len(offline.order), timeout=60.0), node.output()
-        reply = client.trigger("/estimator/save", timeout=10.0)
-        assert reply.success, reply.message
-        assert checkpoint_samples(ckpt) == len(offline.order)
+        learn_and_save(client, node, messages, len(offline.order), ckpt)
     finally:
         client.close()
         node.stop()
