@@ -41,7 +41,13 @@ from semiparam_ros.core.dynamics import (
     point_mass_parameters,
     resolve_urdf,
 )
-from semiparam_ros.sim.contacts import ContactConfig, ContactEpisode, contact_forces, draw_episodes
+from semiparam_ros.sim.contacts import (
+    ContactConfig,
+    ContactEpisode,
+    contact_forces,
+    contacts_timing,
+    draw_episodes,
+)
 from semiparam_ros.sim.ik import ArmKinematics
 from semiparam_ros.sim.scenario import DEFAULT_START_NS
 from semiparam_ros.sim.trajectories import multisine
@@ -339,9 +345,9 @@ ARM_SCENARIOS: tuple[str, ...] = ("excitation", "payload", "contacts")
 
 _DEFAULT_PERTURBATION = ParameterPerturbation()
 
-#: Default length of the ``excitation`` and ``payload`` scenarios (s) and of the ``contacts`` one.
+#: Default length of the ``excitation`` and ``payload`` scenarios (s); ``contacts``: see
+#: :func:`~semiparam_ros.sim.contacts.contacts_timing`.
 _DEFAULT_DURATION = 60.0
-_CONTACTS_DURATION = 120.0
 
 
 @dataclass(frozen=True)
@@ -711,10 +717,10 @@ def arm_preset_configs(
     for scenario in scenarios:
         kwargs: dict[str, Any] = dict(extra)
         if scenario == "contacts":
-            length = float(duration) if duration is not None else _CONTACTS_DURATION
+            length, pickup = contacts_timing(duration, payload_time)
             kwargs.update(
                 payload_mass=mass,
-                payload_time=0.75 * length if payload_time is None else payload_time,
+                payload_time=pickup,
                 contacts=contacts if contacts is not None else ContactConfig(),
             )
         else:

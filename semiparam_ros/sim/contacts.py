@@ -30,7 +30,29 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ContactConfig", "ContactEpisode", "contact_forces", "draw_episodes"]
+__all__ = ["CONTACTS_DURATION_S", "ContactConfig", "ContactEpisode", "contact_forces", "contacts_timing",
+           "draw_episodes"]
+
+#: Length of a ``contacts`` scenario when no duration is given (s): contacts in [18, 78] s, payload
+#: pickup at 90 s, 30 s to adopt it (every simulated robot's ``contacts`` scenario).
+CONTACTS_DURATION_S = 120.0
+#: Where a ``contacts`` scenario picks its payload up unless told: this fraction of its duration.
+_PICKUP_FRACTION = 0.75
+
+
+def contacts_timing(duration: float | None, payload_time: float | None) -> tuple[float, float]:
+    """Return the duration and the payload pickup time of a ``contacts`` scenario.
+
+    Args:
+        duration: Length (s), or None for :data:`CONTACTS_DURATION_S`.
+        payload_time: Pickup time (s), or None for 0.75 of the duration (after the contact window
+            ``[0.15, 0.65]·T`` of :class:`ContactConfig`).
+
+    Returns:
+        ``(duration, payload_time)`` in s.
+    """
+    length = CONTACTS_DURATION_S if duration is None else float(duration)
+    return length, _PICKUP_FRACTION * length if payload_time is None else payload_time
 
 
 def _pair(value: object, what: str, *, positive: bool) -> tuple[float, float]:

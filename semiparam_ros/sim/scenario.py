@@ -43,7 +43,14 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.core.dynamics import RigidBodyRegressor, icub_urdf_path, point_mass_parameters
-from semiparam_ros.sim.contacts import ContactConfig, ContactEpisode, contact_forces, draw_episodes
+from semiparam_ros.sim.contacts import (
+    CONTACTS_DURATION_S,
+    ContactConfig,
+    ContactEpisode,
+    contact_forces,
+    contacts_timing,
+    draw_episodes,
+)
 from semiparam_ros.sim.effects import (
     DEFAULT_EFFECTS,
     SENSOR_FRAME,
@@ -693,9 +700,6 @@ _SCENARIO_NAMES = {
     "contacts": "icub_contacts",
 }
 
-#: Length of the ``contacts`` scenario when no duration is given (s): contacts in [18, 78] s, payload
-#: pickup at 90 s, 30 s to adopt it.
-CONTACTS_DURATION_S = 120.0
 
 
 def preset_configs(
@@ -743,13 +747,13 @@ def preset_configs(
         if scenario == "payload":
             kwargs.update(trajectory=payload_trajectory, payload_mass=payload_mass)
         elif scenario == "contacts":
-            duration = float(overrides.get("duration") or CONTACTS_DURATION_S)
-            pickup = overrides.get("payload_time")
+            given = overrides.get("duration") or None
+            duration, pickup = contacts_timing(given, overrides.get("payload_time"))
             kwargs.update(
                 trajectory=payload_trajectory,
                 payload_mass=payload_mass,
                 duration=duration,
-                payload_time=0.75 * duration if pickup is None else pickup,
+                payload_time=pickup,
                 contacts=contacts if contacts is not None else ContactConfig(),
             )
         else:
