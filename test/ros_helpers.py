@@ -14,7 +14,8 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -81,6 +82,28 @@ def make_ros_env(tmp_path: Path, monkeypatch: Any) -> RosEnv:
         monkeypatch.setenv(key, value)
     monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
     return RosEnv(dict(os.environ), domain, tmp_path)
+
+
+@contextmanager
+def in_process_node(tmp_path: Path, monkeypatch: Any, **overrides: Any) -> Iterator[Any]:
+    """An ``EstimatorNode`` in this process, in its own context (CONFIG, checkpoints off, ``overrides`` as
+    parameter values by name); aborted and destroyed on exit, its context shut down."""
+    from rclpy.parameter import Parameter
+
+    from semiparam_ros.ros.estimator_node import EstimatorNode
+
+    env = make_ros_env(tmp_path, monkeypatch)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=env.domain_id)
+    values = {"checkpoint.path": "", **overrides}
+    node = EstimatorNode(context=context, cli_args=["--ros-args", "--params-file", str(CONFIG)],
+                         parameter_overrides=[Parameter(name, value=value) for name, value in values.items()])
+    try:
+        yield node
+    finally:
+        node.abort()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
 
 
 class NodeProcess:

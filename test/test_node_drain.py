@@ -7,35 +7,27 @@ import time
 
 import pytest
 import rclpy
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from ros_helpers import CONFIG, make_ros_env
+from ros_helpers import in_process_node
 from sensor_msgs.msg import JointState
 
-from semiparam_ros.ros.estimator_node import _MAX_DRAIN, EstimatorNode
+from semiparam_ros.ros.estimator_node import _MAX_DRAIN
 
 pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
 def node_and_publisher(tmp_path, monkeypatch):
-    env = make_ros_env(tmp_path, monkeypatch)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=env.domain_id)
-    node = EstimatorNode(context=context, cli_args=["--ros-args", "--params-file", str(CONFIG)],
-                         parameter_overrides=[Parameter("checkpoint.path", value="")])
-    source = rclpy.create_node("source", context=context)
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.VOLATILE)
-    pub = source.create_publisher(JointState, node.config["topics.joint_states"], qos)
-    try:
-        yield node, pub
-    finally:
-        source.destroy_node()
-        node.abort()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+    with in_process_node(tmp_path, monkeypatch) as node:
+        source = rclpy.create_node("source", context=node.context)
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+        pub = source.create_publisher(JointState, node.config["topics.joint_states"], qos)
+        try:
+            yield node, pub
+        finally:
+            source.destroy_node()
 
 
 def _publish(pub, n):

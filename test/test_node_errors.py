@@ -6,31 +6,20 @@ from __future__ import annotations
 import time
 
 import pytest
-import rclpy
-from rclpy.parameter import Parameter
-from ros_helpers import CONFIG, make_ros_env, source_bag
+from ros_helpers import in_process_node, source_bag
 
 from semiparam_ros.core.messages import JointStateData
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.io.bags import read_messages
-from semiparam_ros.ros.estimator_node import EXECUTORS, EstimatorNode
+from semiparam_ros.ros.estimator_node import EXECUTORS
 
 pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
 def node(tmp_path, monkeypatch):
-    env = make_ros_env(tmp_path, monkeypatch)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=env.domain_id)
-    node = EstimatorNode(context=context, cli_args=["--ros-args", "--params-file", str(CONFIG)],
-                         parameter_overrides=[Parameter("checkpoint.path", value="")])
-    try:
+    with in_process_node(tmp_path, monkeypatch) as node:
         yield node
-    finally:
-        node.abort()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
 
 
 def _kind(msg):

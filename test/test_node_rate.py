@@ -6,29 +6,19 @@ import dataclasses
 import time
 
 import pytest
-import rclpy
-from rclpy.parameter import Parameter
-from ros_helpers import CONFIG, make_ros_env, source_bag
+from ros_helpers import in_process_node, source_bag
 
 from semiparam_ros.core.estimator import samples_in
 from semiparam_ros.core.messages import JointStateData
 from semiparam_ros.io.bags import read_messages
-from semiparam_ros.ros.estimator_node import EstimatorNode
 
 pytestmark = pytest.mark.ros
 
 
 def test_rmse_window_and_warmup_in_seconds_follow_the_measured_rate(tmp_path, monkeypatch):
-    env = make_ros_env(tmp_path, monkeypatch)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=env.domain_id)
-    overrides = [Parameter("checkpoint.path", value=""), Parameter("diagnostics.rmse_window", value=0),
-                 Parameter("diagnostics.rmse_window_s", value=0.7),
-                 Parameter("nonparametric.standardizer_warmup", value=0),
-                 Parameter("nonparametric.standardizer_warmup_s", value=1.3)]
-    node = EstimatorNode(context=context, cli_args=["--ros-args", "--params-file", str(CONFIG)],
-                         parameter_overrides=overrides)
-    try:
+    overrides = {"diagnostics.rmse_window": 0, "diagnostics.rmse_window_s": 0.7,
+                 "nonparametric.standardizer_warmup": 0, "nonparametric.standardizer_warmup_s": 1.3}
+    with in_process_node(tmp_path, monkeypatch, **overrides) as node:
         assert node._stats.rmse_window == 70  # provisional: 0.7 s at 100 Hz
         est = node.estimator
         t0 = None
@@ -43,7 +33,3 @@ def test_rmse_window_and_warmup_in_seconds_follow_the_measured_rate(tmp_path, mo
         assert period == pytest.approx(0.02, rel=1e-6)
         assert node._stats.rmse_window == samples_in(0.7, period) == 35
         assert est.model.nonparametric.standardizer.warmup == samples_in(1.3, period) == 65
-    finally:
-        node.abort()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
