@@ -34,7 +34,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.episodes import flag_samples, score_episodes
@@ -42,7 +41,7 @@ from semiparam_ros.core.estimator import OnlineEstimator
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.eval.metrics import OutputSpec, group_rmse, window_samples, windowed_rmse
 from semiparam_ros.eval.protocol import Recovery, recovery
-from semiparam_ros.eval.replay import Topics
+from semiparam_ros.eval.replay import Topics, payload_pickup, read_scenario
 from semiparam_ros.io.bags import read_messages, topic_info
 
 __all__ = [
@@ -93,13 +92,8 @@ def read_episodes(bag: str | Path) -> GroundTruthEpisodes:
     Raises:
         ValueError: If the file is missing, unreadable or records no contact episodes.
     """
-    bag = Path(bag)
-    path = (bag if bag.is_dir() else bag.parent) / "scenario.yaml"
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as err:
-        raise ValueError(f"cannot read the contact episodes from {path}: {err}") from err
-    contacts = doc.get("contacts") if isinstance(doc, Mapping) else None
+    path, doc = read_scenario(bag, "the contact episodes")
+    contacts = doc.get("contacts") if doc is not None else None
     episodes = contacts.get("episodes") if isinstance(contacts, Mapping) else None
     if not isinstance(episodes, list) or not isinstance(doc.get("start_stamp_ns"), int):
         raise ValueError(f"{path} records no contact episodes (contacts.episodes, start_stamp_ns); simulate "
@@ -109,9 +103,7 @@ def read_episodes(bag: str | Path) -> GroundTruthEpisodes:
         peak = np.array([float(e["peak_force_N"]) for e in episodes])
     except (KeyError, TypeError, ValueError) as err:
         raise ValueError(f"{path}: malformed contact episode: {err}") from err
-    payload = doc.get("payload")
-    pickup = payload.get("time_s") if isinstance(payload, Mapping) else None
-    pickup_s = float(pickup) if isinstance(pickup, int | float) and not isinstance(pickup, bool) else None
+    pickup_s, _ = payload_pickup(doc)
     return GroundTruthEpisodes(int(doc["start_stamp_ns"]), ep, peak, pickup_s)
 
 

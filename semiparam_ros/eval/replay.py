@@ -44,7 +44,9 @@ __all__ = [
     "evaluate_adaptation",
     "evaluate_bags",
     "load_samples",
+    "payload_pickup",
     "read_change_time",
+    "read_scenario",
 ]
 
 #: Topic of the noise-free wrench written by the simulator (absent in real logs).
@@ -234,6 +236,47 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
     return result, info
 
 
+def read_scenario(bag: str | Path, what: str, hint: str = "") -> tuple[Path, Mapping[str, Any] | None]:
+    """Read the simulator's ground-truth sidecar ``scenario.yaml`` next to a bag.
+
+    Args:
+        bag: Bag folder or ``.mcap`` file (the sidecar is read from the folder).
+        what: What the caller wants from it, for the error message (e.g. "the pickup time").
+        hint: Appended to the error message (what the user can do instead).
+
+    Returns:
+        ``(path, document)``: the sidecar's path and its top-level mapping (None if it is not a mapping).
+
+    Raises:
+        ValueError: If the file is missing or is not YAML.
+    """
+    bag = Path(bag)
+    path = (bag if bag.is_dir() else bag.parent) / "scenario.yaml"
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise ValueError(f"cannot read {what} from {path}: {err}{hint}") from err
+    return path, doc if isinstance(doc, Mapping) else None
+
+
+def payload_pickup(doc: Mapping[str, Any] | None) -> tuple[float | None, int | None]:
+    """Return the payload pickup a sidecar records.
+
+    Args:
+        doc: The sidecar's document (:func:`read_scenario`).
+
+    Returns:
+        ``(time_s, stamp_ns)``: ``payload.time_s`` [s from the first joint state] and ``payload.stamp_ns``
+        [ns], each None when missing or not a number.
+    """
+    payload = doc.get("payload") if doc is not None else None
+    if not isinstance(payload, Mapping):
+        return None, None
+    time_s, stamp = payload.get("time_s"), payload.get("stamp_ns")
+    return (float(time_s) if isinstance(time_s, int | float) and not isinstance(time_s, bool) else None,
+            int(stamp) if isinstance(stamp, int) and not isinstance(stamp, bool) else None)
+
+
 def read_change_time(bag: str | Path) -> tuple[float, int | None]:
     """Read the payload pickup from the simulator's ``scenario.yaml`` next to the bag.
 
@@ -250,20 +293,11 @@ def read_change_time(bag: str | Path) -> tuple[float, int | None]:
     Raises:
         ValueError: If the file is missing or records no payload pickup.
     """
-    bag = Path(bag)
-    folder = bag if bag.is_dir() else bag.parent
-    path = folder / "scenario.yaml"
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as err:
-        raise ValueError(f"cannot read the pickup time from {path}: {err}; pass --pickup-time") from err
-    payload = doc.get("payload") if isinstance(doc, Mapping) else None
-    time_s = payload.get("time_s") if isinstance(payload, Mapping) else None
-    if isinstance(time_s, bool) or not isinstance(time_s, int | float):
+    path, doc = read_scenario(bag, "the pickup time", "; pass --pickup-time")
+    time_s, stamp_ns = payload_pickup(doc)
+    if time_s is None:
         raise ValueError(f"{path} records no payload pickup (payload.time_s); pass --pickup-time")
-    stamp = payload.get("stamp_ns")
-    stamp_ns = int(stamp) if isinstance(stamp, int) and not isinstance(stamp, bool) else None
-    return float(time_s), stamp_ns
+    return time_s, stamp_ns
 
 
 def adaptation_configs(config: EstimatorConfig, forgetting: float,
