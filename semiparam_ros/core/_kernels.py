@@ -37,7 +37,7 @@ from numba import njit
 
 __all__ = [
     "back_substitute", "checked_copies", "predict_row", "predict_row_pending", "qr_rls_steps",
-    "solve_predict", "stage_row", "values_within",
+    "solve_predict", "stage_row", "values_within", "within",
 ]
 
 
@@ -525,17 +525,19 @@ def solve_predict(M: np.ndarray, Z: np.ndarray, P: np.ndarray, var: np.ndarray) 
 
 
 @njit(cache=True, nogil=True)
-def values_within(Z: np.ndarray, U: np.ndarray, max_abs: float) -> bool:
-    """Whether every entry of ``Z`` and ``U`` (2-d float64) satisfies ``|v| ≤ max_abs`` (false for NaN)."""
-    for r in range(Z.shape[0]):
-        for q in range(Z.shape[1]):
-            if not (abs(Z[r, q]) <= max_abs):
-                return False
-    for r in range(U.shape[0]):
-        for q in range(U.shape[1]):
-            if not (abs(U[r, q]) <= max_abs):
+def within(A: np.ndarray, max_abs: float) -> bool:
+    """Whether every entry of the 2-d float64 ``A`` satisfies ``|v| ≤ max_abs`` (false for NaN)."""
+    for r in range(A.shape[0]):
+        for q in range(A.shape[1]):
+            if not (abs(A[r, q]) <= max_abs):
                 return False
     return True
+
+
+@njit(cache=True, nogil=True)
+def values_within(Z: np.ndarray, U: np.ndarray, max_abs: float) -> bool:
+    """Whether every entry of ``Z`` and ``U`` (2-d float64) satisfies ``|v| ≤ max_abs`` (false for NaN)."""
+    return within(Z, max_abs) and within(U, max_abs)
 
 
 def checked_copies(Z: np.ndarray, U: np.ndarray, max_abs: float) -> tuple[bool, np.ndarray, np.ndarray]:
@@ -556,12 +558,8 @@ def stage_row(z: np.ndarray, u: np.ndarray, Z: np.ndarray, U: np.ndarray, max_ab
     Returns:
         Whether every entry satisfies ``|v| ≤ max_abs`` (false for NaN); on false nothing is written.
     """
-    for q in range(z.shape[0]):
-        if not (abs(z[q]) <= max_abs):
-            return False
-    for q in range(u.shape[0]):
-        if not (abs(u[q]) <= max_abs):
-            return False
+    if not values_within(z.reshape(1, z.shape[0]), u.reshape(1, u.shape[0]), max_abs):
+        return False
     Zr = Z[0]
     Ur = U[0]
     for q in range(z.shape[0]):
@@ -578,9 +576,8 @@ def predict_row(M: np.ndarray, z: np.ndarray, p: np.ndarray, max_abs: float) -> 
     Returns:
         ``z A⁻¹ zᵀ`` (≥ 0), or −1 if an entry of ``z`` has ``|v| > max_abs`` or is NaN (``p`` unwritten).
     """
-    for q in range(z.shape[0]):
-        if not (abs(z[q]) <= max_abs):
-            return -1.0
+    if not within(z.reshape(1, z.shape[0]), max_abs):
+        return -1.0
     var = np.empty(1)
     solve_predict(M, z.reshape(1, z.shape[0]), p.reshape(1, p.shape[0]), var)
     return var[0]
@@ -596,9 +593,8 @@ def predict_row_pending(M: np.ndarray, Z: np.ndarray, U: np.ndarray, scale: floa
     ``(j, z A_new⁻¹ zᵀ)`` with ``j`` the next regularizer coordinate (−1 if ``Z``/``U`` were rejected,
     ``M`` again untouched). Same operations as :func:`qr_rls_steps` with ``Q = z``: the same bits.
     """
-    for q in range(z.shape[0]):
-        if not (abs(z[q]) <= max_abs):
-            return -2, -1.0
+    if not within(z.reshape(1, z.shape[0]), max_abs):
+        return -2, -1.0
     t = M.shape[1] - M.shape[0]
     none = np.empty((0, t))
     var = np.empty(1)

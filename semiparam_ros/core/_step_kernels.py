@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
-    "exceeds", "joined_within", "noise_std", "noise_update", "standardized_features", "within",
+    "exceeds", "joined_within", "noise_std", "noise_update", "standardized_features",
 ]
 
 
@@ -81,16 +81,6 @@ def joined_within(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, y: np.ndarray,
         if not abs(xy[k]) <= max_abs:
             return (1 if k < 3 * n else 2), xy
     return 0, xy
-
-
-@njit(cache=True, nogil=True)
-def within(A: np.ndarray, max_abs: float) -> bool:
-    """``max |A_ij| <= max_abs`` for a 2-D array (false on NaN), i.e. ``np.abs(A).max() <= max_abs``."""
-    for i in range(A.shape[0]):
-        for j in range(A.shape[1]):
-            if not abs(A[i, j]) <= max_abs:
-                return False
-    return True
 
 
 @njit(cache=True, nogil=True)

@@ -68,6 +68,7 @@ from semiparam_ros.core._kernels import (
     solve_predict,
     stage_row,
     values_within,
+    within,
 )
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.validation import MAX_ABS_INPUT, check_positive_int, check_range
@@ -509,7 +510,7 @@ class RecursiveRLS:
         if (type(Z) is np.ndarray and Z.shape == self._row_shape and Z.dtype == np.float64
                 and Z.flags.c_contiguous):
             Z2 = Z.reshape(1, -1)  # the common case, one contiguous float64 row: a (1, b) view
-            if values and not values_within(Z2, self._no_pred, MAX_ABS_INPUT):
+            if values and not within(Z2, MAX_ABS_INPUT):
                 raise RejectedSampleError(
                     f"Z contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")
             return Z2, True
@@ -523,7 +524,7 @@ class RecursiveRLS:
         if Z2.shape[0] == 0:
             raise RejectedSampleError("Z has no rows")
         Z2 = np.ascontiguousarray(Z2)
-        if values and not values_within(Z2, self._no_pred, MAX_ABS_INPUT):
+        if values and not within(Z2, MAX_ABS_INPUT):
             raise RejectedSampleError(
                 f"Z contains NaN, inf or entries larger than {MAX_ABS_INPUT:g} in magnitude")
         return Z2, single

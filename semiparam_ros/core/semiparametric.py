@@ -41,7 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core._step_kernels import standardized_features, within
+from semiparam_ros.core._kernels import within
+from semiparam_ros.core._step_kernels import standardized_features
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.features import RandomFourierFeatures, Standardizer
 from semiparam_ros.core.rrls import RecursiveRLS
