@@ -323,8 +323,10 @@ class EstimatorNode(Node):
             The number of synthetic samples that went through the step (≥ 3 unless the cap was reached).
         """
         cfg = self.config
+        # the real estimator's regressor (stateless between calls): the URDF is not parsed a second time
         scratch = OnlineEstimator(cfg.with_overrides({"nonparametric.n_features": 4,
-                                                      "nonparametric.standardizer_warmup": 2}))
+                                                      "nonparametric.standardizer_warmup": 2}),
+                                  regressor=self._estimator.regressor)
         joints, n = self._joints, len(self._joints)
         frame = self._frame_id or "warm_up"
         stepped = 0
