@@ -45,6 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="joints of the friction criterion (default: the KUKA's lwr_0, lwr_4, lwr_5, lwr_6)")
     p.add_argument("--splits", type=int, default=10, help="test parts of the protocol (default 10)")
     p.add_argument("--no-inject", action="store_true", help="skip the external-torque measurement")
+    p.add_argument("--horizons", nargs="*", default=["0", "0.1", "1", "10", "frozen"],
+                   help="ages of the model for the horizon table [s] (0 = one step, 'frozen'); "
+                        "none given = skip it (default: 0 0.1 1 10 frozen)")
+    p.add_argument("--figure", type=Path, help="draw the error-by-age figure here (PNG)")
     p.add_argument("--json", type=Path, help="write the JSON here")
     p.add_argument("--markdown", type=Path, help="write the markdown tables here")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -69,8 +73,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         text = run_comparison(data=args.data, config=args.config, train=args.train, test=args.test, urdf=urdf,
                               overrides=parse_overrides(args.overrides), friction_joints=args.friction_joints,
-                              splits=args.splits, inject=not args.no_inject, json_path=args.json,
-                              markdown_path=args.markdown, progress=not args.no_progress)
+                              splits=args.splits, inject=not args.no_inject,
+                              horizons=args.horizons or None, json_path=args.json,
+                              markdown_path=args.markdown, figure_path=args.figure,
+                              progress=not args.no_progress)
     except (ValueError, OSError) as err:
         return error_exit("real_robots", err)
     print(text, end="")

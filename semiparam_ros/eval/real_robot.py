@@ -43,6 +43,13 @@ from semiparam_ros.eval.baselines import (
     identification_regressor,
     least_squares_model,
 )
+from semiparam_ros.eval.horizon import (
+    DEFAULT_HORIZONS,
+    HorizonReport,
+    evaluate_horizons,
+    horizon_figure,
+    horizon_markdown,
+)
 from semiparam_ros.eval.metrics import OutputSpec
 from semiparam_ros.eval.protocol import SampleArrays, predict_only, run_protocol, test_then_train
 from semiparam_ros.eval.replay import build_models, load_samples
@@ -132,6 +139,8 @@ class RealRobotComparison:
         friction_joints: Joints the friction criterion is evaluated on.
         criteria: The issue's acceptance criteria.
         injected: The external-torque measurement, or ``None`` if not run.
+        horizons: Every model's error by the age of the model (:mod:`semiparam_ros.eval.horizon`), or
+            ``None`` if not run.
     """
 
     report: ProtocolReport
@@ -139,6 +148,7 @@ class RealRobotComparison:
     friction_joints: tuple[str, ...]
     criteria: tuple[Criterion, ...]
     injected: InjectedTorque | None
+    horizons: HorizonReport | None = None
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form."""
@@ -148,6 +158,7 @@ class RealRobotComparison:
             "friction_joints": list(self.friction_joints),
             "criteria": [c.__dict__ for c in self.criteria],
             "injected": None if self.injected is None else dict(self.injected.__dict__),
+            "horizons": None if self.horizons is None else self.horizons.to_json(),
         }
 
 
@@ -242,6 +253,7 @@ def _node_predictions(model: Any, config: EstimatorConfig, data: SampleArrays, Y
 def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleArrays, *,
                     friction_joints: Sequence[str], splits: int = 10, window_s: float = 3.0,
                     first_s: float = 3.0, inject: bool = True, protocol: Mapping[str, Any] | None = None,
+                    horizons: Sequence[float | str] | None = DEFAULT_HORIZONS,
                     progress: bool = False) -> RealRobotComparison:
     """Run every model of the module docstring on a joint-torque log pair and check the acceptance.
 
@@ -259,6 +271,9 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
         inject: Also run :func:`injected_torque_recovery`
             (a 1 N·m step for 1 s at the middle of the test log, after the gate's warm-up).
         protocol: Extra settings recorded in the report.
+        horizons: Horizons of :func:`~semiparam_ros.eval.horizon.evaluate_horizons` [s] (0 = one step,
+            ``"frozen"``), run on the learners trained by the protocol, the CAD model, the batch fit and
+            persistence; ``None`` = not run.
         progress: Progress bar (only on a terminal).
 
     Returns:
@@ -299,12 +314,19 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
         injected = injected_torque_recovery(chosen, test, frozen=sorted(frozen), gated=[SP_NODE],
                                             config=gate_on, amplitude=1.0, start_s=0.5 * duration,
                                             duration_s=1.0)
+    horizon = None
+    if horizons is not None:
+        # the protocol trained every model in place on the training stream
+        chosen = {k: models[k] for k in (CAD, BATCH, *LEARNERS, PERSISTENCE)}
+        horizon = evaluate_horizons(chosen, train, test, horizons=horizons, fixed=(CAD, BATCH),
+                                    components=joints)
     std = dict(zip(joints, (float(s) for s in test.Y.std(axis=0)), strict=True))
-    return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected)
+    return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected, horizon)
 
 
 def evaluate_logs(config: EstimatorConfig, train_path: str | Path, test_path: str | Path, *,
                   friction_joints: Sequence[str], splits: int = 10, inject: bool = True,
+                  horizons: Sequence[float | str] | None = DEFAULT_HORIZONS,
                   progress: bool = False) -> RealRobotComparison:
     """Read two joint-torque bags through the node's pipeline and run :func:`compare_on_logs`.
 
@@ -315,6 +337,7 @@ def evaluate_logs(config: EstimatorConfig, train_path: str | Path, test_path: st
         friction_joints: Joints of the friction criterion.
         splits: Test parts of the protocol.
         inject: Run the external-torque measurement.
+        horizons: Horizons of the age table [s] (see :func:`compare_on_logs`); ``None`` = not run.
         progress: Progress bar (only on a terminal).
 
     Returns:
@@ -328,7 +351,7 @@ def evaluate_logs(config: EstimatorConfig, train_path: str | Path, test_path: st
     info = {"train_bag": str(train_path), "test_bag": str(test_path), "drops_train": train_drops,
             "drops_test": test_drops}
     return compare_on_logs(config, train, test, friction_joints=friction_joints, splits=splits, inject=inject,
-                           protocol=info, progress=progress)
+                           protocol=info, horizons=horizons, progress=progress)
 
 
 def _row(name: str, values: Sequence[float], fmt: str) -> str:
@@ -373,14 +396,17 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
             + "".join(f"| {k} | {inj.mean_fraction[k]:.3f} | {inj.end_fraction[k]:.3f} |\n"
                       for k in inj.mean_fraction)
         )
+    if comparison.horizons is not None:
+        text += "\nBy the age of the model [N·m]. " + horizon_markdown(comparison.horizons)
     return text
 
 
 def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", test: str = "measurements_3",
                    urdf: Path | None = None, overrides: Mapping[str, Any] | None = None,
                    friction_joints: Sequence[str] = (), splits: int = 10, inject: bool = True,
+                   horizons: Sequence[float | str] | None = DEFAULT_HORIZONS,
                    json_path: Path | None = None, markdown_path: Path | None = None,
-                   progress: bool = True) -> str:
+                   figure_path: Path | None = None, progress: bool = True) -> str:
     """Run the ``real_robots`` command: load, compare, write the JSON and markdown, return the text.
 
     Args:
@@ -393,8 +419,10 @@ def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", t
         friction_joints: Joints of the friction criterion.
         splits: Test parts.
         inject: Run the external-torque measurement.
+        horizons: Horizons of the age table [s] (0 = one step, ``"frozen"``); ``None`` = not run.
         json_path: Destination of the JSON (``None``: not written).
         markdown_path: Destination of the tables (``None``: not written).
+        figure_path: Destination of the age figure (PNG; ``None`` or no horizons: not drawn).
         progress: Progress bar (only on a terminal).
 
     Returns:
@@ -414,8 +442,10 @@ def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", t
         over["robot.urdf"] = str(urdf)
     cfg = load_evaluation_config(config, over)
     comparison = evaluate_logs(cfg, Path(data) / train, Path(data) / test, friction_joints=friction_joints,
-                               splits=splits, inject=inject, progress=progress)
+                               splits=splits, inject=inject, horizons=horizons, progress=progress)
     text = comparison_markdown(comparison)
+    if figure_path is not None and comparison.horizons is not None:
+        horizon_figure(comparison.horizons, figure_path, title=f"{train} → {test}")
     if json_path is not None:
         write_json(comparison.to_json(), json_path)
     if markdown_path is not None:
