@@ -18,6 +18,7 @@ MODULES = [
     "semiparam_ros.core.semiparametric",
     "semiparam_ros.core.semiparametric_joint",
     "semiparam_ros.core.validation",
+    "semiparam_ros.eval.horizon",
 ]
 
 
