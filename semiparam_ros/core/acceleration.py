@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from semiparam_ros.core.rate import RATE_SAMPLES, measured_period_s
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
 __all__ = [
@@ -91,8 +92,6 @@ KALMAN_SETTLE = {"jerk": 4.0, "snap": 5.5}
 #: units (unit noise densities): effectively diffuse, 10⁴ times the standard deviation of any signal seen.
 KALMAN_PRIOR_VARIANCE = 1e8
 
-#: Stamps held back to measure the joint-state rate when the window is given in seconds (19 intervals).
-RATE_SAMPLES = 20
 
 Decision = tuple[int, "np.ndarray | None"]
 """``(stamp_ns, ddq)`` for one input stamp: the estimate in rad/s², or ``None`` (warm-up / gap)."""
@@ -871,18 +870,14 @@ class RateAdaptiveEstimator(AccelerationEstimator):
         self._held.append((int(stamp_ns), np.array(dq, dtype=np.float64)))
         if len(self._held) < RATE_SAMPLES:
             return []
-        stamps = np.array([s for s, _ in self._held], dtype=np.int64)
-        dts = np.diff(stamps) * 1e-9
-        gap = self.config.max_gap_s
-        if gap is not None:
-            dts = dts[dts <= gap]
-        if dts.size == 0:  # every interval was a dropout: keep measuring on the newest sample
+        period = measured_period_s((s for s, _ in self._held), self.config.max_gap_s)
+        if period is None:  # every interval was a dropout: keep measuring on the newest sample
             decided: list[Decision] = [(s, None) for s, _ in self._held[:-1]]
             self._held = self._held[-1:]
             return decided
         cfg = self.config
         assert cfg.window_s is not None  # checked in __init__
-        window = samples_for_window(cfg.window_s, float(np.median(dts)), cfg.method, cfg.polyorder)
+        window = samples_for_window(cfg.window_s, period, cfg.method, cfg.polyorder)
         sized = AccelerationConfig(method=cfg.method, window=window, polyorder=cfg.polyorder,
                                    cutoff_hz=cfg.cutoff_hz, max_gap_s=cfg.max_gap_s)
         inner = SavitzkyGolayEstimator(self.n_joints, sized) if cfg.method == "savgol" else \

@@ -226,8 +226,27 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("semiparametric.combination", "string", "cascade",
                   "SP model: 'cascade' = the paper's (rigid-body stage alone first, residual stage on "
                   "[x, y_hat]); 'joint' = rigid-body parameters and kernel residual (on x) fitted as one "
-                  "ridge problem, which needs parametric.forgetting == nonparametric.forgetting",
-                  choices=("cascade", "joint")),
+                  "ridge problem, which needs parametric.forgetting == nonparametric.forgetting; "
+                  "'consistent' = rigid-body stage alone first, a residual on x that stays consistent with "
+                  "the current parameters and falls back to zero where x is novel (the model), plus a fast "
+                  "tracker of the model's error (one step ahead); see core/semiparametric_consistent.py",
+                  choices=("cascade", "joint", "consistent")),
+    ParameterSpec("semiparametric.novelty_scale", "double", 0.05,
+                  "'consistent': the residual is weighted by exp(-nu/novelty_scale), nu = lambda·v in (0, 1] "
+                  "the fraction of its prior variance left at the state (dimensionless)",
+                  min=0.0, min_exclusive=True, max=1e6),
+    ParameterSpec("semiparametric.tracker", "bool", True,
+                  "'consistent': add the fast tracker of the model's error to the prediction (false = the "
+                  "model alone)"),
+    ParameterSpec("semiparametric.tracker_position_scale", "double", 0.05,
+                  "'consistent': joint-position distance [rad] over which the tracked error fades "
+                  "(weight exp(-d^2/2) in units of these scales)", min=0.0, min_exclusive=True, max=1e3),
+    ParameterSpec("semiparametric.tracker_velocity_scale", "double", 0.5,
+                  "'consistent': joint-velocity distance [rad/s] over which the tracked error fades",
+                  min=0.0, min_exclusive=True, max=1e4),
+    ParameterSpec("semiparametric.tracker_samples", "integer", 20,
+                  "'consistent': learned samples the tracker's noise and drift statistics average over (a "
+                  "statistical sample size, not a time)", min=2, max=10**7),
     # adaptation, uncertainty and the contact-aware learning gate (core/adaptation.py, core/uncertainty.py,
     # core/gate.py; measurements in docs/adaptation.md)
     ParameterSpec("adaptation.time_constant", "double", 20.0,

@@ -11,7 +11,6 @@ is fed.
 from __future__ import annotations
 
 import json
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,12 +28,14 @@ from semiparam_ros.core.dynamics import RigidBodyRegressor
 from semiparam_ros.core.gate import ContactGate, GateConfig, Verdict
 from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
 from semiparam_ros.core.pipeline import SamplePipeline
+from semiparam_ros.core.rate import RATE_SAMPLES, RateMeter, measured_period_s, samples_in
 from semiparam_ros.core.semiparametric import (
     NonparametricModel,
     ParametricModel,
     Prediction,
     SemiparametricModel,
 )
+from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
 from semiparam_ros.core.uncertainty import NoiseScale
 from semiparam_ros.core.validation import MAX_ABS_INPUT
@@ -62,7 +63,8 @@ __all__ = [
 ]
 
 ModelKind = Literal["P", "NP", "SP"]
-Model = ParametricModel | NonparametricModel | SemiparametricModel | JointSemiparametricModel
+Model = (ParametricModel | NonparametricModel | SemiparametricModel | JointSemiparametricModel
+         | ConsistentSemiparametricModel)
 
 DROP_REJECTED_SAMPLE = "rejected_sample"
 """Key of :attr:`OnlineEstimator.drops`: a paired sample the learner refused (values beyond its input
@@ -254,48 +256,9 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
     return np.concatenate(floors)
 
 
-#: Samples whose stamps measure the sample rate (median interval of the first ones).
-RATE_SAMPLES = 10
 #: Sample period [s] at which seconds-based lengths are converted before the rate is measured (100 Hz: the
 #: rate at which the former sample-count defaults were chosen).
 NOMINAL_PERIOD_S = 0.01
-
-
-def samples_in(duration_s: float, sample_period_s: float) -> int:
-    """Return the number of samples spanning a duration: ``max(1, round(duration_s / sample_period_s))``.
-
-    Args:
-        duration_s: Duration [s], > 0.
-        sample_period_s: Sample period [s], > 0.
-
-    Raises:
-        ConfigurationError: If either is not a finite positive number.
-    """
-    if not (math.isfinite(duration_s) and duration_s > 0 and math.isfinite(sample_period_s)
-            and sample_period_s > 0):
-        raise ConfigurationError(f"need a positive duration and period, got {duration_s!r} s, "
-                                 f"{sample_period_s!r} s")
-    return max(1, round(duration_s / sample_period_s))
-
-
-def measured_period_s(stamps_ns: Any) -> float | None:
-    """Measure the sample period [s] as the median interval of the first :data:`RATE_SAMPLES` stamps.
-
-    The node (:class:`OnlineEstimator`) and offline replay measure it alike, so both convert seconds to
-    the same sample counts.
-
-    Args:
-        stamps_ns: Sample stamps [ns] in order (at least the first :data:`RATE_SAMPLES`).
-
-    Returns:
-        The period [s], or ``None`` with fewer than :data:`RATE_SAMPLES` stamps or no positive interval.
-    """
-    stamps = np.asarray(stamps_ns, dtype=np.int64)[:RATE_SAMPLES]
-    if len(stamps) < RATE_SAMPLES:
-        return None
-    dt = np.diff(stamps)
-    dt = dt[dt > 0]
-    return float(np.median(dt)) * 1e-9 if len(dt) else None
 
 
 def standardizer_warmup_samples(config: EstimatorConfig, sample_period_s: float | None = None) -> int:
@@ -358,13 +321,46 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
     """
     if kind not in ("P", "NP", "SP"):
         raise ConfigurationError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
+    model = _build_model(config, kind, regressor)
+    if sample_period_s is not None:
+        apply_sample_period(model, config, sample_period_s)
+    return model
+
+
+def apply_sample_period(model: Model, config: EstimatorConfig, sample_period_s: float) -> float | None:
+    """Convert what the configuration gives in seconds for a learner, at the measured sample period.
+
+    The one route by which the rate reaches a learner, online (:class:`OnlineEstimator`, once its
+    :class:`~semiparam_ros.core.rate.RateMeter` has measured the period) and offline (:func:`build_model`
+    with ``sample_period_s``): the standardizer warm-up given in seconds becomes samples
+    (:func:`standardizer_warmup_samples`, if it is still running), and with ``adaptation.time_constant``
+    τ > 0 every learner forgets with β = exp(−T/τ).
+
+    Args:
+        model: A learner (not yet past its warm-up for the warm-up to change).
+        config: Its configuration.
+        sample_period_s: The measured period T [s].
+
+    Returns:
+        β if the time constant set it, else ``None``.
+    """
+    if not config["nonparametric.standardizer_warmup"]:
+        model.set_standardizer_warmup(standardizer_warmup_samples(config, sample_period_s))
     tau = float(config["adaptation.time_constant"])
-    if tau > 0.0 and sample_period_s is not None:
-        beta = forgetting_factor(tau, sample_period_s)
-        config = config.with_overrides({"parametric.forgetting": beta, "nonparametric.forgetting": beta})
+    if tau <= 0.0:
+        return None
+    beta = forgetting_factor(tau, sample_period_s)
+    for rls in learners(model):
+        rls.set_forgetting(beta)
+    return beta
+
+
+def _build_model(config: EstimatorConfig, kind: ModelKind,
+                 regressor: RigidBodyRegressor | None) -> Model:
+    """Build the learner of ``kind`` with the configured per-sample factors and the provisional warm-up."""
     n_joints = len(config["robot.joints"])
     n_inputs = 3 * n_joints
-    warmup = standardizer_warmup_samples(config, sample_period_s)
+    warmup = standardizer_warmup_samples(config, None)
     if kind == "NP":
         n_outputs = 6 if config["robot.output"] == "wrench" else n_joints
         return NonparametricModel(
@@ -406,6 +402,19 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
             forgetting=config["parametric.forgetting"],
             standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
             prior=prior,
+        )
+    if config["semiparametric.combination"] == "consistent":
+        return ConsistentSemiparametricModel(
+            phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,
+            forgetting_parametric=config["parametric.forgetting"],
+            forgetting_nonparametric=config["nonparametric.forgetting"],
+            standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
+            prior=prior,
+            novelty_scale=config["semiparametric.novelty_scale"],
+            tracker=config["semiparametric.tracker"],
+            tracker_position_scale=config["semiparametric.tracker_position_scale"],
+            tracker_velocity_scale=config["semiparametric.tracker_velocity_scale"],
+            tracker_samples=config["semiparametric.tracker_samples"],
         )
     return SemiparametricModel(
         phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,
@@ -484,7 +493,7 @@ class OnlineEstimator:
         self.forgetting: float | None = None  # β from adaptation.time_constant, once the rate is measured
         #: Sample period [s] measured from the first :data:`RATE_SAMPLES` samples (None until then).
         self.sample_period_s: float | None = None
-        self._rate_stamps: list[int] = []
+        self._rate = RateMeter()  # the rule of offline replay's measured_period_s(stamps)
 
     # ------------------------------------------------------------------ streaming
     def process_joint_state(self, msg: JointStateData) -> list[StepResult]:
@@ -605,24 +614,18 @@ class OnlineEstimator:
         self.gate_enabled = bool(config["gate.enabled"])
 
     def _measure_rate(self, stamp_ns: int) -> None:
-        """Collect the first sample stamps; once the rate is known, convert what is given in seconds.
+        """Feed the rate meter; once the period is known, convert what is given in seconds.
 
         The seconds-based warm-up becomes samples, and with ``adaptation.time_constant`` τ > 0 every
-        learner forgets with β = exp(−T/τ) from then on.
+        learner forgets with β = exp(−T/τ) from then on (:func:`apply_sample_period`, as offline).
         """
-        self._rate_stamps.append(int(stamp_ns))
-        period = measured_period_s(self._rate_stamps)
+        period = self._rate.add(stamp_ns)
         if period is None:
-            if len(self._rate_stamps) >= RATE_SAMPLES:
-                self._rate_stamps.clear()  # no positive interval yet (repeated stamps): measure again
             return
         self.sample_period_s = period
-        self._rate_stamps.clear()
-        if not self.config["nonparametric.standardizer_warmup"]:
-            self.model.set_standardizer_warmup(standardizer_warmup_samples(self.config, period))
-        tau = float(self.config["adaptation.time_constant"])
-        if tau > 0.0:
-            self._apply_forgetting(forgetting_factor(tau, period))
+        beta = apply_sample_period(self.model, self.config, period)
+        if beta is not None:
+            self.forgetting = beta
 
     # ------------------------------------------------------------------ inspection
     @property

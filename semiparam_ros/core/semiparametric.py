@@ -64,12 +64,16 @@ class Prediction:
         total: ``ŷ + Δŷ``.
         variance: Optional relative predictive variance per output, ``z A⁻¹ zᵀ`` summed over the stages
             (multiply by the noise variance of y in its units²); None unless requested.
+        correction: The fast error tracker's part of ``residual`` (units of y), for a model that has one
+            (:mod:`semiparam_ros.core.semiparametric_consistent`): ``total − correction`` is the model's
+            prediction from the state alone. None for the others.
     """
 
     parametric: np.ndarray
     residual: np.ndarray
     total: np.ndarray
     variance: np.ndarray | None = None
+    correction: np.ndarray | None = None
 
 
 class PredictionContext:

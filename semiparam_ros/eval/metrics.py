@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.rate import samples_in
+
 __all__ = [
     "GROUP_UNITS",
     "OUTPUT_KINDS",
@@ -233,4 +235,4 @@ def window_samples(window_s: float, sample_period_s: float) -> int:
     for name, value in (("window_s", window_s), ("sample_period_s", sample_period_s)):
         if not np.isfinite(value) or value <= 0:
             raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return max(1, round(window_s / sample_period_s))
+    return samples_in(window_s, sample_period_s)  # the one conversion of seconds to samples

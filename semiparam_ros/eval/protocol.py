@@ -31,6 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from semiparam_ros.core.rate import measured_period_s
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse, group_rmse, window_samples, windowed_rmse
 
 __all__ = [
@@ -149,7 +150,13 @@ class SampleArrays:
 
     @property
     def sample_period_s(self) -> float:
-        """Median stamp difference [s] (the actual sample period; ``nan`` for a single sample)."""
+        """The stream's period [s] as the node measures it (:func:`.rate.measured_period_s`).
+
+        For a stream too short for that, its median stamp difference (``nan`` for a single sample).
+        """
+        period = measured_period_s(self.stamps_ns)
+        if period is not None:
+            return period
         if len(self) < 2:
             return float("nan")
         return float(np.median(np.diff(self.stamps_ns))) * _NS

@@ -1,0 +1,419 @@
+"""A semiparametric model that stays a model: a consistent, abstaining residual plus a fast error tracker.
+
+The paper's cascade (:class:`~semiparam_ros.core.semiparametric.SemiparametricModel`) is an excellent
+one-step-ahead predictor and a poor *model*: trained on one motion and used without updates on another it
+is worse than its own rigid-body part, because (a) its residual learned the targets ``y − Φ(x)π̂_t`` while
+π̂_t was still moving, so it is inconsistent with the final π̂; (b) random Fourier features are global
+cosines, so away from the data the residual does not fall back to zero; (c) its one-step accuracy comes
+from the residual stage tracking the latest samples, which says nothing about other states. This model
+separates the two jobs (two time scales) and publishes them apart.
+
+**1. Rigid-body part** — the cascade's parametric stage, fitted alone and first (the physical model keeps
+priority): ``ŷ_P = Φ(x)π̂``, π̂ = π₀ + δ̂ regularized toward the prior π₀ (the URDF's parameters).
+
+**2. Consistent residual** (the slow part: the model's correction). The residual of the *current* π̂ over
+all the data seen (with the learners' forgetting β),
+
+    W(δ) = argmin_W Σ_m β^{n−m} ‖y_m − Φ_m π₀ − Φ_m δ − Wᵀφ_m‖² + λ‖W‖²  =  A⁻¹(B_y − Σ_k B_Φk δ),
+
+is linear in δ: one random-feature :class:`~semiparam_ros.core.rrls.RecursiveRLS` regresses the columns
+``U = [y − Φπ₀, Φ_1, …, Φ_t]`` (``Φ_k`` the k-th row of the regressor) on ``φ(s(x))`` — the same statistics
+as the joint fit of :mod:`semiparam_ros.core.semiparametric_joint`, but π̂ comes from the rigid-body part
+alone. One forward substitution gives ``[p | P_1 … P_t] = φᵀA⁻¹[B_y | B_Φ]`` and the residual of the
+current parameters is ``r_k = p_k − P_k δ̂``: it never goes stale when π̂ moves (the consistency correction
+of adaptive semiparametric dynamics learning, here exact).
+
+**3. Abstention.** The same forward substitution gives the residual stage's relative predictive variance
+``v = φA⁻¹φᵀ``; ``ν = λv ∈ (0, 1]`` is the fraction of the prior variance left at x (≈ 0 where the data
+determines the residual, → 1 far from it). The residual is used with the weight ``g = exp(−ν/ν₀)``
+(``novelty_scale`` ν₀): where x is novel the model falls back to its rigid-body part instead of
+extrapolating cosines. The predictive variance reported is unchanged (the residual's own), so σ still says
+how novel the state is. **model(x) = ŷ_P + g·r** is what is used frozen, at desired states and for
+feed-forward.
+
+**4. Fast correction** (the tracker: one step ahead, contacts). The model's error ``e = y − model(x)`` of
+the learned samples is filtered by a local-level Kalman filter per output (the error is a random walk b
+plus white noise): with ``q`` the random walk's and ``r`` the noise's variance per sample, the increments
+``e_m − e_{m−1}`` have variance ``q + 2r`` and lag-one covariance ``−r``, estimated as running averages over
+about ``tracker_samples`` learned samples; the steady-state gain is ``K = P⁻/(P⁻ + r)``,
+``P⁻ = (q + √(q² + 4qr))/2`` (K → 1: persistence of the model's error, where the error is smooth; K → 0:
+averaging, where noise dominates). The estimate ``b̂`` was made at the state ``x_b`` of the last learned
+sample and is used at x with the weight ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``:
+one step later κ ≈ 1, at a state far from the last learned one (a model h seconds old, a desired state, a
+new motion) κ → 0 and the prediction is the model's. Prediction: ``model(x) + κ b̂``.
+
+Parts (:class:`~semiparam_ros.core.semiparametric.Prediction`): ``parametric = ŷ_P``,
+``residual = g·r + κb̂``, ``correction = κb̂`` (so ``total − correction`` is model(x)), ``variance`` the
+relative variance of the rigid-body part plus the residual stage's.
+
+Units: x = [q, q̇, q̈] (rad, rad/s, rad/s²), y in N and N·m (wrench in the sensor frame) or N·m (joint
+torques); ℓ_q in rad, ℓ_q̇ in rad/s.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from semiparam_ros.core.features import Standardizer
+from semiparam_ros.core.rrls import RecursiveRLS
+from semiparam_ros.core.semiparametric import (
+    NonparametricModel,
+    ParametricModel,
+    Prediction,
+    PredictionContext,
+    Regressor,
+    _TwoStageModel,
+)
+from semiparam_ros.core.validation import check_positive_int, check_range
+from semiparam_ros.errors import CheckpointError
+
+__all__ = ["ConsistentSemiparametricModel", "ErrorTracker"]
+
+
+class ErrorTracker:
+    """Local-level Kalman filter of a model's error, used with a weight that fades with the state distance.
+
+    Args:
+        n_outputs: t, the number of outputs.
+        n_joints: n (the state coordinates are q and q̇ of the n joints).
+        position_scale: ℓ_q [rad] of the fading weight.
+        velocity_scale: ℓ_q̇ [rad/s] of the fading weight.
+        stats_samples: About how many learned samples the running increment statistics average over.
+
+    Raises:
+        ConfigurationError: Invalid sizes or scales.
+
+    Example:
+        >>> import numpy as np
+        >>> tr = ErrorTracker(1, 1, position_scale=0.1, velocity_scale=1.0)
+        >>> x = np.array([0.0, 0.0, 0.0])  # q, q̇, q̈ of one joint
+        >>> tr.update(x, np.array([0.5]), np.array([0.0]))  # the model was 0.5 too low here
+        >>> tr.correction(x).round(3).tolist()  # the same state: the error is carried over
+        [0.5]
+        >>> float(tr.correction(np.array([1.0, 0.0, 0.0]))[0]) < 1e-10  # 10 ℓ_q away: nothing
+        True
+    """
+
+    def __init__(self, n_outputs: int, n_joints: int, *, position_scale: float, velocity_scale: float,
+                 stats_samples: int = 500) -> None:
+        self.n_outputs = check_positive_int("n_outputs", n_outputs)
+        self.n_joints = check_positive_int("n_joints", n_joints)
+        pos = check_range("position_scale", position_scale, 0.0, lo_inclusive=False)
+        vel = check_range("velocity_scale", velocity_scale, 0.0, lo_inclusive=False)
+        self.stats_samples = check_positive_int("stats_samples", stats_samples, minimum=2)
+        n = self.n_joints
+        self._inv_scale = np.concatenate([np.full(n, 1.0 / pos), np.full(n, 1.0 / vel)])
+        self.position_scale, self.velocity_scale = float(pos), float(vel)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the estimate and the statistics."""
+        t = self.n_outputs
+        self.estimate = np.zeros(t)          # b̂ (units of y)
+        self.state: np.ndarray | None = None  # scaled [q, q̇] of the last learned sample
+        self.last_error = np.zeros(t)        # e of the last learned sample
+        self.last_increment = np.zeros(t)    # its increment e − e_prev
+        self.var_increment = np.zeros(t)     # running E[d²]
+        self.cov_increment = np.zeros(t)     # running E[d_m d_{m−1}]
+        self.n_errors = 0                    # learned samples seen
+
+    def _scaled(self, x: np.ndarray) -> np.ndarray:
+        return x[:2 * self.n_joints] * self._inv_scale
+
+    def weight(self, x: np.ndarray) -> float:
+        """κ ∈ [0, 1] at the state x = [q, q̇, q̈] (0 before any learned sample)."""
+        if self.state is None:
+            return 0.0
+        d = self._scaled(x) - self.state
+        return math.exp(-0.5 * float(d @ d))
+
+    def correction(self, x: np.ndarray) -> np.ndarray:
+        """``κ(x) b̂`` (t,), units of y."""
+        return self.weight(x) * self.estimate
+
+    def gain(self) -> np.ndarray:
+        """Return the Kalman gain per output from the running statistics (1 until 10 increments are seen)."""
+        if self.n_errors < 12:
+            return np.ones(self.n_outputs)
+        r = np.maximum(-self.cov_increment, 0.0)
+        q = np.maximum(self.var_increment - 2.0 * r, 0.0)
+        prior = 0.5 * (q + np.sqrt(q * q + 4.0 * q * r))
+        denom = prior + r
+        return np.where(denom > 0.0, prior / np.where(denom > 0.0, denom, 1.0), 1.0)
+
+    def update(self, x: np.ndarray, y: np.ndarray, model: np.ndarray) -> None:
+        """Absorb a learned sample: its state x, measurement y and the model's a-priori prediction.
+
+        Args:
+            x: The state ``[q, q̇, q̈]`` (validated, finite).
+            y: The measurement (t,).
+            model: model(x), the prediction without the correction (t,).
+        """
+        e = y - model
+        if self.n_errors >= 1:
+            d = e - self.last_error
+            k = self.n_errors  # increments seen so far, this one included
+            a = max(1.0 / k, 1.0 / self.stats_samples)
+            self.var_increment += a * (d * d - self.var_increment)
+            if self.n_errors >= 2:
+                b = max(1.0 / (k - 1), 1.0 / self.stats_samples)
+                self.cov_increment += b * (d * self.last_increment - self.cov_increment)
+            self.last_increment = d
+        prior = self.correction(x)
+        self.estimate = prior + self.gain() * (e - prior)
+        self.state = self._scaled(x)
+        self.last_error = e
+        self.n_errors += 1
+
+    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Return the tracker's state as arrays."""
+        return {
+            f"{prefix}estimate": self.estimate.copy(),
+            f"{prefix}state": np.zeros(0) if self.state is None else self.state.copy(),
+            f"{prefix}last_error": self.last_error.copy(),
+            f"{prefix}last_increment": self.last_increment.copy(),
+            f"{prefix}var_increment": self.var_increment.copy(),
+            f"{prefix}cov_increment": self.cov_increment.copy(),
+            f"{prefix}n_errors": np.array(self.n_errors),
+        }
+
+    def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
+        """Replace the state (validated first: sizes and finiteness).
+
+        Raises:
+            CheckpointError: Missing keys, wrong sizes or non-finite values.
+        """
+        t, n = self.n_outputs, self.n_joints
+        try:
+            vals = {k: np.asarray(state[f"{prefix}{k}"], dtype=np.float64)
+                    for k in ("estimate", "last_error", "last_increment", "var_increment", "cov_increment")}
+            st = np.asarray(state[f"{prefix}state"], dtype=np.float64)
+            n_errors = int(state[f"{prefix}n_errors"])
+        except KeyError as err:
+            raise CheckpointError(f"state is missing key {err}") from err
+        if any(v.shape != (t,) or not np.isfinite(v).all() for v in vals.values()) or n_errors < 0 or (
+                st.size and (st.shape != (2 * n,) or not np.isfinite(st).all())):
+            raise CheckpointError("tracker state has the wrong sizes or non-finite values")
+        self.estimate, self.last_error = vals["estimate"], vals["last_error"]
+        self.last_increment = vals["last_increment"]
+        self.var_increment, self.cov_increment = vals["var_increment"], vals["cov_increment"]
+        self.state = st if st.size else None
+        self.n_errors = n_errors
+
+
+class _Context(PredictionContext):
+    """A prediction context that also keeps the model's prediction without the correction."""
+
+    __slots__ = ("_model_total",)
+
+    def __init__(self, prediction: Prediction, model: Any, x: np.ndarray, Phi: np.ndarray | None,
+                 phi: np.ndarray | None, model_total: np.ndarray) -> None:
+        super().__init__(prediction, model, x, Phi, phi)
+        self._model_total = model_total
+
+
+class ConsistentSemiparametricModel(_TwoStageModel):
+    """Rigid-body part, consistent abstaining residual and fast error tracker (see the module docstring).
+
+    Args:
+        regressor: Maps x to ``Φ(x)`` (n_outputs, n_params).
+        n_params: p, number of (base) parameters.
+        n_inputs: Length of x (3 × joints).
+        n_outputs: t, length of y.
+        lam_parametric: λ of the rigid-body part.
+        lam_nonparametric: λ of the residual (prior precision of its weights).
+        n_features: D random features of the residual (input: the standardized x).
+        sigma: Kernel width in standardized units of x.
+        forgetting_parametric: β of the rigid-body part (per sample).
+        forgetting_nonparametric: β of the residual (per sample).
+        seed: Seed of the random features.
+        standardizer: Optional fitted :class:`Standardizer` for x.
+        standardizer_warmup: Online warm-up of the standardizer (samples; 0 = identity); the residual is
+            zero and the rigid-body part learns alone until it is over.
+        standardizer_min_scale: Floors of the warm-up's scales (units of x).
+        prior: Prior mean π₀ of the rigid-body parameters (default zero).
+        novelty_scale: ν₀ > 0 of the residual's weight ``exp(−ν/ν₀)``.
+        tracker: Whether the fast correction is used (False: the prediction is model(x)).
+        tracker_position_scale: ℓ_q [rad] of the tracker's fading weight.
+        tracker_velocity_scale: ℓ_q̇ [rad/s] of the tracker's fading weight.
+        tracker_samples: Learned samples the tracker's statistics average over.
+
+    Raises:
+        ConfigurationError: Invalid sizes or hyperparameters.
+
+    Example:
+        >>> import numpy as np
+        >>> line = lambda x: np.array([[x[0], 1.0]])  # rigid part y = a·q + b (one joint)
+        >>> m = ConsistentSemiparametricModel(line, 2, 3, 1, lam_parametric=1e-6, lam_nonparametric=1e-3,
+        ...                                   n_features=300, sigma=1.0, standardizer_warmup=50)
+        >>> q = np.linspace(-1.0, 1.0, 400)
+        >>> for qi in q:
+        ...     m.learn_one([qi, 0.0, 0.0], [3.0 * qi + 1.0 + 0.2 * np.sin(3.0 * qi)])
+        >>> pred = m.predict_one([0.3, 0.0, 0.0])
+        >>> bool(abs(pred.total[0] - pred.correction[0] - (1.9 + 0.2 * np.sin(0.9))) < 0.02)  # the model
+        True
+        >>> far = m.predict_one([30.0, 0.0, 0.0])  # far outside the data: the rigid-body part alone
+        >>> bool(abs(far.total[0] - far.parametric[0]) < 1e-6)
+        True
+    """
+
+    _kind = "semiparametric_consistent"
+
+    def __init__(self, regressor: Regressor, n_params: int, n_inputs: int, n_outputs: int, *,
+                 lam_parametric: float = 1.0, lam_nonparametric: float = 1.0, n_features: int = 500,
+                 sigma: float = 1.0, forgetting_parametric: float = 1.0,
+                 forgetting_nonparametric: float = 1.0, seed: int = 0,
+                 standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
+                 standardizer_min_scale: Any = 0.0, prior: Any = None, novelty_scale: float = 0.05,
+                 tracker: bool = True, tracker_position_scale: float = 0.05,
+                 tracker_velocity_scale: float = 0.5, tracker_samples: int = 20) -> None:
+        self.parametric = ParametricModel(regressor, n_params, n_outputs, lam=lam_parametric,
+                                          forgetting=forgetting_parametric, prior=prior)
+        p, t = self.parametric.n_params, self.parametric.n_outputs
+        self.nonparametric = NonparametricModel(int(n_inputs), t * (1 + p), n_features=n_features,
+                                                sigma=sigma, lam=lam_nonparametric,
+                                                forgetting=forgetting_nonparametric, seed=seed,
+                                                standardizer=standardizer,
+                                                standardizer_warmup=standardizer_warmup,
+                                                standardizer_min_scale=standardizer_min_scale)
+        self.n_inputs = int(n_inputs)
+        self.n_outputs = t
+        self.n_params = p
+        self.novelty_scale = check_range("novelty_scale", novelty_scale, 0.0, lo_inclusive=False)
+        self.use_tracker = bool(tracker)
+        self.tracker = ErrorTracker(t, max(1, self.n_inputs // 3), position_scale=tracker_position_scale,
+                                    velocity_scale=tracker_velocity_scale, stats_samples=tracker_samples)
+        self.n_samples_seen = 0
+
+    # ------------------------------------------------------------------ prediction
+    def _model_valid(self, xv: np.ndarray, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                      np.ndarray | None]:
+        """``(ŷ_P, g·r, relative variance, φ or None)`` for a validated x and its regressor."""
+        par_model, npm = self.parametric, self.nonparametric
+        yp, var = par_model._predict_phi(Phi, True)
+        assert var is not None  # asked for
+        if not npm.standardizer.ready:
+            return yp, np.zeros(self.n_outputs), var, None
+        t, p = self.n_outputs, self.n_params
+        phi = npm._features(xv)
+        P, v = npm.rls._predict_valid(phi, True)
+        assert v is not None  # asked for
+        pk = P[0]
+        delta = par_model.rls.weights[:, 0]
+        r = pk[:t] - pk[t:].reshape(t, p) @ delta
+        nu = npm.rls.lam * float(v[0])
+        r *= math.exp(-nu / self.novelty_scale)
+        return yp, r, var + float(v[0]), phi
+
+    def _predict_valid(self, xv: np.ndarray, Phi: np.ndarray) -> tuple[Prediction, np.ndarray,
+                                                                       np.ndarray | None]:
+        yp, r, var, phi = self._model_valid(xv, Phi)
+        model_total = yp + r
+        c = self.tracker.correction(xv) if self.use_tracker else np.zeros(self.n_outputs)
+        total = model_total + c
+        return Prediction(yp, total - yp, total, var, c), model_total, phi
+
+    def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
+        """Predict ``model(x) + κ b̂`` with its parts (``correction`` = κ b̂).
+
+        Args:
+            x: The input ``[q, q̇, q̈]``.
+            return_variance: Keep the relative predictive variance in the result (always computed: the
+                residual's weight needs it).
+
+        Raises:
+            RejectedSampleError: Bad x or regressor output.
+        """
+        xv, _, Phi = self._check(x)
+        pred, _, _ = self._predict_valid(xv, Phi)
+        if not return_variance:
+            pred = Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
+        return pred
+
+    def predict_model(self, x: Any) -> Prediction:
+        """Predict model(x) alone (rigid-body part + weighted residual; no fast correction).
+
+        What a feed-forward term at a desired state uses: it does not depend on the last measurement.
+
+        Raises:
+            RejectedSampleError: Bad x or regressor output.
+        """
+        xv, _, Phi = self._check(x)
+        yp, r, var, _ = self._model_valid(xv, Phi)
+        return Prediction(yp, r, yp + r, var)
+
+    # ------------------------------------------------------------------ learning
+    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
+        Phi = self.parametric._phi_fresh(xv)
+        pred, model_total, phi = self._predict_valid(xv, Phi)
+        return _Context(pred, self, xv, Phi, phi, model_total)
+
+    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
+        ctx = self._take(context)
+        assert isinstance(ctx, _Context) and ctx._Phi is not None  # made by _predict_ahead_valid
+        Phi, phi, xv = ctx._Phi, ctx._phi, ctx._x
+        par_model, npm = self.parametric, self.nonparametric
+        y0 = par_model._prior_output(Phi)
+        target = yv.copy() if y0 is None else yv - y0
+        # both learners' rows are checked before either changes: a refused value leaves the model as it was
+        par_step = par_model.rls._checked_step(Phi, target.reshape(-1, 1), owned=True)
+        if phi is None:
+            npm.standardizer.partial_fit(xv)
+            par_model.rls._defer_checked(par_step)
+        else:
+            u = np.concatenate([target, Phi.reshape(-1)]).reshape(1, -1)
+            np_step = RecursiveRLS._checked_step(phi, u, owned=True)
+            par_model.rls._defer_checked(par_step)
+            npm.rls._defer_checked(np_step)
+        if self.use_tracker:
+            self.tracker.update(xv, yv, ctx._model_total)
+        par_model.n_samples_seen += 1
+        npm.n_samples_seen += 1
+        self.n_samples_seen += 1
+
+    def learn_one(self, x: Any, y: Any) -> None:
+        """Learn one sample (x, y).
+
+        Raises:
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
+        """
+        self.predict_learn_one(x, y)
+
+    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
+        """Return the a-priori prediction (all parts), then learn (x, y).
+
+        Raises:
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
+        """
+        ctx = self.predict_ahead(x)
+        self.learn_ahead(ctx, y)
+        pred = ctx.prediction
+        return Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
+
+    def reset(self) -> None:
+        """Forget everything (both learners and the tracker)."""
+        super().reset()
+        self.tracker.reset()
+
+    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Return the learners' and the tracker's state as arrays."""
+        state = super().state_dict(prefix)
+        state.update(self.tracker.state_dict(f"{prefix}tracker."))
+        return state
+
+    def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
+        """Replace the whole state (validated completely before anything changes).
+
+        Raises:
+            CheckpointError: Wrong kind, missing keys or sizes that do not match this model.
+        """
+        tracker = ErrorTracker(self.n_outputs, self.tracker.n_joints,
+                               position_scale=self.tracker.position_scale,
+                               velocity_scale=self.tracker.velocity_scale,
+                               stats_samples=self.tracker.stats_samples)
+        tracker.load_state_dict(state, f"{prefix}tracker.")
+        super().load_state_dict(state, prefix)
+        self.tracker = tracker
