@@ -232,8 +232,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "tracker of the model's error (one step ahead); see core/semiparametric_consistent.py",
                   choices=("cascade", "joint", "consistent")),
     ParameterSpec("semiparametric.novelty_scale", "double", 0.05,
-                  "'consistent': the residual is weighted by exp(-nu/novelty_scale), nu = lambda·v in (0, 1] "
-                  "the fraction of its prior variance left at the state (dimensionless)",
+                  "'consistent': the residual is weighted by exp(-(nu/novelty_scale)^2), nu = lambda·v the "
+                  "fraction of its prior variance left at the state (dimensionless; ≈ 0 where the data "
+                  "determines it, → 1 far from the data)",
                   min=0.0, min_exclusive=True, max=1e6),
     ParameterSpec("semiparametric.tracker", "bool", True,
                   "'consistent': add the fast tracker of the model's error to the prediction (false = the "

@@ -24,8 +24,9 @@ current parameters is ``r_k = p_k − P_k δ̂``: it never goes stale when π̂ 
 of adaptive semiparametric dynamics learning, here exact).
 
 **3. Abstention.** The same forward substitution gives the residual stage's relative predictive variance
-``v = φA⁻¹φᵀ``; ``ν = λv ∈ (0, 1]`` is the fraction of the prior variance left at x (≈ 0 where the data
-determines the residual, → 1 far from it). The residual is used with the weight ``g = exp(−ν/ν₀)``
+``v = φA⁻¹φᵀ``; ``ν = λv`` is the fraction of the prior variance left at x (≈ 0 where the data
+determines the residual, about 1 far from it: ``‖φ‖² ≈ 1``, and with forgetting the kept prior weight
+oscillates around λ, so ν can exceed 1 a little). The residual is used with the weight ``g = exp(−(ν/ν₀)²)``
 (``novelty_scale`` ν₀): where x is novel the model falls back to its rigid-body part instead of
 extrapolating cosines. The predictive variance reported is unchanged (the residual's own), so σ still says
 how novel the state is. **model(x) = ŷ_P + g·r** is what is used frozen, at desired states and for
@@ -235,7 +236,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             zero and the rigid-body part learns alone until it is over.
         standardizer_min_scale: Floors of the warm-up's scales (units of x).
         prior: Prior mean π₀ of the rigid-body parameters (default zero).
-        novelty_scale: ν₀ > 0 of the residual's weight ``exp(−ν/ν₀)``.
+        novelty_scale: ν₀ > 0 of the residual's weight ``exp(−(ν/ν₀)²)``.
         tracker: Whether the fast correction is used (False: the prediction is model(x)).
         tracker_position_scale: ℓ_q [rad] of the tracker's fading weight.
         tracker_velocity_scale: ℓ_q̇ [rad/s] of the tracker's fading weight.
@@ -305,7 +306,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         delta = par_model.rls.weights[:, 0]
         r = pk[:t] - pk[t:].reshape(t, p) @ delta
         nu = npm.rls.lam * float(v[0])
-        r *= math.exp(-nu / self.novelty_scale)
+        r *= math.exp(-((nu / self.novelty_scale) ** 2))
         return yp, r, var + float(v[0]), phi
 
     def _predict_valid(self, xv: np.ndarray, Phi: np.ndarray) -> tuple[Prediction, np.ndarray,

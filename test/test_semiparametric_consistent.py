@@ -1,0 +1,165 @@
+"""The consistent semiparametric model against closed-form ridge, and its tracker against Kalman theory."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from semiparam_ros.core.features import Standardizer
+from semiparam_ros.core.semiparametric import ParametricModel
+from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel, ErrorTracker
+from semiparam_ros.errors import CheckpointError, RejectedSampleError
+
+
+def regressor(x: np.ndarray) -> np.ndarray:
+    """Two outputs, three parameters, nonlinear in the state of two joints (x = [q1, q2, dq1, dq2, ...])."""
+    q1, q2, dq1 = x[0], x[1], x[2]
+    return np.array([[math.sin(q1), dq1, 1.0], [math.cos(q2), q1 * dq1, 0.5]])
+
+
+def truth(x: np.ndarray) -> np.ndarray:
+    """The rigid-body part with π = [2, 0.5, -1] plus an effect it cannot express."""
+    rigid = regressor(x) @ np.array([2.0, 0.5, -1.0])
+    return rigid + np.array([0.3 * np.tanh(3 * x[3]), 0.2 * x[0] ** 2])
+
+
+def data(n: int, seed: int, spread: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-spread, spread, size=(n, 6))
+    Y = np.array([truth(x) for x in X]) + 0.01 * rng.normal(size=(n, 2))
+    return X, Y
+
+
+STD = Standardizer(6, mean=np.zeros(6), scale=np.full(6, 0.6))
+
+
+def model(**kw) -> ConsistentSemiparametricModel:
+    args = dict(lam_parametric=1e-2, lam_nonparametric=1e-1, n_features=80, sigma=1.5, seed=3,
+                standardizer=STD, novelty_scale=0.05, tracker=False)
+    args.update(kw)
+    return ConsistentSemiparametricModel(regressor, 3, 6, 2, **args)
+
+
+def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
+    """After learning, the residual is the closed-form ridge fit, on the features, of y − Φπ̂ with the
+    *final* π̂ over all samples (never of stale targets), times exp(−(λv/ν₀)²) with v = φA⁻¹φᵀ. Both sides
+    solve the same λ = 0.1 system of condition ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
+    m = model()
+    X, Y = data(400, 0)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    pi = m.parametric.parameters
+    Z = np.array([m.nonparametric._features(x)[0] for x in X])
+    targets = Y - np.array([regressor(x) @ pi for x in X])
+    A = Z.T @ Z + 0.1 * np.eye(Z.shape[1])
+    W = np.linalg.solve(A, Z.T @ targets)
+    Xt, _ = data(50, 1)
+    for x in Xt:
+        z = m.nonparametric._features(x)[0]
+        v = z @ np.linalg.solve(A, z)
+        want = math.exp(-((0.1 * v / 0.05) ** 2)) * (z @ W)
+        pred = m.predict_one(x)
+        np.testing.assert_allclose(pred.residual, want, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(pred.parametric, regressor(x) @ pi, rtol=1e-12)
+        np.testing.assert_allclose(pred.total, pred.parametric + pred.residual, rtol=1e-15)
+
+
+def test_parametric_part_is_the_cascade_rigid_body_stage():
+    """The rigid-body part is fitted alone: the same π̂ as a ParametricModel on the same samples."""
+    m = model()
+    p = ParametricModel(regressor, 3, 2, lam=1e-2)
+    X, Y = data(300, 2)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+        p.learn_one(x, y)
+    np.testing.assert_allclose(m.parameters, p.parameters, rtol=1e-12)
+
+
+def test_far_from_the_data_the_model_is_its_rigid_body_part_and_helps_inside():
+    m = model()
+    X, Y = data(600, 3, spread=0.5)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    far = m.predict_one(np.full(6, 8.0))
+    assert np.all(np.abs(far.residual) < 1e-6 * np.abs(far.parametric).max())
+    # inside the training region the residual removes most of what the rigid-body part misses
+    Xt, _ = data(200, 4, spread=0.5)
+    truth_t = np.array([truth(x) for x in Xt])
+    err_sp = np.array([m.predict_one(x).total for x in Xt]) - truth_t
+    err_p = np.array([m.predict_one(x).parametric for x in Xt]) - truth_t
+    assert np.sqrt(np.mean(err_sp ** 2)) < 0.5 * np.sqrt(np.mean(err_p ** 2))
+
+
+def test_predict_ahead_then_learn_ahead_is_predict_learn_one():
+    a, b = model(tracker=True), model(tracker=True)
+    X, Y = data(200, 5)
+    for x, y in zip(X, Y, strict=True):
+        ctx = a.predict_ahead(x)
+        a.learn_ahead(ctx, y)
+        pb = b.predict_learn_one(x, y)
+        np.testing.assert_array_equal(ctx.prediction.total, pb.total)
+        np.testing.assert_array_equal(ctx.prediction.correction, pb.correction)
+    np.testing.assert_array_equal(a.predict_one(X[0]).total, b.predict_one(X[0]).total)
+
+
+def test_a_refused_sample_leaves_the_model_unchanged():
+    m = model(tracker=True)
+    X, Y = data(50, 6)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    before = m.state_dict()
+    with pytest.raises(RejectedSampleError):
+        m.learn_one(X[0], [np.nan, 1.0])
+    with pytest.raises(RejectedSampleError):
+        m.learn_one(np.full(6, np.inf), Y[0])
+    after = m.state_dict()
+    assert before.keys() == after.keys()
+    for k in before:
+        np.testing.assert_array_equal(before[k], after[k])
+
+
+def test_state_dict_round_trip_and_corrupt_tracker_state(tmp_path):
+    m = model(tracker=True)
+    X, Y = data(120, 7)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    path = tmp_path / "m.npz"
+    m.save(path)
+    fresh = model(tracker=True).load(path)
+    for x in X[:10]:
+        np.testing.assert_array_equal(fresh.predict_one(x).total, m.predict_one(x).total)
+    state = m.state_dict()
+    state["tracker.estimate"] = np.array([np.nan, 0.0])
+    other = model(tracker=True)
+    with pytest.raises(CheckpointError):
+        other.load_state_dict(state)
+    assert other.n_samples_seen == 0
+
+
+@pytest.mark.parametrize("q,r", [(1e-4, 1e-2), (1e-2, 1e-4), (1e-3, 1e-3)])
+def test_tracker_gain_converges_to_the_steady_state_kalman_gain(q, r):
+    """A random walk b (variance q per sample) seen through white noise (variance r): the running
+    increment statistics give K = P⁻/(P⁻ + r), P⁻ = (q + √(q² + 4qr))/2. q̂ = mean(d² + 2 d d₋₁) has a
+    standard error ≈ 2r·√(3/n) (MA(1) increments), which at q/r = 0.01 is 0.11·q for n = 10⁵ samples: K,
+    ∝ √q there, then holds to ≈ 6 %; 10 % is ≈ 2 standard errors."""
+    rng = np.random.default_rng(0)
+    n = 100_000
+    tr = ErrorTracker(1, 1, position_scale=1.0, velocity_scale=1.0, stats_samples=n)
+    b = 0.0
+    x = np.zeros(3)
+    for _ in range(n):
+        b += math.sqrt(q) * rng.normal()
+        tr.update(x, np.array([b + math.sqrt(r) * rng.normal()]), np.zeros(1))
+    prior = 0.5 * (q + math.sqrt(q * q + 4 * q * r))
+    assert tr.gain()[0] == pytest.approx(prior / (prior + r), rel=0.1)
+
+
+def test_tracker_fades_with_the_state_distance():
+    tr = ErrorTracker(1, 2, position_scale=0.1, velocity_scale=1.0)
+    tr.update(np.zeros(6), np.array([1.0]), np.zeros(1))
+    assert tr.weight(np.zeros(6)) == 1.0
+    assert tr.weight(np.array([0.1, 0, 0, 0, 0, 0])) == pytest.approx(math.exp(-0.5))
+    assert tr.weight(np.array([0, 0, 0, 2.0, 0, 0])) == pytest.approx(math.exp(-2.0))
+    assert tr.weight(np.array([0, 0, 0, 0, 50.0, 50.0])) == 1.0  # accelerations do not count
