@@ -35,7 +35,7 @@ def jittered_stamps(rate_hz: float, n: int, seed: int, repeat: bool = True) -> n
 
 
 def independent_period(stamps: np.ndarray, max_gap_s: float | None = None) -> float:
-    """The documented rule written out: median of the positive intervals among the first RATE_SAMPLES stamps."""
+    """The documented rule written out: the median of the positive intervals of the first stamps."""
     dts = np.diff(stamps[:RATE_SAMPLES]).astype(np.float64) * 1e-9
     dts = dts[dts > 0]
     if max_gap_s is not None:
