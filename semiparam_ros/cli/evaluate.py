@@ -159,6 +159,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--markdown", type=Path, help="write the markdown table here")
     p.add_argument(
+        "--horizons", nargs="*", default=None, metavar="SECONDS",
+        help="paper protocol: also score each model by its age h (learned up to t - h, predicts t) beside "
+             "persistence held h and the CAD model; seconds, 0 = one step, 'frozen' (given without "
+             "values: 0 0.1 1 10 frozen)",
+    )
+    p.add_argument("--horizon-plot", type=Path, help="write the error-by-age figure (PNG) here")
+    p.add_argument(
         "--no-progress",
         action="store_true",
         help="no progress bar (one is drawn only when stderr is a terminal anyway)",
@@ -211,6 +218,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             plot_path=args.plot,
             plot_truth_path=args.plot_truth,
             markdown_path=args.markdown,
+            horizons=None if args.horizons is None else (args.horizons or ["0", "0.1", "1", "10", "frozen"]),
+            horizon_plot_path=args.horizon_plot,
             progress=not args.no_progress,
         )
     except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created

@@ -187,8 +187,9 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
                   topics: Topics | None = None, kinds: Sequence[str] = KINDS, splits: int = 10,
                   split_size: int | None = None, window_s: float = 3.0, first_s: float = 3.0,
                   train_limit: int | None = None, test_limit: int | None = None, test_skip: int = 0,
+                  horizons: Sequence[float | str] | None = None,
                   progress: bool = False) -> tuple[ProtocolResult, dict[str, Any]]:
-    """Run the paper's protocol on two bags.
+    """Run the paper's protocol on two bags (and, if asked, the error by the age of the model).
 
     Args:
         train_path: Training bag (the XY circles).
@@ -204,10 +205,14 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         test_limit: Use only the first samples of the test bag (counted before ``test_skip``).
         test_skip: Drop this many samples at the start of the test bag (e.g. to run the protocol within one
             bag: ``train_limit = test_skip = n`` trains on its first n samples and tests on the rest).
+        horizons: Ages of the model [s] (0 = one step, ``"frozen"``) for
+            :func:`~semiparam_ros.eval.horizon.evaluate_horizons`, run on the trained learners, the CAD
+            model and persistence over the whole test stream; ``None``: not run.
         progress: Show a progress bar (only when stderr is a terminal).
 
     Returns:
-        ``(result, info)`` where ``info`` records the bags, topics, limits and pipeline drops.
+        ``(result, info)`` where ``info`` records the bags, topics, limits and pipeline drops, and under
+        ``"horizons"`` the :class:`~semiparam_ros.eval.horizon.HorizonReport` when asked.
 
     Raises:
         ValueError: On unreadable bags or a test bag too short for the split request.
@@ -233,6 +238,16 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         "drops_train": train_drops, "drops_test": test_drops,
         "test_samples_available": len(test_data),
     }
+    if horizons is not None:
+        from semiparam_ros.eval.baselines import Persistence, cad_model
+        from semiparam_ros.eval.horizon import evaluate_horizons
+        from semiparam_ros.eval.protocol import train
+
+        chosen: dict[str, Any] = {"CAD": cad_model(config), **models}  # the protocol trained the learners
+        chosen["persistence"] = Persistence(test_data.n_outputs)
+        train(chosen["persistence"], train_data)
+        info["horizons"] = evaluate_horizons(chosen, train_data, test_data, horizons=horizons, fixed=("CAD",),
+                                             components=OutputSpec.from_config(config).components)
     return result, info
 
 

@@ -17,6 +17,7 @@ from semiparam_ros.core.config import EstimatorConfig, load_config, write_config
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.contacts import contact_report, run_contacts
 from semiparam_ros.eval.figures import plot_adaptation, plot_contacts, plot_protocol
+from semiparam_ros.eval.horizon import horizon_figure, horizon_markdown
 from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags, load_samples
 from semiparam_ros.eval.report import adaptation_report, protocol_report, write_json
 from semiparam_ros.eval.selection import TUNED_KEYS, grid_table, holdout_search, protocol_search
@@ -119,6 +120,8 @@ def run_evaluate(
     plot_path: Path | None = None,
     plot_truth_path: Path | None = None,
     markdown_path: Path | None = None,
+    horizons: Sequence[float | str] | None = None,
+    horizon_plot_path: Path | None = None,
     progress: bool = True,
 ) -> str:
     """Run an evaluation and write its outputs.
@@ -150,6 +153,9 @@ def run_evaluate(
         plot_path: Figure destination.
         plot_truth_path: Figure against the noise-free wrench (paper protocol, simulated bags).
         markdown_path: Markdown table destination.
+        horizons: Paper protocol: also score every model by its age (seconds, 0 = one step, ``"frozen"``;
+            :mod:`semiparam_ros.eval.horizon`), written under ``"horizons"`` in the JSON.
+        horizon_plot_path: Figure of the error by the age of the model (with ``horizons``).
         progress: Show a progress bar (only when stderr is a terminal).
 
     Returns:
@@ -203,10 +209,18 @@ def run_evaluate(
             train_limit=train_limit,
             test_limit=test_limit,
             test_skip=test_skip,
+            horizons=horizons,
             progress=progress,
         )
+        horizon = info.pop("horizons", None)
+        if horizon is not None:
+            info["horizons"] = horizon.to_json()
         report = protocol_report(result, config=cfg.to_flat(), protocol=info)
         text = evaluation_text(report)
+        if horizon is not None:
+            text += "\n## By the age of the model\n\n" + horizon_markdown(horizon)
+            if horizon_plot_path is not None:
+                horizon_figure(horizon, horizon_plot_path, title=f"{Path(train).name} → {Path(test).name}")
         if plot_path is not None:
             plot_protocol(report, plot_path)
         if plot_truth_path is not None:
