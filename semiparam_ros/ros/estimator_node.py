@@ -19,6 +19,10 @@ Topics (relative names, remap with ``-r``):
   ``~/predicted_wrench/parametric`` (rigid-body part), ``~/predicted_wrench/nonparametric`` (residual);
   with ``robot.output: joint_torques`` instead ``predicted_joint_torques`` (``sensor_msgs/JointState``,
   ``effort`` in N·m); every prediction is a priori: it was made before its own sample was learned;
+* out ``~/predicted_wrench/model`` (or ``~/predicted_joint_torques/model``): the model alone — rigid-body
+  part plus the residual where the state is known, without the fast tracker of its recent error
+  (``semiparametric.combination: consistent``; the same as the prediction for the other combinations):
+  what a feed-forward term or a frozen model gives (:mod:`semiparam_ros.core.semiparametric_consistent`);
 * out, for contact detection and control (same stamp and frame as the prediction):
   ``~/external_wrench`` (``WrenchStamped``, measured − predicted: the wrench the model does not explain,
   i.e. external forces at the robot) and ``~/predicted_wrench/std`` (``WrenchStamped`` whose six
@@ -246,11 +250,13 @@ class EstimatorNode(Node):
             self._pub_total = publisher(WrenchStamped, "~/predicted_wrench", _OUTPUT_QOS)
             self._pub_param = publisher(WrenchStamped, "~/predicted_wrench/parametric", _OUTPUT_QOS)
             self._pub_resid = publisher(WrenchStamped, "~/predicted_wrench/nonparametric", _OUTPUT_QOS)
+            self._pub_model = publisher(WrenchStamped, "~/predicted_wrench/model", _OUTPUT_QOS)
             self._pub_external = publisher(WrenchStamped, "~/external_wrench", _OUTPUT_QOS)
             self._pub_std = publisher(WrenchStamped, "~/predicted_wrench/std", _OUTPUT_QOS)
         else:
             self._pub_total = publisher(JointState, "predicted_joint_torques", _OUTPUT_QOS)
             self._pub_param = self._pub_resid = None
+            self._pub_model = publisher(JointState, "~/predicted_joint_torques/model", _OUTPUT_QOS)
             self._pub_external = publisher(JointState, "~/external_joint_torques", _OUTPUT_QOS)
             self._pub_std = publisher(JointState, "~/predicted_joint_torques/std", _OUTPUT_QOS)
         self._pub_params = publisher(Float64MultiArray, "~/inertial_parameters", PARAMETERS_QOS)
@@ -628,6 +634,9 @@ class EstimatorNode(Node):
         pub = self._pub_external
         if pub.get_subscription_count():
             pub.publish(fill(stamp, result.sample.y - pred.total))
+        pub = self._pub_model
+        if pub.get_subscription_count():  # the model alone: the prediction without the fast correction
+            pub.publish(fill(stamp, pred.total if pred.correction is None else pred.total - pred.correction))
         for pub, value in ((self._pub_param, pred.parametric), (self._pub_resid, pred.residual),
                            (self._pub_std, result.std)):
             if value is not None and pub is not None and pub.get_subscription_count():
