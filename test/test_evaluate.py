@@ -244,8 +244,7 @@ def test_build_models_spj_is_the_joint_fit_whatever_the_configuration_says() -> 
     from semiparam_ros.eval.replay import JOINT_SP, build_models
 
     small = {"nonparametric.n_features": 20, "nonparametric.standardizer_warmup": 5}
-    cascade = load_config(CONFIG).with_overrides(small)
-    assert cascade["semiparametric.combination"] == "cascade"
+    cascade = load_config(CONFIG).with_overrides({**small, "semiparametric.combination": "cascade"})
     models = build_models(cascade, ["SP", JOINT_SP])
     assert type(models["SP"]) is SemiparametricModel and type(models[JOINT_SP]) is JointSemiparametricModel
     assert models[JOINT_SP].nonparametric.rls.lam == cascade["nonparametric.lam"]
@@ -256,6 +255,19 @@ def test_build_models_spj_is_the_joint_fit_whatever_the_configuration_says() -> 
     assert type(build_models(unequal, ["SP"])["SP"]) is SemiparametricModel
     with pytest.raises(ValueError, match=r"SPJ.*'parametric\.forgetting' and 'nonparametric\.forgetting'"):
         build_models(unequal, [JOINT_SP])
+
+
+def test_build_models_spc_is_the_papers_cascade_whatever_the_configuration_says() -> None:
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.core.semiparametric import SemiparametricModel
+    from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel
+    from semiparam_ros.eval.replay import CASCADE_SP, build_models
+
+    config = load_config(CONFIG).with_overrides({"nonparametric.n_features": 20})
+    assert config["semiparametric.combination"] == "consistent"  # the shipped default
+    models = build_models(config, ["SP", CASCADE_SP])
+    assert type(models["SP"]) is ConsistentSemiparametricModel
+    assert type(models[CASCADE_SP]) is SemiparametricModel
 
 
 # ------------------------------------------------------------------------------ committed bags, CLI

@@ -5,7 +5,8 @@ Paper protocol (P, NP, SP from zero; train on all of --train; test-then-train on
     evaluate --train bags/generated/icub_xy --test bags/generated/icub_xz --split-size 1000 \
         --json results/report.json --plot results/fig3.png
 
-Add ``--models P NP SP SPJ`` to compare the joint semiparametric fit (``SPJ``) with the paper's cascade.
+Add ``--models P NP SP SPJ SPC`` to compare the default (consistent) SP with the joint semiparametric fit
+(``SPJ``) and the paper's cascade (``SPC``).
 
 Payload scenario (one bag with a pickup; SP with and without forgetting)::
 
@@ -102,12 +103,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--models",
         nargs="+",
-        choices=("P", "NP", "SP", "SPJ", "SPfrozenP"),
+        choices=("P", "NP", "SP", "SPJ", "SPC", "SPfrozenP"),
         default=None,
-        help="learners (default: P NP SP; with --payload: SP); SPJ = the joint semiparametric fit "
+        help="learners (default: P NP SP; with --payload: SP); SP = semiparametric.combination as "
+        "configured (default 'consistent'); SPJ = the joint semiparametric fit "
         "(semiparametric.combination=joint whatever the configuration says; needs equal "
-        "forgetting factors); SPfrozenP = diagnostic SP whose rigid-body stage stops "
-        "learning after the training bag",
+        "forgetting factors); SPC = the paper's cascade whatever the configuration says; SPfrozenP = "
+        "diagnostic cascade whose rigid-body stage stops learning after the training bag",
     )
     p.add_argument("--splits", type=int, default=10, help="number of sequential test parts (default 10)")
     p.add_argument(

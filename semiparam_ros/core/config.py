@@ -223,7 +223,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "[N·m] (SP); only a warm-up whose torques barely move reaches it (the arm at rest)",
                   min=0.0, max=1e5),
     # how the two stages are combined
-    ParameterSpec("semiparametric.combination", "string", "cascade",
+    ParameterSpec("semiparametric.combination", "string", "consistent",
                   "SP model: 'cascade' = the paper's (rigid-body stage alone first, residual stage on "
                   "[x, y_hat]); 'joint' = rigid-body parameters and kernel residual (on x) fitted as one "
                   "ridge problem, which needs parametric.forgetting == nonparametric.forgetting; "
@@ -231,7 +231,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "the current parameters and falls back to zero where x is novel (the model), plus a fast "
                   "tracker of the model's error (one step ahead); see core/semiparametric_consistent.py",
                   choices=("cascade", "joint", "consistent")),
-    ParameterSpec("semiparametric.novelty_scale", "double", 0.05,
+    ParameterSpec("semiparametric.novelty_scale", "double", 0.01,
                   "'consistent': the residual is weighted by exp(-(nu/novelty_scale)^2), nu = lambda·v the "
                   "fraction of its prior variance left at the state (dimensionless; ≈ 0 where the data "
                   "determines it, → 1 far from the data)",
@@ -245,9 +245,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("semiparametric.tracker_velocity_scale", "double", 0.5,
                   "'consistent': joint-velocity distance [rad/s] over which the tracked error fades",
                   min=0.0, min_exclusive=True, max=1e4),
-    ParameterSpec("semiparametric.tracker_samples", "integer", 20,
-                  "'consistent': learned samples the tracker's noise and drift statistics average over (a "
-                  "statistical sample size, not a time)", min=2, max=10**7),
+    ParameterSpec("semiparametric.tracker_time_constant", "double", 0.3,
+                  "'consistent': memory of the fast rigid-body correction of the model's error [s] (what "
+                  "follows a payload or a parameter drift at once), converted at the measured rate; at "
+                  "least 10 rows per parameter are kept whatever the rate",
+                  min=0.0, min_exclusive=True, max=1e6),
+    ParameterSpec("semiparametric.tracker_samples", "integer", 50,
+                  "'consistent': learned samples over which the local tracker compares its error smoothers "
+                  "and estimates the noise (a statistical sample size, not a time)", min=2, max=10**7),
     # adaptation, uncertainty and the contact-aware learning gate (core/adaptation.py, core/uncertainty.py,
     # core/gate.py; measurements in docs/adaptation.md)
     ParameterSpec("adaptation.time_constant", "double", 20.0,

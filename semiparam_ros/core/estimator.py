@@ -333,8 +333,9 @@ def apply_sample_period(model: Model, config: EstimatorConfig, sample_period_s: 
     The one route by which the rate reaches a learner, online (:class:`OnlineEstimator`, once its
     :class:`~semiparam_ros.core.rate.RateMeter` has measured the period) and offline (:func:`build_model`
     with ``sample_period_s``): the standardizer warm-up given in seconds becomes samples
-    (:func:`standardizer_warmup_samples`, if it is still running), and with ``adaptation.time_constant``
-    τ > 0 every learner forgets with β = exp(−T/τ).
+    (:func:`standardizer_warmup_samples`, if it is still running), the consistent model's fast correction
+    takes its memory ``semiparametric.tracker_time_constant``, and with ``adaptation.time_constant`` τ > 0
+    every learner (the slow ones) forgets with β = exp(−T/τ).
 
     Args:
         model: A learner (not yet past its warm-up for the warm-up to change).
@@ -346,6 +347,8 @@ def apply_sample_period(model: Model, config: EstimatorConfig, sample_period_s: 
     """
     if not config["nonparametric.standardizer_warmup"]:
         model.set_standardizer_warmup(standardizer_warmup_samples(config, sample_period_s))
+    if isinstance(model, ConsistentSemiparametricModel):
+        model.set_sample_period(sample_period_s)  # the fast correction's memory in seconds
     tau = float(config["adaptation.time_constant"])
     if tau <= 0.0:
         return None
@@ -415,6 +418,8 @@ def _build_model(config: EstimatorConfig, kind: ModelKind,
             tracker_position_scale=config["semiparametric.tracker_position_scale"],
             tracker_velocity_scale=config["semiparametric.tracker_velocity_scale"],
             tracker_samples=config["semiparametric.tracker_samples"],
+            tracker_time_constant=config["semiparametric.tracker_time_constant"],
+            sample_period_s=NOMINAL_PERIOD_S,
         )
     return SemiparametricModel(
         phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,

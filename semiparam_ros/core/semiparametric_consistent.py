@@ -32,20 +32,30 @@ extrapolating cosines. The predictive variance reported is unchanged (the residu
 how novel the state is. **model(x) = ŷ_P + g·r** is what is used frozen, at desired states and for
 feed-forward.
 
-**4. Fast correction** (the tracker: one step ahead, contacts). The model's error ``e = y − model(x)`` of
-the learned samples is filtered by a local-level Kalman filter per output (the error is a random walk b
-plus white noise): with ``q`` the random walk's and ``r`` the noise's variance per sample, the increments
-``e_m − e_{m−1}`` have variance ``q + 2r`` and lag-one covariance ``−r``, estimated as running averages over
-about ``tracker_samples`` learned samples; the steady-state gain is ``K = P⁻/(P⁻ + r)``,
-``P⁻ = (q + √(q² + 4qr))/2`` (K → 1: persistence of the model's error, where the error is smooth; K → 0:
-averaging, where noise dominates). The estimate ``b̂`` was made at the state ``x_b`` of the last learned
-sample and is used at x with the weight ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``:
-one step later κ ≈ 1, at a state far from the last learned one (a model h seconds old, a desired state, a
-new motion) κ → 0 and the prediction is the model's. Prediction: ``model(x) + κ b̂``.
+**4. Fast correction** (the tracker: one step ahead, payloads, contacts). Two parts, both learned only
+from the samples the model learns (the contact gate's refusals are held out of them too):
+
+* a *fast rigid-body correction* ``Φ(x) δ_f``: recursive ridge regression of the model's error
+  ``e = y − model(x)`` on the regressor rows with a short memory (``tracker_time_constant`` τ_f, but at
+  least 10 rows per parameter: β = exp(−1/N), N = max(τ_f/T, 10p/t) samples once the sample period T is
+  known): a payload or a drift of the inertial parameters is a change ``Φ(x)Δπ``, which it follows
+  within about τ_f and carries to nearby states through Φ (it fades like the local tracker below, over
+  :attr:`FAST_FADE` times its distances). It is used with the weight ``w = max(0, 1 − 9r̂v/c²)`` of its
+  value c against its own standard deviation (:meth:`fast_weight`): where it only fits noise (a model
+  already at the noise floor) w ≈ 0 and it adds nothing;
+* a *local error tracker* for the rest, ``e − wΦδ_f`` (:class:`ErrorTracker`): a bank of exponential
+  smoothers of the error with gains K ∈ {0, 0.1, 0.3, 1} (none, averages, the last error carried over),
+  the one with the smallest recent one-step error used per output — K = 1 where the error drifts faster
+  than its noise (persistence of the model's error), K = 0 where noise dominates. The estimate ``b̂`` was
+  made at the state ``x_b`` of the last learned sample and is used at x with the weight
+  ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``: one step later κ ≈ 1, at a state far
+  from the last learned one (a model h seconds old, a desired state, a new motion) κ → 0.
+
+Prediction: ``model(x) + w Φ(x)δ_f + κ b̂``; a frozen model is ``model(x)`` (:meth:`predict_model`).
 
 Parts (:class:`~semiparam_ros.core.semiparametric.Prediction`): ``parametric = ŷ_P``,
-``residual = g·r + κb̂``, ``correction = κb̂`` (so ``total − correction`` is model(x)), ``variance`` the
-relative variance of the rigid-body part plus the residual stage's.
+``residual = g·r + correction``, ``correction = wΦδ_f + κb̂`` (so ``total − correction`` is model(x)),
+``variance`` the relative variance of the rigid-body part plus the residual stage's.
 
 Units: x = [q, q̇, q̈] (rad, rad/s, rad/s²), y in N and N·m (wrench in the sensor frame) or N·m (joint
 torques); ℓ_q in rad, ℓ_q̇ in rad/s.
@@ -58,6 +68,7 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.adaptation import forgetting_factor
 from semiparam_ros.core.features import Standardizer
 from semiparam_ros.core.rrls import RecursiveRLS
 from semiparam_ros.core.semiparametric import (
@@ -75,31 +86,49 @@ __all__ = ["ConsistentSemiparametricModel", "ErrorTracker"]
 
 
 class ErrorTracker:
-    """Local-level Kalman filter of a model's error, used with a weight that fades with the state distance.
+    """Smoothers of a model's recent error, the best of them chosen by its recent one-step accuracy.
+
+    A bank of exponential smoothers ``b_K ← b_K + K(e − b_K)`` of the model's error e, one per gain K in
+    :attr:`GAINS` (K = 0: no correction, the model alone; K = 1: the last error carried over; in between,
+    averages over about 1/K samples — the steady-state Kalman filters of a drifting error seen through
+    noise, for drift-to-noise ratios from none to large). Each smoother's a-priori one-step squared error
+    is averaged over about ``stats_samples`` learned samples, and per output the smoother with the
+    smallest one is used: where the error drifts faster than its noise, K → 1; where noise dominates (a
+    model at the noise floor), K = 0 and the tracker adds nothing. The choice needs no model of the noise
+    and follows a change of regime within ``stats_samples`` samples.
+
+    An estimate made at the state ``x_b`` of the last learned sample is used at x with the weight
+    ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``. The increments of the error
+    also give its white-noise variance per output (``r̂ = −E[d_m d_{m−1}]``, d the increments), used by
+    the fast rigid-body correction (:meth:`noise_variance`).
 
     Args:
         n_outputs: t, the number of outputs.
         n_joints: n (the state coordinates are q and q̇ of the n joints).
         position_scale: ℓ_q [rad] of the fading weight.
         velocity_scale: ℓ_q̇ [rad/s] of the fading weight.
-        stats_samples: About how many learned samples the running increment statistics average over.
+        stats_samples: About how many learned samples the running statistics average over.
 
     Raises:
         ConfigurationError: Invalid sizes or scales.
 
     Example:
         >>> import numpy as np
-        >>> tr = ErrorTracker(1, 1, position_scale=0.1, velocity_scale=1.0)
+        >>> tr = ErrorTracker(1, 1, position_scale=0.1, velocity_scale=1.0, stats_samples=5)
         >>> x = np.array([0.0, 0.0, 0.0])  # q, q̇, q̈ of one joint
-        >>> tr.update(x, np.array([0.5]), np.array([0.0]))  # the model was 0.5 too low here
-        >>> tr.correction(x).round(3).tolist()  # the same state: the error is carried over
+        >>> for _ in range(20):  # the model is 0.5 too low, without noise: carry the error over
+        ...     tr.update(x, np.array([0.5]), np.array([0.0]))
+        >>> tr.correction(x).round(3).tolist()
         [0.5]
         >>> float(tr.correction(np.array([1.0, 0.0, 0.0]))[0]) < 1e-10  # 10 ℓ_q away: nothing
         True
     """
 
+    #: Gains of the smoothers: none, about 10 and 3 samples averaged, the last error.
+    GAINS = np.array([0.0, 0.1, 0.3, 1.0])
+
     def __init__(self, n_outputs: int, n_joints: int, *, position_scale: float, velocity_scale: float,
-                 stats_samples: int = 500) -> None:
+                 stats_samples: int = 20) -> None:
         self.n_outputs = check_positive_int("n_outputs", n_outputs)
         self.n_joints = check_positive_int("n_joints", n_joints)
         pos = check_range("position_scale", position_scale, 0.0, lo_inclusive=False)
@@ -111,15 +140,15 @@ class ErrorTracker:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the estimate and the statistics."""
-        t = self.n_outputs
-        self.estimate = np.zeros(t)          # b̂ (units of y)
+        """Forget the estimates and the statistics."""
+        t, k = self.n_outputs, len(self.GAINS)
+        self.estimates = np.zeros((k, t))     # b_K (units of y)
+        self.errors = np.zeros((k, t))        # running a-priori squared error of each smoother
         self.state: np.ndarray | None = None  # scaled [q, q̇] of the last learned sample
-        self.last_error = np.zeros(t)        # e of the last learned sample
-        self.last_increment = np.zeros(t)    # its increment e − e_prev
-        self.var_increment = np.zeros(t)     # running E[d²]
-        self.cov_increment = np.zeros(t)     # running E[d_m d_{m−1}]
-        self.n_errors = 0                    # learned samples seen
+        self.last_error = np.zeros(t)         # e of the last learned sample
+        self.last_increment = np.zeros(t)     # its increment e − e_prev
+        self.cov_increment = np.zeros(t)      # running E[d_m d_{m−1}]
+        self.n_errors = 0                     # learned samples seen
 
     def _scaled(self, x: np.ndarray) -> np.ndarray:
         return x[:2 * self.n_joints] * self._inv_scale
@@ -131,19 +160,25 @@ class ErrorTracker:
         d = self._scaled(x) - self.state
         return math.exp(-0.5 * float(d @ d))
 
+    @property
+    def chosen(self) -> np.ndarray:
+        """Index into :attr:`GAINS` of the smoother used, per output (K = 0 until 2 errors are seen)."""
+        if self.n_errors < 2:
+            return np.zeros(self.n_outputs, dtype=np.int64)
+        return np.argmin(self.errors, axis=0)
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """b̂ (t,): the chosen smoother's estimate per output, units of y."""
+        return self.estimates[self.chosen, np.arange(self.n_outputs)]
+
     def correction(self, x: np.ndarray) -> np.ndarray:
         """``κ(x) b̂`` (t,), units of y."""
         return self.weight(x) * self.estimate
 
-    def gain(self) -> np.ndarray:
-        """Return the Kalman gain per output from the running statistics (1 until 10 increments are seen)."""
-        if self.n_errors < 12:
-            return np.ones(self.n_outputs)
-        r = np.maximum(-self.cov_increment, 0.0)
-        q = np.maximum(self.var_increment - 2.0 * r, 0.0)
-        prior = 0.5 * (q + np.sqrt(q * q + 4.0 * q * r))
-        denom = prior + r
-        return np.where(denom > 0.0, prior / np.where(denom > 0.0, denom, 1.0), 1.0)
+    def noise_variance(self) -> np.ndarray:
+        """r̂ (t,): the white-noise variance of the error, ``max(0, −E[d_m d_{m−1}])`` [units of y²]."""
+        return np.maximum(-self.cov_increment, 0.0)
 
     def update(self, x: np.ndarray, y: np.ndarray, model: np.ndarray) -> None:
         """Absorb a learned sample: its state x, measurement y and the model's a-priori prediction.
@@ -151,20 +186,20 @@ class ErrorTracker:
         Args:
             x: The state ``[q, q̇, q̈]`` (validated, finite).
             y: The measurement (t,).
-            model: model(x), the prediction without the correction (t,).
+            model: The prediction the error is relative to (t,).
         """
         e = y - model
+        a = max(1.0 / (self.n_errors + 1), 1.0 / self.stats_samples)
         if self.n_errors >= 1:
             d = e - self.last_error
-            k = self.n_errors  # increments seen so far, this one included
-            a = max(1.0 / k, 1.0 / self.stats_samples)
-            self.var_increment += a * (d * d - self.var_increment)
             if self.n_errors >= 2:
-                b = max(1.0 / (k - 1), 1.0 / self.stats_samples)
+                b = max(1.0 / (self.n_errors - 1), 1.0 / self.stats_samples)
                 self.cov_increment += b * (d * self.last_increment - self.cov_increment)
             self.last_increment = d
-        prior = self.correction(x)
-        self.estimate = prior + self.gain() * (e - prior)
+        prior = self.weight(x) * self.estimates
+        miss = e - prior
+        self.errors += a * (miss * miss - self.errors)
+        self.estimates = prior + self.GAINS[:, None] * miss
         self.state = self._scaled(x)
         self.last_error = e
         self.n_errors += 1
@@ -172,11 +207,11 @@ class ErrorTracker:
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the tracker's state as arrays."""
         return {
-            f"{prefix}estimate": self.estimate.copy(),
+            f"{prefix}estimates": self.estimates.copy(),
+            f"{prefix}errors": self.errors.copy(),
             f"{prefix}state": np.zeros(0) if self.state is None else self.state.copy(),
             f"{prefix}last_error": self.last_error.copy(),
             f"{prefix}last_increment": self.last_increment.copy(),
-            f"{prefix}var_increment": self.var_increment.copy(),
             f"{prefix}cov_increment": self.cov_increment.copy(),
             f"{prefix}n_errors": np.array(self.n_errors),
         }
@@ -187,20 +222,25 @@ class ErrorTracker:
         Raises:
             CheckpointError: Missing keys, wrong sizes or non-finite values.
         """
-        t, n = self.n_outputs, self.n_joints
+        t, n, k = self.n_outputs, self.n_joints, len(self.GAINS)
         try:
-            vals = {k: np.asarray(state[f"{prefix}{k}"], dtype=np.float64)
-                    for k in ("estimate", "last_error", "last_increment", "var_increment", "cov_increment")}
+            vals = {name: np.asarray(state[f"{prefix}{name}"], dtype=np.float64)
+                    for name in ("last_error", "last_increment", "cov_increment")}
+            banks = {name: np.asarray(state[f"{prefix}{name}"], dtype=np.float64)
+                     for name in ("estimates", "errors")}
             st = np.asarray(state[f"{prefix}state"], dtype=np.float64)
             n_errors = int(state[f"{prefix}n_errors"])
         except KeyError as err:
             raise CheckpointError(f"state is missing key {err}") from err
-        if any(v.shape != (t,) or not np.isfinite(v).all() for v in vals.values()) or n_errors < 0 or (
-                st.size and (st.shape != (2 * n,) or not np.isfinite(st).all())):
+        bad = (any(v.shape != (t,) or not np.isfinite(v).all() for v in vals.values())
+               or any(v.shape != (k, t) or not np.isfinite(v).all() for v in banks.values())
+               or bool((banks["errors"] < 0).any()) or n_errors < 0
+               or (st.size and (st.shape != (2 * n,) or not np.isfinite(st).all())))
+        if bad:
             raise CheckpointError("tracker state has the wrong sizes or non-finite values")
-        self.estimate, self.last_error = vals["estimate"], vals["last_error"]
-        self.last_increment = vals["last_increment"]
-        self.var_increment, self.cov_increment = vals["var_increment"], vals["cov_increment"]
+        self.estimates, self.errors = banks["estimates"], banks["errors"]
+        self.last_error, self.last_increment = vals["last_error"], vals["last_increment"]
+        self.cov_increment = vals["cov_increment"]
         self.state = st if st.size else None
         self.n_errors = n_errors
 
@@ -240,7 +280,11 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         tracker: Whether the fast correction is used (False: the prediction is model(x)).
         tracker_position_scale: ℓ_q [rad] of the tracker's fading weight.
         tracker_velocity_scale: ℓ_q̇ [rad/s] of the tracker's fading weight.
-        tracker_samples: Learned samples the tracker's statistics average over.
+        tracker_samples: Learned samples the tracker's statistics (its choice of smoother, the noise
+            variance) average over.
+        tracker_time_constant: τ_f [s], memory of the fast rigid-body correction (its ridge λ is
+            ``lam_parametric``, toward zero).
+        sample_period_s: Provisional sample period [s] converting τ_f until :meth:`set_sample_period`.
 
     Raises:
         ConfigurationError: Invalid sizes or hyperparameters.
@@ -256,7 +300,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         >>> pred = m.predict_one([0.3, 0.0, 0.0])
         >>> bool(abs(pred.total[0] - pred.correction[0] - (1.9 + 0.2 * np.sin(0.9))) < 0.02)  # the model
         True
-        >>> far = m.predict_one([30.0, 0.0, 0.0])  # far outside the data: the rigid-body part alone
+        >>> far = m.predict_model([30.0, 0.0, 0.0])  # far outside the data: the rigid-body part alone
         >>> bool(abs(far.total[0] - far.parametric[0]) < 1e-6)
         True
     """
@@ -268,9 +312,10 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                  sigma: float = 1.0, forgetting_parametric: float = 1.0,
                  forgetting_nonparametric: float = 1.0, seed: int = 0,
                  standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
-                 standardizer_min_scale: Any = 0.0, prior: Any = None, novelty_scale: float = 0.05,
+                 standardizer_min_scale: Any = 0.0, prior: Any = None, novelty_scale: float = 0.01,
                  tracker: bool = True, tracker_position_scale: float = 0.05,
-                 tracker_velocity_scale: float = 0.5, tracker_samples: int = 20) -> None:
+                 tracker_velocity_scale: float = 0.5, tracker_samples: int = 50,
+                 tracker_time_constant: float = 0.3, sample_period_s: float = 0.01) -> None:
         self.parametric = ParametricModel(regressor, n_params, n_outputs, lam=lam_parametric,
                                           forgetting=forgetting_parametric, prior=prior)
         p, t = self.parametric.n_params, self.parametric.n_outputs
@@ -287,7 +332,32 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.use_tracker = bool(tracker)
         self.tracker = ErrorTracker(t, max(1, self.n_inputs // 3), position_scale=tracker_position_scale,
                                     velocity_scale=tracker_velocity_scale, stats_samples=tracker_samples)
+        self.tracker_time_constant = check_range("tracker_time_constant", tracker_time_constant, 0.0,
+                                                 lo_inclusive=False)
+        self.fast = RecursiveRLS(p, 1, lam_parametric, forgetting=self._fast_forgetting(sample_period_s))
         self.n_samples_seen = 0
+
+    #: The fast rigid-body correction fades like the local tracker but over this many times its distances
+    #: (it is a rigid-body correction, valid further from where it was learned than a local error).
+    FAST_FADE = 4.0
+
+    #: The fast correction remembers at least this many rows per parameter (a statistical floor: p
+    #: parameters need several times p equations before a noisy fit is worth adding to the prediction).
+    FAST_ROWS_PER_PARAMETER = 10
+
+    def _fast_forgetting(self, sample_period_s: float) -> float:
+        """β_f = exp(−1/N), N = max(τ_f/T, 10·p/t) samples (τ_f in s, T the period in s)."""
+        floor = self.FAST_ROWS_PER_PARAMETER * self.n_params / self.n_outputs
+        samples = max(self.tracker_time_constant / float(sample_period_s), floor)
+        return forgetting_factor(samples, 1.0)
+
+    def set_sample_period(self, sample_period_s: float) -> None:
+        """Convert the fast correction's memory τ_f [s] at the measured sample period [s].
+
+        Raises:
+            ConfigurationError: On a non-positive period.
+        """
+        self.fast.set_forgetting(self._fast_forgetting(sample_period_s))
 
     # ------------------------------------------------------------------ prediction
     def _model_valid(self, xv: np.ndarray, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
@@ -311,11 +381,31 @@ class ConsistentSemiparametricModel(_TwoStageModel):
 
     def _predict_valid(self, xv: np.ndarray, Phi: np.ndarray) -> tuple[Prediction, np.ndarray,
                                                                        np.ndarray | None]:
+        """Return the prediction, ``model(x) + wΦδ_f`` (the local tracker's reference) and φ."""
         yp, r, var, phi = self._model_valid(xv, Phi)
         model_total = yp + r
-        c = self.tracker.correction(xv) if self.use_tracker else np.zeros(self.n_outputs)
-        total = model_total + c
-        return Prediction(yp, total - yp, total, var, c), model_total, phi
+        if not self.use_tracker:
+            return Prediction(yp, r, model_total, var, np.zeros(self.n_outputs)), model_total, phi
+        kappa = self.tracker.weight(xv)
+        kappa_fast = kappa ** (1.0 / self.FAST_FADE ** 2)  # the same fade over FAST_FADE × the distances
+        P, v = self.fast._predict_valid(Phi, True)
+        assert v is not None  # asked for
+        c = P[:, 0]
+        fast = model_total + (kappa_fast * self.fast_weight(c, v)) * c
+        total = fast + kappa * self.tracker.estimate
+        return Prediction(yp, total - yp, total, var, total - model_total), fast, phi
+
+    def fast_weight(self, c: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Weight of the fast rigid-body correction per output, in [0, 1]: ``max(0, 1 − 9 r̂ v / c²)``.
+
+        ``c = Φδ_f`` is the correction, ``r̂ v`` its variance (v the relative predictive variance of the
+        fast learner, r̂ the noise variance of the model's error estimated by the tracker): the correction
+        counts only as far as it stands out from its own noise by three standard deviations — at once for a
+        payload (large, well determined), not at all where it only fits noise (a model at the noise floor).
+        """
+        noise = 9.0 * self.tracker.noise_variance() * v
+        c2 = c * c
+        return np.where(c2 > noise, 1.0 - noise / np.where(c2 > 0.0, c2, 1.0), 0.0)
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
         """Predict ``model(x) + κ b̂`` with its parts (``correction`` = κ b̂).
@@ -361,6 +451,12 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         target = yv.copy() if y0 is None else yv - y0
         # both learners' rows are checked before either changes: a refused value leaves the model as it was
         par_step = par_model.rls._checked_step(Phi, target.reshape(-1, 1), owned=True)
+        fast_step = None
+        if self.use_tracker:
+            # the fast correction learns the error of model(x) (the a-priori model, without corrections)
+            pred = ctx.prediction
+            model_only = pred.total if pred.correction is None else pred.total - pred.correction
+            fast_step = RecursiveRLS._checked_step(Phi, (yv - model_only).reshape(-1, 1))
         if phi is None:
             npm.standardizer.partial_fit(xv)
             par_model.rls._defer_checked(par_step)
@@ -369,7 +465,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             np_step = RecursiveRLS._checked_step(phi, u, owned=True)
             par_model.rls._defer_checked(par_step)
             npm.rls._defer_checked(np_step)
-        if self.use_tracker:
+        if fast_step is not None:
+            self.fast._defer_checked(fast_step)
             self.tracker.update(xv, yv, ctx._model_total)
         par_model.n_samples_seen += 1
         npm.n_samples_seen += 1
@@ -395,14 +492,16 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         return Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
 
     def reset(self) -> None:
-        """Forget everything (both learners and the tracker)."""
+        """Forget everything (both learners and the fast correction)."""
         super().reset()
+        self.fast.reset()
         self.tracker.reset()
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the learners' and the tracker's state as arrays."""
         state = super().state_dict(prefix)
         state.update(self.tracker.state_dict(f"{prefix}tracker."))
+        state.update(self.fast.state_dict(f"{prefix}fast."))
         return state
 
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
@@ -416,5 +515,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                                velocity_scale=self.tracker.velocity_scale,
                                stats_samples=self.tracker.stats_samples)
         tracker.load_state_dict(state, f"{prefix}tracker.")
+        fast = RecursiveRLS.from_state_dict(state, f"{prefix}fast.")
+        if fast.n_features != self.n_params or fast.n_outputs != 1:
+            raise CheckpointError(f"the fast correction's state has {fast.n_features} parameters, expected "
+                                  f"{self.n_params}")
         super().load_state_dict(state, prefix)
-        self.tracker = tracker
+        self.tracker, self.fast = tracker, fast

@@ -34,10 +34,11 @@ __all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_contacts", "plot_protoco
 
 #: The paper's colours: parametric green, nonparametric red, semiparametric blue; the joint semiparametric
 #: fit (not in the paper) purple.
-COLORS: dict[str, str] = {"P": "tab:green", "NP": "tab:red", "SP": "tab:blue", "SPJ": "tab:purple"}
+COLORS: dict[str, str] = {"P": "tab:green", "NP": "tab:red", "SP": "tab:blue", "SPJ": "tab:purple",
+                          "SPC": "tab:cyan"}
 #: Legend names of model kinds that differ from the kind (a kind is also the prefix of adaptation names,
 #: e.g. ``"SPJ adaptive (β=0.995)"``).
-LABELS: dict[str, str] = {"SPJ": "SP joint"}
+LABELS: dict[str, str] = {"SPJ": "SP joint", "SPC": "SP cascade (paper)"}
 _EXTRA = ("tab:orange", "tab:brown", "tab:gray", "tab:olive", "tab:cyan", "tab:pink")
 
 

@@ -14,7 +14,9 @@ sample period) goes through the test stream as::
 
 so the model predicting sample ``i`` has learned the training stream and every test sample up to
 ``i − d`` — it is the snapshot of the online model taken ``h`` before ``i``, without storing snapshots.
-``d = 1`` is test-then-train (one step ahead); the *frozen* horizon learns no test sample at all.
+``d = 1`` is test-then-train (one step ahead); the *frozen* horizon learns no test sample at all, and
+uses a learner's model alone (``predict_model`` where it has one: the consistent SP without the fast
+correction of its last errors, which exists to track and has nothing to track in a frozen model).
 Persistence (:class:`~semiparam_ros.eval.baselines.Persistence`) through the same delay line is
 persistence *held h*: ``ŷ(t) = y(t − h)``. Models that never learn (the CAD model, a batch fit) give the
 same prediction at every horizon.
@@ -149,10 +151,12 @@ def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int) ->
     n = X.shape[0]
     out = np.empty((n, Y.shape[1]))
     learns = delay > 0 and callable(getattr(model, "learn_one", None))
+    # frozen, a learner is used as its model: without the fast correction of its recent errors, if it has one
+    predict = (getattr(model, "predict_model", None) if delay == 0 else None) or model.predict_one
     for i in range(n):
         if learns and i >= delay:
             model.learn_one(X[i - delay], Y[i - delay])
-        pred = model.predict_one(X[i])
+        pred = predict(X[i])
         out[i] = np.asarray(getattr(pred, "total", pred), dtype=np.float64).reshape(-1)
     return out
 
@@ -303,11 +307,12 @@ def horizon_markdown(report: HorizonReport, *, reference: str | None = "persiste
             f"| {m} | " + " | ".join(f"{report.mean(m, h, subset):.3f}" for h in labels) + " |\n"
             for m in report.rmse)
 
-    text = (f"Scored samples: {report.n_scored} (index ≥ the largest delay), {report.n_inside} inside the "
-            f"training range of q and q̇; period {report.sample_period_s * 1e3:.1f} ms. Mean RMSE over the "
-            "outputs, by the age of the model (h: learned every sample up to t − h, predicts t; frozen: no "
-            "test sample learned; persistence held h: ŷ(t) = y(t − h)).\n\nAll scored samples:\n\n"
-            + table("all"))
+    legend = ("h: learned every sample up to t − h, predicts t", "frozen: no test sample learned",
+              "persistence held h: ŷ(t) = y(t − h)")
+    text = (f"Scored samples: {report.n_scored} (from the largest delay on), " + f"{report.n_inside} inside "
+            + f"the training range of q and q̇; period {report.sample_period_s * 1e3:.1f} ms. "
+            + "Mean RMSE over the outputs by the age of the model (" + "; ".join(legend) + ").\n\n"
+            + "All scored samples:\n\n" + table("all"))
     if report.n_inside:
         text += "\nInside the training range:\n\n" + table("inside")
     if report.n_inside < report.n_scored:

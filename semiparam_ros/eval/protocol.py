@@ -255,7 +255,8 @@ def predict_only(model: Any, X: np.ndarray,
     """Predict each sample without learning it (a model frozen after training: generalization).
 
     Args:
-        model: A trained model with ``predict_one(x)`` (array or object with ``.total``); not modified.
+        model: A trained model with ``predict_one(x)`` (array or object with ``.total``), or
+            ``predict_model(x)`` which is then used (the model without its fast correction); not modified.
         X: Inputs, shape ``(n, d)``.
         progress: Called with the number of samples processed since the last call (every 100).
 
@@ -265,7 +266,8 @@ def predict_only(model: Any, X: np.ndarray,
     Raises:
         TypeError: If the model has no ``predict_one``.
     """
-    predict = getattr(model, "predict_one", None)
+    # a frozen learner is used as its model (without the fast correction of its last errors, if it has one)
+    predict = getattr(model, "predict_model", None) or getattr(model, "predict_one", None)
     if not callable(predict):
         raise TypeError(f"{type(model).__name__} has no predict_one: it cannot be evaluated frozen")
     n = X.shape[0]

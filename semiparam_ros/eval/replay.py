@@ -33,6 +33,7 @@ from semiparam_ros.eval.protocol import (
 from semiparam_ros.io.bags import iter_samples, read_messages, topic_info
 
 __all__ = [
+    "CASCADE_SP",
     "EXTRA_KINDS",
     "FROZEN_P",
     "GROUND_TRUTH_WRENCH_TOPIC",
@@ -59,11 +60,14 @@ KINDS: tuple[str, ...] = ("P", "NP", "SP")
 #: (:class:`~semiparam_ros.core.semiparametric_joint.JointSemiparametricModel`): the SP model built with
 #: ``semiparametric.combination = joint`` whatever the configuration says.
 JOINT_SP = "SPJ"
+#: The paper's cascade (:class:`~semiparam_ros.core.semiparametric.SemiparametricModel`): the SP model
+#: built with ``semiparametric.combination = cascade`` whatever the configuration says.
+CASCADE_SP = "SPC"
 #: Diagnostic variant (:class:`~semiparam_ros.eval.diagnostics.FrozenParametricSP`): SP whose rigid-body
 #: stage stops learning after the training stream.
 FROZEN_P = "SPfrozenP"
 #: Kinds :func:`build_models` accepts besides :data:`KINDS`.
-EXTRA_KINDS: tuple[str, ...] = (JOINT_SP, FROZEN_P)
+EXTRA_KINDS: tuple[str, ...] = (JOINT_SP, CASCADE_SP, FROZEN_P)
 
 
 def _absolute(topic: str) -> str:
@@ -145,8 +149,9 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
     Args:
         config: Estimator configuration.
         kinds: Any of ``"P"``, ``"NP"``, ``"SP"`` (the cascade or the joint fit, as the configuration's
-            ``semiparametric.combination`` says), :data:`JOINT_SP` (always the joint fit) and the diagnostic
-            :data:`FROZEN_P`.
+            ``semiparametric.combination`` says), :data:`JOINT_SP` (always the joint fit),
+            :data:`CASCADE_SP` (always the paper's cascade) and the diagnostic :data:`FROZEN_P` (around the
+            cascade).
         n_train: Samples the rigid-body stage of :data:`FROZEN_P` learns (required for it).
         sample_period_s: The stream's sample period [s], measured as the node does
             (:func:`~semiparam_ros.core.estimator.measured_period_s` of the first stream learned): it
@@ -166,11 +171,15 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
     regressor = build_regressor(config) if any(k != "NP" for k in kinds) else None
     models: dict[str, Any] = {}
     for kind in kinds:
-        if kind == FROZEN_P:
+        if kind in (FROZEN_P, CASCADE_SP):
+            cascade = config.with_overrides({"semiparametric.combination": "cascade"})
+            model = build_model(cascade, "SP", regressor, sample_period_s=sample_period_s)
+            if kind == CASCADE_SP:
+                models[kind] = model
+                continue
             if n_train is None:
                 raise ValueError(f"{FROZEN_P} needs the number of training samples")
-            models[kind] = FrozenParametricSP(
-                build_model(config, "SP", regressor, sample_period_s=sample_period_s), n_train)
+            models[kind] = FrozenParametricSP(model, n_train)
         elif kind == JOINT_SP:
             try:
                 joint = config.with_overrides({"semiparametric.combination": "joint"})
