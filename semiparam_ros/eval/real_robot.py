@@ -4,8 +4,10 @@
 (:func:`~semiparam_ros.eval.protocol.run_protocol`: the test log in sequential parts, each from a copy of
 the trained model; "at regime" = the second half of each part), for:
 
-- the learners P, NP, SP (the configuration as given), updated online on the test parts (test-then-train)
-  and frozen after training (:data:`FROZEN_SUFFIX`: no test updates, i.e. generalization);
+- the learners P, NP, SP (the configuration as given) and SPC (the paper's cascade), updated online on
+  the test parts (test-then-train) and frozen after training (:data:`FROZEN_SUFFIX`: no test updates, i.e.
+  generalization; a learner with a fast correction is used as its model, see
+  :func:`~semiparam_ros.eval.protocol.predict_only`);
 - P without friction and offsets (:data:`P_RIGID`), to measure what the friction columns add;
 - the CAD model (:data:`CAD`: RNEA with the URDF's parameters, no learning);
 - batch identification (:data:`BATCH`: ordinary least squares on the whole training log with the
@@ -82,7 +84,9 @@ P_RIGID = "P rigid"
 FROZEN_SUFFIX = " frozen"
 #: The node's own step (:class:`OnlineEstimator`: contact gate and σ as configured) around the trained SP.
 SP_NODE = "SP (node, gate on)"
-LEARNERS: tuple[str, ...] = ("P", "NP", "SP")
+#: The learners: P, NP, SP (the configured combination, by default the consistent model) and the paper's
+#: cascade (``SPC``) beside it.
+LEARNERS: tuple[str, ...] = ("P", "NP", "SP", "SPC")
 
 
 @dataclass(frozen=True)
