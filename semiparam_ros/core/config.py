@@ -263,7 +263,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   min=0.0, max=1e9),
     ParameterSpec("uncertainty.noise_time_constant", "double", 2.0,
                   "time constant of the running estimate of the noise scale s^2 per output [s]; the "
-                  "published std is sqrt(s^2 (1 + z A^-1 z^T))", min=0.0, min_exclusive=True, max=1e9,
+                  "published std is sqrt(s^2 (1 + z A^-1 z^T)); with the consistent SP, s^2 is of the "
+                  "model's errors (its fast correction left out)", min=0.0, min_exclusive=True, max=1e9,
                   read_only=False),
     ParameterSpec("gate.enabled", "bool", True,
                   "contact-aware learning gate: a sample whose residual exceeds gate.threshold standard "

@@ -576,7 +576,10 @@ class OnlineEstimator:
             std = self.noise.std(variance)
             error = y - prediction.total
         if learned or verdict is None:
-            self.noise.update(sample.stamp_ns, error, variance)
+            # σ is the model's: a fast correction of the recent error (the consistent SP's) makes one-step
+            # errors far smaller than those of a model that stops learning, e.g. through a contact
+            correction = prediction.correction
+            self.noise.update(sample.stamp_ns, error if correction is None else error + correction, variance)
         else:
             self.noise.skip(sample.stamp_ns)
         return StepResult(sample, prediction, time.perf_counter() - start, learned, std, verdict)
