@@ -229,7 +229,9 @@ def test_gated_estimator_step_equals_predict_then_learn_one(kind):
         verdict = ref.gate.decide(s.stamp_ns, s.y - ahead.total, std)
         if verdict.learn:
             ref.model.learn_one(s.x, s.y)
-            ref.noise.update(s.stamp_ns, s.y - ahead.total, ahead.variance)
+            # the noise scale of the model's errors (a consistent SP's fast correction left out)
+            model_error = s.y - ahead.total + (0.0 if ahead.correction is None else ahead.correction)
+            ref.noise.update(s.stamp_ns, model_error, ahead.variance)
         else:
             ref.noise.skip(s.stamp_ns)
         assert got.verdict == verdict and got.learned == verdict.learn

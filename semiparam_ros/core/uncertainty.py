@@ -56,7 +56,7 @@ def predict_with_variance(model: Any, x: np.ndarray) -> Prediction:
     """
     pred = model.predict_one(x, return_variance=True)
     var = np.fmax(np.asarray(pred.variance, dtype=np.float64), 0.0)  # NaN (a warm-up) counts as 0
-    return Prediction(pred.parametric, pred.residual, pred.total, var)
+    return Prediction(pred.parametric, pred.residual, pred.total, var, pred.correction)
 
 
 class NoiseScale:
