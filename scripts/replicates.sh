@@ -26,6 +26,8 @@ while [ $# -gt 0 ]; do
   esac
 done
 source scripts/paper_params.sh
+# this page reproduces the paper's learner, the cascade, whatever the package default (docs/generalization.md)
+tuned+=(--set semiparametric.combination=cascade)
 # one job per seed (simulate the two logs, run the protocol, keep the scalars), on every core through
 # joblib (semiparam_ros/eval/parallel.py); each job has one BLAS thread, so the numbers do not depend on --jobs
 .venv/bin/python - "$config" "$out/figures/replicates.json" "$jobs" $seeds "--" "${tuned[@]}" <<'PY'
