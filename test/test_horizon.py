@@ -124,3 +124,38 @@ def test_horizons_longer_than_the_stream_are_left_out_or_refused():
     assert [h.label for h in report.horizons] == ["1 step"]
     with pytest.raises(ConfigurationError):
         evaluate_horizons({"P": p}, train_data, test, horizons=[10.0])
+
+
+def test_evaluate_cli_reports_horizons_in_text_json_and_figure(tmp_path):
+    """`evaluate --horizons` on the committed bags: the text, the JSON and the figure carry the table, and
+    its numbers are those of the library run on the same samples."""
+    import json
+    from pathlib import Path
+
+    from semiparam_ros.cli.evaluate import main
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "r.json"
+    fig = tmp_path / "h.png"
+    code = main(["--train", str(root / "bags" / "icub_xy"), "--test", str(root / "bags" / "icub_xz"),
+                 "--config", str(root / "config" / "icub_right_arm.yaml"),
+                 "--set", "nonparametric.n_features=40",
+                 "--train-limit", "800", "--test-limit", "900", "--splits", "2", "--models", "P", "SP",
+                 "--horizons", "0", "1", "frozen", "--horizon-plot", str(fig), "--json", str(out),
+                 "--no-progress"])
+    assert code == 0
+    doc = json.loads(out.read_text())
+    h = doc["protocol"]["horizons"]
+    assert [x["label"] for x in h["horizons"]] == ["1 step", "1 s", FROZEN]
+    assert set(h["mean"]) == {"CAD", "P", "SP", "persistence"}
+    # persistence held 1 s, recomputed from the bag's samples
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.eval.replay import load_samples
+
+    cfg = load_config(root / "config" / "icub_right_arm.yaml")
+    test, _ = load_samples(root / "bags" / "icub_xz", cfg, limit=900)
+    d = h["horizons"][1]["delay"]
+    err = test.Y[d:] - test.Y[:-d]
+    np.testing.assert_allclose(h["mean"]["persistence"]["1 s"], np.mean(np.sqrt(np.mean(err ** 2, axis=0))),
+                               rtol=1e-12)
+    assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
