@@ -406,13 +406,14 @@ def _build_model(config: EstimatorConfig, kind: ModelKind,
             standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
             prior=prior,
         )
+    # the rigid-body stage first and alone, each stage with its own forgetting: the cascade and the
+    # consistent model
+    two_stage = dict(forgetting_parametric=config["parametric.forgetting"],
+                     forgetting_nonparametric=config["nonparametric.forgetting"], prior=prior)
     if config["semiparametric.combination"] == "consistent":
         return ConsistentSemiparametricModel(
-            phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,
-            forgetting_parametric=config["parametric.forgetting"],
-            forgetting_nonparametric=config["nonparametric.forgetting"],
+            phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared, **two_stage,
             standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
-            prior=prior,
             novelty_scale=config["semiparametric.novelty_scale"],
             tracker=config["semiparametric.tracker"],
             tracker_position_scale=config["semiparametric.tracker_position_scale"],
@@ -422,11 +423,8 @@ def _build_model(config: EstimatorConfig, kind: ModelKind,
             sample_period_s=NOMINAL_PERIOD_S,
         )
     return SemiparametricModel(
-        phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,
-        forgetting_parametric=config["parametric.forgetting"],
-        forgetting_nonparametric=config["nonparametric.forgetting"],
+        phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared, **two_stage,
         standardizer_min_scale=standardizer_min_scale(config, with_outputs=True),
-        prior=prior,
     )
 
 @dataclass(frozen=True)
