@@ -408,7 +408,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         return np.where(c2 > noise, 1.0 - noise / np.where(c2 > 0.0, c2, 1.0), 0.0)
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
-        """Predict ``model(x) + κ b̂`` with its parts (``correction`` = κ b̂).
+        """Predict ``model(x) + wΦ(x)δ_f + κ b̂`` with its parts (``correction`` = the last two terms).
 
         Args:
             x: The input ``[q, q̇, q̈]``.
