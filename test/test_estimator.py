@@ -932,3 +932,18 @@ def test_joint_combination_with_unequal_forgetting_is_refused(config):
     joint = config.with_overrides({"semiparametric.combination": "joint", "parametric.forgetting": 0.99,
                                    "nonparametric.forgetting": 0.99})
     assert OnlineEstimator(joint).model.forgetting == 0.99
+
+
+def test_a_checkpoint_of_the_former_default_cascade_is_refused_with_the_way_to_load_it(config, tmp_path):
+    """Checkpoints written before the consistent learner became the default hold the paper's cascade: the
+    default refuses them by name and says which setting loads them; that setting does."""
+    cascade_cfg = config.with_overrides({"semiparametric.combination": "cascade"})
+    old = OnlineEstimator(cascade_cfg)
+    feed(old, rich_stream().messages[:300])
+    path = tmp_path / "old.npz"
+    old.save(path)
+    with pytest.raises(CheckpointError, match=r"semiparametric\.combination: cascade to load it"):
+        OnlineEstimator(config).load(path)
+    again = OnlineEstimator(cascade_cfg)
+    again.load(path)
+    assert again.n_samples_learned == old.n_samples_learned

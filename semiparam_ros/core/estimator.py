@@ -820,5 +820,12 @@ def _fingerprint_difference(saved: str, current: str) -> str:
     if not isinstance(a, dict):
         return f"unreadable fingerprint {saved!r}"
     names = sorted(set(a) | set(b))
-    return "; ".join(f"{k} = {a.get(k)!r} in the checkpoint, {b.get(k)!r} now" for k in names
+    text = "; ".join(f"{k} = {a.get(k)!r} in the checkpoint, {b.get(k)!r} now" for k in names
                      if a.get(k) != b.get(k))
+    key = "semiparametric.combination"
+    if "kind" in a and a.get(key) is None and b.get(key) not in (None, "cascade"):
+        # a fingerprint without the key was written by the paper's cascade, the default until the
+        # consistent learner became it
+        text += (f" (a checkpoint without {key} holds the paper's cascade: set {key}: cascade to load "
+                 "it, or start the new default learner afresh)")
+    return text
