@@ -259,6 +259,9 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
 #: Sample period [s] at which seconds-based lengths are converted before the rate is measured (100 Hz: the
 #: rate at which the former sample-count defaults were chosen).
 NOMINAL_PERIOD_S = 0.01
+#: ``semiparametric.*`` parameters of the consistent SP, named as its constructor's keywords.
+_CONSISTENT_KEYS = ("novelty_scale", "tracker", "tracker_position_scale", "tracker_velocity_scale",
+                    "tracker_samples", "tracker_time_constant")
 
 
 def standardizer_warmup_samples(config: EstimatorConfig, sample_period_s: float | None = None) -> int:
@@ -414,12 +417,8 @@ def _build_model(config: EstimatorConfig, kind: ModelKind,
         return ConsistentSemiparametricModel(
             phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared, **two_stage,
             standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
-            novelty_scale=config["semiparametric.novelty_scale"],
-            tracker=config["semiparametric.tracker"],
-            tracker_position_scale=config["semiparametric.tracker_position_scale"],
-            tracker_velocity_scale=config["semiparametric.tracker_velocity_scale"],
-            tracker_samples=config["semiparametric.tracker_samples"],
-            tracker_time_constant=config["semiparametric.tracker_time_constant"],
+            # the constructor's keywords are the parameters' names
+            **{name: config[f"semiparametric.{name}"] for name in _CONSISTENT_KEYS},
             sample_period_s=NOMINAL_PERIOD_S,
         )
     return SemiparametricModel(
