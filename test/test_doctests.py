@@ -14,6 +14,7 @@ MODULES = [
     "semiparam_ros.core.estimator",
     "semiparam_ros.core.features",
     "semiparam_ros.core.pipeline",
+    "semiparam_ros.core.rate",
     "semiparam_ros.core.rrls",
     "semiparam_ros.core.semiparametric",
     "semiparam_ros.core.semiparametric_joint",

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from semiparam_ros.core.rate import measured_period_s
+from semiparam_ros.core.rate import stream_period_s
 
 __all__ = ["DetectionScore", "flag_samples", "score_episodes"]
 
@@ -108,8 +108,7 @@ def score_episodes(t: np.ndarray, flagged: np.ndarray, episodes: np.ndarray, *,
         ends = np.flatnonzero(f & ~np.concatenate([f[1:], [False]]))
         false_alarms = sum(1 for a, b in zip(starts, ends, strict=True) if not near[a : b + 1].any())
     duration = float(t[-1] - t[0]) if t.size > 1 else 0.0
-    period = measured_period_s(np.round(t * 1e9).astype(np.int64)) if t.size > 1 else None
-    dt = period if period is not None else (float(np.median(np.diff(t))) if t.size > 1 else 0.0)
+    dt = stream_period_s(np.round(t * 1e9).astype(np.int64)) or 0.0
     outside_min = max(duration - dt * float(near.sum()), 0.0) / 60.0
     rate = false_alarms / outside_min if outside_min > 0 else float("nan")
     return DetectionScore(detected, delays, false_alarms, rate)

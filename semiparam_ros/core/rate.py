@@ -22,7 +22,7 @@ import numpy as np
 
 from semiparam_ros.errors import ConfigurationError
 
-__all__ = ["RATE_SAMPLES", "RateMeter", "measured_period_s", "samples_in"]
+__all__ = ["RATE_SAMPLES", "RateMeter", "measured_period_s", "samples_in", "stream_period_s"]
 
 #: Stamps whose intervals measure a stream's period (9 intervals).
 RATE_SAMPLES = 10
@@ -94,6 +94,28 @@ def measured_period_s(stamps_ns: Iterable[int], max_gap_s: float | None = None) 
         if meter.add(int(s)) is not None:
             break
     return meter.period_s
+
+
+def stream_period_s(stamps_ns: np.ndarray) -> float | None:
+    """Return a recorded stream's period [s], by the node's rule where the stream is long enough.
+
+    :func:`measured_period_s`, or for a stream too short for it the median of its stamp differences
+    (``None`` with fewer than two stamps).
+
+    Args:
+        stamps_ns: The stream's stamps [ns], in order.
+
+    Example:
+        >>> stream_period_s(np.array([0, 10**7, 2 * 10**7]))  # 3 stamps: too few to measure, the median
+        0.01
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    period = measured_period_s(stamps)
+    if period is not None:
+        return period
+    if len(stamps) < 2:
+        return None
+    return float(np.median(np.diff(stamps))) * 1e-9
 
 
 def samples_in(duration_s: float, sample_period_s: float) -> int:

@@ -39,7 +39,7 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.episodes import flag_samples, score_episodes
 from semiparam_ros.core.estimator import OnlineEstimator
 from semiparam_ros.core.messages import JointStateData, WrenchData
-from semiparam_ros.core.rate import measured_period_s
+from semiparam_ros.core.rate import stream_period_s
 from semiparam_ros.eval.metrics import OutputSpec, group_rmse, window_samples, windowed_rmse
 from semiparam_ros.eval.protocol import Recovery, recovery
 from semiparam_ros.eval.replay import Topics, payload_pickup, read_scenario
@@ -392,7 +392,8 @@ def score_run(run: ContactRun, truth: GroundTruthEpisodes, output: OutputSpec, *
     adoption: dict[str, float | None] | None = None
     if truth.pickup_s is not None and t[0] <= truth.pickup_s - pre_s and t[-1] > truth.pickup_s:
         tc = t - truth.pickup_s
-        period = measured_period_s(np.round(t * 1e9).astype(np.int64)) or float(np.median(np.diff(t)))
+        period = stream_period_s(np.round(t * 1e9).astype(np.int64))
+        assert period is not None  # t spans the pickup: at least two samples
         window = window_samples(recovery_window_s, period)
         pre = (tc >= -pre_s) & (tc < 0)
         rec, adoption = {}, {}

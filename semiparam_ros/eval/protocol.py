@@ -31,7 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from semiparam_ros.core.rate import measured_period_s
+from semiparam_ros.core.rate import stream_period_s
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse, group_rmse, window_samples, windowed_rmse
 
 __all__ = [
@@ -154,12 +154,8 @@ class SampleArrays:
 
         For a stream too short for that, its median stamp difference (``nan`` for a single sample).
         """
-        period = measured_period_s(self.stamps_ns)
-        if period is not None:
-            return period
-        if len(self) < 2:
-            return float("nan")
-        return float(np.median(np.diff(self.stamps_ns))) * _NS
+        period = stream_period_s(self.stamps_ns)
+        return float("nan") if period is None else period
 
     @property
     def duration_s(self) -> float:
