@@ -193,7 +193,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                      "--contacts (contact evaluation)")
     if args.payload is not None and args.test is not None:
         parser.error("--payload and --test are exclusive")
-    from semiparam_ros.eval.run import run_evaluate  # heavy imports after argument checks
+    from semiparam_ros.eval.horizon import DEFAULT_HORIZONS  # heavy imports after argument checks
+    from semiparam_ros.eval.run import run_evaluate
 
     try:
         text = run_evaluate(
@@ -220,7 +221,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             plot_path=args.plot,
             plot_truth_path=args.plot_truth,
             markdown_path=args.markdown,
-            horizons=None if args.horizons is None else (args.horizons or ["0", "0.1", "1", "10", "frozen"]),
+            horizons=None if args.horizons is None else (args.horizons or DEFAULT_HORIZONS),
             horizon_plot_path=args.horizon_plot,
             progress=not args.no_progress,
         )

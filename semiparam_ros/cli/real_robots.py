@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="joints of the friction criterion (default: the KUKA's lwr_0, lwr_4, lwr_5, lwr_6)")
     p.add_argument("--splits", type=int, default=10, help="test parts of the protocol (default 10)")
     p.add_argument("--no-inject", action="store_true", help="skip the external-torque measurement")
-    p.add_argument("--horizons", nargs="*", default=["0", "0.1", "1", "10", "frozen"],
+    p.add_argument("--horizons", nargs="*", default=None,
                    help="ages of the model for the horizon table [s] (0 = one step, 'frozen'); "
                         "none given = skip it (default: 0 0.1 1 10 frozen)")
     p.add_argument("--figure", type=Path, help="draw the error-by-age figure here (PNG)")
@@ -65,7 +65,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         0 on success, 2 on invalid input, 1 if a file cannot be read or written.
     """
     args = build_parser().parse_args(argv)
-    from semiparam_ros.eval.real_robot import run_comparison  # heavy imports after argument parsing
+    from semiparam_ros.eval.horizon import DEFAULT_HORIZONS  # heavy imports after argument parsing
+    from semiparam_ros.eval.real_robot import run_comparison
+
+    horizons = DEFAULT_HORIZONS if args.horizons is None else (args.horizons or None)
 
     urdf = args.urdf
     if urdf is None and (args.data / "kuka_lwr4_cogimon.urdf").is_file():
@@ -74,7 +77,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         text = run_comparison(data=args.data, config=args.config, train=args.train, test=args.test, urdf=urdf,
                               overrides=parse_overrides(args.overrides), friction_joints=args.friction_joints,
                               splits=args.splits, inject=not args.no_inject,
-                              horizons=args.horizons or None, json_path=args.json,
+                              horizons=horizons, json_path=args.json,
                               markdown_path=args.markdown, figure_path=args.figure,
                               progress=not args.no_progress)
     except (ValueError, OSError) as err:
