@@ -180,13 +180,14 @@ class ErrorTracker:
         """r̂ (t,): the white-noise variance of the error, ``max(0, −E[d_m d_{m−1}])`` [units of y²]."""
         return np.maximum(-self.cov_increment, 0.0)
 
-    def update(self, x: np.ndarray, y: np.ndarray, model: np.ndarray) -> None:
+    def update(self, x: np.ndarray, y: np.ndarray, model: np.ndarray, weight: float | None = None) -> None:
         """Absorb a learned sample: its state x, measurement y and the model's a-priori prediction.
 
         Args:
             x: The state ``[q, q̇, q̈]`` (validated, finite).
             y: The measurement (t,).
             model: The prediction the error is relative to (t,).
+            weight: ``weight(x)`` if already computed for this state (nothing updated since).
         """
         e = y - model
         a = max(1.0 / (self.n_errors + 1), 1.0 / self.stats_samples)
@@ -196,7 +197,7 @@ class ErrorTracker:
                 b = max(1.0 / (self.n_errors - 1), 1.0 / self.stats_samples)
                 self.cov_increment += b * (d * self.last_increment - self.cov_increment)
             self.last_increment = d
-        prior = self.weight(x) * self.estimates
+        prior = (self.weight(x) if weight is None else weight) * self.estimates
         miss = e - prior
         self.errors += a * (miss * miss - self.errors)
         self.estimates = prior + self.GAINS[:, None] * miss
@@ -246,14 +247,15 @@ class ErrorTracker:
 
 
 class _Context(PredictionContext):
-    """A prediction context that also keeps the model's prediction without the correction."""
+    """A prediction context that also keeps the local tracker's reference prediction and weight at x."""
 
-    __slots__ = ("_model_total",)
+    __slots__ = ("_kappa", "_model_total")
 
     def __init__(self, prediction: Prediction, model: Any, x: np.ndarray, Phi: np.ndarray | None,
-                 phi: np.ndarray | None, model_total: np.ndarray) -> None:
+                 phi: np.ndarray | None, model_total: np.ndarray, kappa: float) -> None:
         super().__init__(prediction, model, x, Phi, phi)
         self._model_total = model_total
+        self._kappa = kappa  # the tracker's weight at x
 
 
 class ConsistentSemiparametricModel(_TwoStageModel):
@@ -380,12 +382,12 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         return yp, r, var + float(v[0]), phi
 
     def _predict_valid(self, xv: np.ndarray, Phi: np.ndarray) -> tuple[Prediction, np.ndarray,
-                                                                       np.ndarray | None]:
-        """Return the prediction, ``model(x) + wΦδ_f`` (the local tracker's reference) and φ."""
+                                                                       np.ndarray | None, float]:
+        """Return the prediction, ``model(x) + wΦδ_f`` (the local tracker's reference), φ and κ(x)."""
         yp, r, var, phi = self._model_valid(xv, Phi)
         model_total = yp + r
         if not self.use_tracker:
-            return Prediction(yp, r, model_total, var, np.zeros(self.n_outputs)), model_total, phi
+            return Prediction(yp, r, model_total, var, np.zeros(self.n_outputs)), model_total, phi, 0.0
         kappa = self.tracker.weight(xv)
         kappa_fast = kappa ** (1.0 / self.FAST_FADE ** 2)  # the same fade over FAST_FADE × the distances
         P, v = self.fast._predict_valid(Phi, True)
@@ -393,7 +395,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         c = P[:, 0]
         fast = model_total + (kappa_fast * self.fast_weight(c, v)) * c
         total = fast + kappa * self.tracker.estimate
-        return Prediction(yp, total - yp, total, var, total - model_total), fast, phi
+        return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
 
     def fast_weight(self, c: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Weight of the fast rigid-body correction per output, in [0, 1]: ``max(0, 1 − 9 r̂ v / c²)``.
@@ -419,7 +421,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        pred, _, _ = self._predict_valid(xv, Phi)
+        pred = self._predict_valid(xv, Phi)[0]
         if not return_variance:
             pred = Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
         return pred
@@ -439,8 +441,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
     # ------------------------------------------------------------------ learning
     def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
         Phi = self.parametric._phi_fresh(xv)
-        pred, model_total, phi = self._predict_valid(xv, Phi)
-        return _Context(pred, self, xv, Phi, phi, model_total)
+        pred, model_total, phi, kappa = self._predict_valid(xv, Phi)
+        return _Context(pred, self, xv, Phi, phi, model_total, kappa)
 
     def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
         ctx = self._take(context)
@@ -467,7 +469,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             npm.rls._defer_checked(np_step)
         if fast_step is not None:
             self.fast._defer_checked(fast_step)
-            self.tracker.update(xv, yv, ctx._model_total)
+            self.tracker.update(xv, yv, ctx._model_total, ctx._kappa)
         par_model.n_samples_seen += 1
         npm.n_samples_seen += 1
         self.n_samples_seen += 1
