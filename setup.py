@@ -30,6 +30,7 @@ setup(
             "estimator = semiparam_ros.ros.estimator_node:main",
             "simulate = semiparam_ros.cli.simulate:main",
             "evaluate = semiparam_ros.cli.evaluate:main",
+            "learn = semiparam_ros.cli.learn:main",
             "tune = semiparam_ros.cli.tune:main",
             "real_robots = semiparam_ros.cli.real_robots:main",
         ],

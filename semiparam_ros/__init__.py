@@ -7,6 +7,25 @@ Subpackages:
     eval: offline bag-replay evaluation (the paper's protocol), figures, hyperparameter selection.
     ros: the thin rclpy node.
     cli: command-line entry points (argument parsing only).
+
+The public entry point of a learned model is :func:`load_model` (``from semiparam_ros import
+load_model``): a checkpoint in, ``model.predict(q, dq, ddq)`` out (see :mod:`semiparam_ros.core.serving`).
 """
 
+from typing import TYPE_CHECKING, Any
+
 __version__ = "0.1.0"
+
+__all__ = ["LearnedModel", "load_model"]
+
+if TYPE_CHECKING:
+    from semiparam_ros.core.serving import LearnedModel, load_model
+
+
+def __getattr__(name: str) -> Any:
+    """Import the public API lazily (Pinocchio and the learners load only when first used)."""
+    if name in ("load_model", "LearnedModel"):
+        from semiparam_ros.core import serving
+
+        return getattr(serving, name)
+    raise AttributeError(f"module 'semiparam_ros' has no attribute {name!r}")

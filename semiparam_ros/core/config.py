@@ -281,6 +281,19 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("gate.warmup", "double", 10.0,
                   "time from the first sample during which every sample is learned and the noise "
                   "estimate settles before the gate engages [s]", min=0.0, max=1e6, read_only=False),
+    # feed-forward at desired states (joint torques; core/feedforward.py)
+    ParameterSpec("feedforward.joints", "string_array", [],
+                  "joint order of ~/feedforward_commands and ~/feedforward (a JointGroupEffortController's "
+                  "joints); empty = robot.joints"),
+    ParameterSpec("feedforward.max_std", "double", 0.0,
+                  "predictive std [N m] on any joint above which the feed-forward falls back to the "
+                  "rigid-body part; 0 = never (the residual already abstains in states never seen)",
+                  min=0.0, max=1e9),
+    ParameterSpec("feedforward.refresh_period", "double", 1.0,
+                  "the feed-forward is served from a copy of the model refreshed this often [s] while "
+                  "learning goes on; 0 = the live model (it changes at every sample: measured to inject "
+                  "torque jitter that degrades closed-loop tracking, docs/feedforward.md)",
+                  min=0.0, max=1e6),
     # run time
     ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)", read_only=False),
     ParameterSpec("queue_size", "integer", 1000,

@@ -313,6 +313,7 @@ class RigidBodyRegressor:
         output_names: ``fx … tz`` for a wrench, the joint names for torques.
         gravity: Gravity (3,) in m/s², in the URDF root frame.
         locked: The position (rad or m) of every locked joint that was given a non-zero value.
+        robot_name: The URDF's ``<robot name=…>`` ("" when unnamed).
     """
 
     def __init__(
@@ -389,6 +390,7 @@ class RigidBodyRegressor:
             raise ConfigurationError(f"URDF{where} is not valid XML: {err}") from err
         if root.tag != "robot":
             raise ConfigurationError(f"URDF{where} has root element <{root.tag}>, expected <robot>")
+        self.robot_name = str(root.get("name") or "")
         # Only direct children: <transmission> blocks also contain <joint> elements.
         urdf_joints = {j.get("name"): j for j in root.findall("joint")}
         child_link = {
@@ -620,6 +622,11 @@ class RigidBodyRegressor:
             base_seed=base_seed,
             base_samples=base_samples,
         )
+
+    @property
+    def urdf_xml(self) -> str:
+        """The URDF text this regressor was built from (what a self-contained checkpoint stores)."""
+        return self._urdf_xml
 
     def __reduce__(self) -> tuple[Any, ...]:
         """Pickle/deepcopy by rebuilding from the URDF text and the construction arguments."""

@@ -104,7 +104,7 @@ _STRUCTURAL = (
 )
 
 
-def build_regressor(config: EstimatorConfig) -> RigidBodyRegressor:
+def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None) -> RigidBodyRegressor:
     """Build the rigid-body regressor described by a configuration.
 
     With ``robot.output: joint_torques``, ``parametric.friction`` / ``offsets`` / ``armature`` append the
@@ -113,17 +113,27 @@ def build_regressor(config: EstimatorConfig) -> RigidBodyRegressor:
 
     Args:
         config: Estimator configuration (``robot.*`` and ``parametric.*``).
+        urdf_xml: URDF text to use instead of the file ``robot.urdf`` names (a checkpoint's own copy).
 
     Returns:
         The regressor of the F/T sensor wrench or of the joint torques.
 
     Raises:
+        FileNotFoundError: If ``robot.urdf`` names no file (and no ``urdf_xml`` is given).
         ConfigurationError: If the URDF, joints or sensor are invalid.
     """
     output = config["robot.output"]
-    return RigidBodyRegressor.from_urdf(
-        config.urdf_path(),
+    if urdf_xml is None:
+        path = config.urdf_path()
+        if not path.is_file():
+            raise FileNotFoundError(f"URDF file not found: {path}")
+        urdf_xml, source = path.read_text(encoding="utf-8"), str(path)
+    else:
+        source = "the checkpoint's URDF"
+    return RigidBodyRegressor(
+        urdf_xml,
         config["robot.joints"],
+        source=source,
         ft_sensor=config["robot.ft_sensor"] if output == "wrench" else None,
         locked=config.locked,
         gravity=tuple(config["robot.gravity"]),
@@ -658,7 +668,18 @@ class OnlineEstimator:
         (N·m·s/rad), Coulomb (N·m), offset (N·m) and armature (kg·m²) terms, named by
         :attr:`parameter_names`.
         """
-        theta = self.model.parameters
+        return self.physical_parameters(self.model)
+
+    def physical_parameters(self, model: Model) -> np.ndarray | None:
+        """Return the base parameters of a model of this estimator (its own or a copy) in physical units.
+
+        Args:
+            model: A learner built for this estimator's configuration (e.g. ``est.model.copy()``).
+
+        Returns:
+            π̂_b = θ / c (see :attr:`parameters`), or None for the NP learner.
+        """
+        theta = model.parameters
         return None if theta is None else theta / self._scale
 
     @property
@@ -680,6 +701,17 @@ class OnlineEstimator:
         if self.kind in ("NP", "SP"):
             size += int(self.config["nonparametric.n_features"]) * n_out
         return size
+
+    def start_recording(self) -> None:
+        """Begin another recording (another bag): keep what was learned, restart the time-based state.
+
+        The pipeline (pairing buffers, acceleration window, stamp order) starts afresh, the noise estimate
+        and the contact gate take the next stamp as a new beginning (a warm-up already over stays over),
+        so a later recording whose stamps lie before the previous one's is learned, not dropped.
+        """
+        self.pipeline.reset(keep_counts=True)
+        self.noise.restart_stream()
+        self.gate.restart_stream()
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -737,14 +769,32 @@ class OnlineEstimator:
         The node takes this snapshot under its model lock (a memory copy) and writes it from another
         thread with :func:`~semiparam_ros.core.checkpoint.atomic_save_npz`, so learning never waits for disk.
 
+        A checkpoint is self-contained: besides the learned state (``model.*``) and the noise estimate behind
+        σ (``noise.*``) it holds the whole configuration (``meta.config``, JSON), the URDF text
+        (``meta.urdf``), the robot's identity (``meta.robot``: its name and CAD base parameters) and the
+        versions that wrote it (``meta.versions``), so :func:`semiparam_ros.load_model` needs nothing else.
+
         Returns:
-            Checkpoint arrays by key (``model.*`` learned state, ``meta.*`` version and structure).
+            Checkpoint arrays by key (``model.*`` learned state, ``noise.*``, ``meta.*``).
         """
         state = {key: np.array(value, copy=True) for key, value in self.model.state_dict("model.").items()}
+        state.update(self.noise.state_dict("noise."))
         state["meta.version"] = np.array(_CHECKPOINT_VERSION)
         state["meta.fingerprint"] = np.array(self._fingerprint())
         state["meta.n_samples_learned"] = np.array(self.n_samples_learned)
+        state["meta.config"] = np.array(json.dumps(self.config.to_flat(), sort_keys=True))
+        state["meta.urdf"] = np.array(self.regressor.urdf_xml)
+        state["meta.robot"] = np.array(json.dumps(self._robot_identity(), sort_keys=True))
+        state["meta.versions"] = np.array(json.dumps(software_versions(), sort_keys=True))
+        state["meta.sample_period_s"] = np.array(
+            np.nan if self.sample_period_s is None else self.sample_period_s)
         return state
+
+    def _robot_identity(self) -> dict[str, Any]:
+        """Return the robot a checkpoint is learned on: URDF robot name and CAD base parameters (rounded)."""
+        reg = self.regressor
+        cad = reg.to_base(reg.urdf_parameters())
+        return {"name": reg.robot_name, "cad_base_parameters": [float(f"{v:.9g}") for v in cad]}
 
     def load(self, path: str | Path) -> None:
         """Restore the learned state written by :meth:`save`.
@@ -753,10 +803,22 @@ class OnlineEstimator:
             path: Checkpoint file.
 
         Raises:
-            CheckpointError: If the file is missing or corrupt, or was written for another model
-                structure (joints, output, features…); the current state is then left untouched.
+            CheckpointError: If the file is missing or corrupt, was written for another model structure
+                (joints, output, features…) or another robot (URDF name or CAD inertial parameters); the
+                current state is then left untouched.
         """
-        state = load_npz(Path(path).expanduser())
+        self.load_state(load_npz(Path(path).expanduser()), path)
+
+    def load_state(self, state: dict[str, np.ndarray], path: str | Path = "checkpoint") -> None:
+        """Restore the learned state from the arrays of a checkpoint already read (see :meth:`load`).
+
+        Args:
+            state: Checkpoint arrays (:func:`~semiparam_ros.core.checkpoint.load_npz`).
+            path: Where they came from, for messages.
+
+        Raises:
+            CheckpointError: As :meth:`load`.
+        """
         try:
             version = _scalar(state["meta.version"], int)
             fingerprint = _scalar(state["meta.fingerprint"], str)
@@ -772,18 +834,53 @@ class OnlineEstimator:
                                   f"{_fingerprint_difference(fingerprint, self._fingerprint())}")
         if n_learned < 0:
             raise CheckpointError(f"{path}: corrupt checkpoint: {n_learned} samples learned")
+        if "meta.robot" in state:  # checkpoints written before they were self-contained have none
+            self._check_robot(path, state["meta.robot"])
         model = self.model.copy()
+        noise = NoiseScale(self.model.n_outputs, self.noise.time_constant_s)
         try:
             model.load_state_dict(state, "model.")
+            if "noise.s2" in state:
+                noise.load_state_dict(state, "noise.")
         except CheckpointError as err:
             raise CheckpointError(f"{path}: {err}") from err
         except (TypeError, KeyError, IndexError, OverflowError, ValueError) as err:
             # e.g. a counter stored as a vector: the learners' checks expect scalars; still a bad file
             raise CheckpointError(f"{path}: corrupt checkpoint: {type(err).__name__}: {err}") from err
         self.model = model
+        self.noise = noise
         self.n_samples_learned = n_learned
         if self.forgetting is not None:
             self._apply_forgetting(self.forgetting)
+
+    def _check_robot(self, path: str | Path, saved: np.ndarray) -> None:
+        """Refuse a checkpoint learned on another robot (other URDF name or CAD inertial parameters)."""
+        try:
+            identity = json.loads(_scalar(saved, str))
+            name, cad = identity["name"], np.asarray(identity["cad_base_parameters"], dtype=np.float64)
+        except (TypeError, ValueError, KeyError) as err:
+            raise CheckpointError(f"{path}: corrupt checkpoint metadata meta.robot: {err}") from err
+        mine = self._robot_identity()
+        ours = np.asarray(mine["cad_base_parameters"])
+        if name != mine["name"]:
+            raise CheckpointError(f"{path}: checkpoint was learned on robot {name!r}, this configuration's "
+                                  f"URDF describes {mine['name']!r}")
+        if cad.shape != ours.shape or not np.allclose(cad, ours, rtol=1e-6, atol=1e-9):
+            raise CheckpointError(f"{path}: checkpoint was learned on a URDF of {name!r} with other inertial "
+                                  "parameters (its CAD prior differs from this configuration's URDF); use "
+                                  "the URDF it was learned with, or start afresh")
+
+
+def software_versions() -> dict[str, str]:
+    """Versions of the software a checkpoint is written with (semiparam_ros, Python, NumPy, Pinocchio)."""
+    import platform
+
+    import pinocchio
+
+    from semiparam_ros import __version__
+
+    return {"semiparam_ros": __version__, "python": platform.python_version(), "numpy": np.__version__,
+            "pinocchio": str(pinocchio.__version__)}
 
 
 def _gate_config(config: EstimatorConfig) -> GateConfig:

@@ -106,7 +106,18 @@ class ContactGate:
         """Restart: warm-up again, no excursion, counts to zero."""
         self._first_ns: int | None = None
         self._excursion_ns: int | None = None
+        self._warm = False  # the warm-up is over (stays so across recordings, see restart_stream)
         self.counts: dict[Verdict, int] = dict.fromkeys(Verdict, 0)
+
+    def restart_stream(self) -> None:
+        """Begin a new recording, whose stamps may lie before the last one.
+
+        No excursion is open; a warm-up already over stays over (the model it protects is not new), one
+        still running restarts.
+        """
+        self._excursion_ns = None
+        if not self._warm:
+            self._first_ns = None
 
     @property
     def in_excursion(self) -> bool:
@@ -127,10 +138,11 @@ class ContactGate:
         cfg = self.config
         if self._first_ns is None:
             self._first_ns = int(stamp_ns)
-        if (stamp_ns - self._first_ns) * 1e-9 < cfg.warmup_s:
+        if not self._warm and (stamp_ns - self._first_ns) * 1e-9 < cfg.warmup_s:
             verdict = Verdict.WARMUP
             self._excursion_ns = None
         else:
+            self._warm = True
             e = np.asarray(error, dtype=np.float64)
             s = np.asarray(std, dtype=np.float64)
             if e.ndim == 1 and e.shape == s.shape:

@@ -111,6 +111,34 @@ class NoiseScale:
         v = np.fmax(np.asarray(variance, dtype=np.float64), 0.0)  # fmax: NaN counts as 0
         return np.sqrt(self.s2 * (1.0 + v))
 
+    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Return the estimate as arrays (empty ``s2`` before the first sample)."""
+        return {f"{prefix}s2": np.array([] if self.s2 is None else self.s2, dtype=np.float64),
+                f"{prefix}last_ns": np.array(-1 if self._last_ns is None else self._last_ns, dtype=np.int64),
+                f"{prefix}n_samples": np.array(self.n_samples, dtype=np.int64)}
+
+    def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
+        """Replace the estimate by one written by :meth:`state_dict` (validated before anything changes).
+
+        Raises:
+            KeyError: A key is missing.
+            ValueError: Wrong size, a negative or non-finite variance, or a negative count.
+        """
+        s2 = np.asarray(state[f"{prefix}s2"], dtype=np.float64).reshape(-1)
+        last = int(np.asarray(state[f"{prefix}last_ns"]))
+        n = int(np.asarray(state[f"{prefix}n_samples"]))
+        if s2.size and (s2.shape != (self.n_outputs,) or not np.isfinite(s2).all() or (s2 < 0).any()):
+            raise ValueError(f"noise variance must be {self.n_outputs} finite values >= 0, got {s2}")
+        if n < 0:
+            raise ValueError(f"noise sample count must be >= 0, got {n}")
+        self.s2 = s2.copy() if s2.size else None
+        self._last_ns = None if last < 0 else last
+        self.n_samples = n
+
+    def restart_stream(self) -> None:
+        """Begin a new recording: its first sample's time step weighs nothing (the estimate is kept)."""
+        self._last_ns = None
+
     def skip(self, stamp_ns: int) -> None:
         """Let a sample pass without absorbing it (a gated contact): its time step weighs nothing.
 

@@ -38,6 +38,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from semiparam_ros.core.feedforward import DesiredState, FeedForwardCommand, TrajectoryPoint
 from semiparam_ros.core.messages import (
     JointStateData,
     WrenchData,
@@ -126,6 +127,63 @@ def joint_torques_msg(stamp_ns: int, joints: Sequence[str], torques: np.ndarray)
     msg.name = list(joints)
     msg.effort = tau.tolist()
     return msg
+
+
+def desired_state_from_msg(msg: Any) -> DesiredState:
+    """Convert a ``trajectory_msgs/JointTrajectory`` (or any object with its fields) to a desired state.
+
+    Args:
+        msg: The trajectory: ``header.stamp``, ``joint_names``, ``points`` with ``positions`` [rad],
+            ``velocities`` [rad/s], ``accelerations`` [rad/s²] and ``time_from_start``.
+
+    Returns:
+        The plain-array form (values are checked later, by
+        :class:`~semiparam_ros.core.feedforward.FeedForward`).
+
+    Raises:
+        RejectedSampleError: A stamp with ``nanosec ≥ 10⁹`` or negative, or non-numeric values.
+    """
+    stamp = msg.header.stamp
+    if not (0 <= stamp.nanosec < 1_000_000_000) or stamp.sec < 0:
+        raise RejectedSampleError(f"invalid header stamp {stamp.sec} s {stamp.nanosec} ns")
+    points = []
+    try:
+        for point in msg.points:
+            tfs = point.time_from_start
+            points.append(TrajectoryPoint(
+                int(tfs.sec) * 1_000_000_000 + int(tfs.nanosec),
+                np.asarray(point.positions, dtype=np.float64),
+                np.asarray(point.velocities, dtype=np.float64),
+                np.asarray(point.accelerations, dtype=np.float64)))
+    except (TypeError, ValueError) as err:
+        raise RejectedSampleError(f"a trajectory point holds non-numeric values: {err}") from err
+    return DesiredState(int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), tuple(msg.joint_names),
+                        tuple(points))
+
+
+def feedforward_msgs(command: FeedForwardCommand, joints: Sequence[str]
+                     ) -> tuple[Float64MultiArray, JointState, JointState]:
+    """Build the three feed-forward messages of a command.
+
+    Args:
+        command: The feed-forward command (order of ``joints``).
+        joints: The output joint names (``feedforward.joints``).
+
+    Returns:
+        ``(commands, state, std)``: a ``Float64MultiArray`` of τ_ff [N·m] in the order of a
+        ``JointGroupEffortController``'s ``~/commands``; a ``JointState`` (stamp = the evaluated time,
+        position/velocity = the desired state used, effort = τ_ff); a ``JointState`` whose effort is σ.
+    """
+    commands = Float64MultiArray()
+    commands.data = command.tau.tolist()
+    state = JointState()
+    state.header.stamp = stamp_msg(command.stamp_ns)
+    state.name = list(joints)
+    state.position = command.q.tolist()
+    state.velocity = command.dq.tolist()
+    state.effort = command.tau.tolist()
+    std = joint_torques_msg(command.stamp_ns, joints, command.std)
+    return commands, state, std
 
 
 def parameters_msg(names: Sequence[str], values: np.ndarray) -> Float64MultiArray:

@@ -110,14 +110,19 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from threadpoolctl import threadpool_limits
+from trajectory_msgs.msg import JointTrajectory
 
 from semiparam_ros.core.checkpoint import atomic_save_npz
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult, rmse_window_samples
+from semiparam_ros.core.feedforward import FeedForward
 from semiparam_ros.core.messages import JointStateData, WrenchData
+from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 from semiparam_ros.ros.conversions import (
     SerializedOutput,
+    desired_state_from_msg,
+    feedforward_msgs,
     joint_state_from_cdr,
     joint_state_from_msg,
     joint_torques_msg,
@@ -150,6 +155,11 @@ PARAMETERS_QOS = QoSProfile(
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 _OUTPUT_QOS = 100
+#: The feed-forward answers: reliable (what a JointGroupEffortController's ~/commands expects), shallow.
+_FF_QOS = 10
+#: Desired states: only the latest matters; best effort accepts reliable and best-effort publishers.
+_DESIRED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.VOLATILE)
 _LOG_THROTTLE_S = 5.0
 _BATCH = 50  # queued messages processed per turn of the executor (≈ 10–20 ms of learning at most)
 _SHUTDOWN_BUDGET_S = 10.0  # time allowed to learn the queue at shutdown (1000 messages take ≈ 0.2 s)
@@ -217,6 +227,16 @@ class EstimatorNode(Node):
             self.get_logger().info(
                 f"warm start from {self._ckpt_path} ({self._estimator.n_samples_learned} samples learned)")
         self._estimator.learning_enabled = bool(cfg["learning_enabled"])
+        self._serving = LearnedModel(self._estimator)  # the model at any state (feed-forward, gravity)
+        self._feedforward: FeedForward | None = None
+        self._desired_sub: Any = None
+        self._ff_latency_ms: list[float] = []  # desired state stamped → feed-forward published, this period
+        if self._output == "joint_torques":
+            try:
+                self._feedforward = FeedForward(self._serving, joints=cfg["feedforward.joints"] or None,
+                                                max_std=cfg["feedforward.max_std"])
+            except ConfigurationError as err:
+                raise StartupError(f"invalid parameter: {err}") from err
 
         # State shared by the executor thread and the checkpoint thread.
         self._model_lock = threading.Lock()
@@ -254,11 +274,20 @@ class EstimatorNode(Node):
             self._pub_external = publisher(WrenchStamped, "~/external_wrench", _OUTPUT_QOS)
             self._pub_std = publisher(WrenchStamped, "~/predicted_wrench/std", _OUTPUT_QOS)
         else:
-            self._pub_total = publisher(JointState, "predicted_joint_torques", _OUTPUT_QOS)
-            self._pub_param = self._pub_resid = None
+            self._pub_total = publisher(JointState, "~/predicted_joint_torques", _OUTPUT_QOS)
+            # the name outside ~/ of earlier releases, kept one release (deprecated, logged once)
+            self._pub_legacy = publisher(JointState, "predicted_joint_torques", _OUTPUT_QOS)
+            self._pub_param = publisher(JointState, "~/predicted_joint_torques/parametric", _OUTPUT_QOS)
+            self._pub_resid = publisher(JointState, "~/predicted_joint_torques/nonparametric", _OUTPUT_QOS)
             self._pub_model = publisher(JointState, "~/predicted_joint_torques/model", _OUTPUT_QOS)
             self._pub_external = publisher(JointState, "~/external_joint_torques", _OUTPUT_QOS)
             self._pub_std = publisher(JointState, "~/predicted_joint_torques/std", _OUTPUT_QOS)
+            self._pub_gravity = publisher(JointState, "~/gravity_torques", _OUTPUT_QOS)
+            self._pub_ff_commands = publisher(Float64MultiArray, "~/feedforward_commands", _FF_QOS)
+            self._pub_ff = publisher(JointState, "~/feedforward", _FF_QOS)
+            self._pub_ff_std = publisher(JointState, "~/feedforward/std", _FF_QOS)
+            self._desired_sub = self.create_subscription(JointTrajectory, "~/desired_state",
+                                                         self._on_desired_state, _DESIRED_QOS)
         self._pub_params = publisher(Float64MultiArray, "~/inertial_parameters", PARAMETERS_QOS)
         self._pub_diag = publisher(DiagnosticArray, "/diagnostics", 10)
 
@@ -299,6 +328,13 @@ class EstimatorNode(Node):
         self.add_post_set_parameters_callback(self._on_parameters_set)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(float(cfg["diagnostics.period"]), self._on_diagnostics_timer, clock=steady)
+        # The feed-forward is served from a copy of the model refreshed at a low rate (a model that changes
+        # at every sample makes the torque it commands jitter: docs/feedforward.md).
+        self._ff_version = -1
+        if self._feedforward is not None and cfg["feedforward.refresh_period"] > 0:
+            self._refresh_feedforward()
+            self.create_timer(float(cfg["feedforward.refresh_period"]), self._refresh_feedforward,
+                              clock=steady)
 
         # Catch-up of a backlog (more than a batch queued): a timer armed only while input is waiting
         # (timers work with every executor, guard conditions not with the EventsExecutor).
@@ -427,14 +463,16 @@ class EstimatorNode(Node):
 
         return count
 
-    def _warn_throttled(self, key: str, text: str | Callable[[], str]) -> None:
-        """Log a warning at most every ``_LOG_THROTTLE_S`` per ``key``; the text is built only when logged.
+    def _warn_throttled(self, key: str, text: str | Callable[[], str], *, once: bool = False) -> None:
+        """Log a warning at most every ``_LOG_THROTTLE_S`` per ``key`` (``once``: only the first time).
 
-        rclpy's own ``throttle_duration_sec`` inspects the caller's frame and source file on every call,
-        logged or not (≈ 0.35 ms): at 1 kHz of bad input that alone would stall the node.
+        The text is built only when logged. rclpy's own ``throttle_duration_sec`` inspects the caller's
+        frame and source file on every call, logged or not (≈ 0.35 ms): at 1 kHz of bad input that alone
+        would stall the node.
         """
         now = time.monotonic()
-        if now - self._last_warning.get(key, -math.inf) < _LOG_THROTTLE_S:
+        last = self._last_warning.get(key, -math.inf)
+        if now - last < _LOG_THROTTLE_S or (once and last > -math.inf):
             return
         self._last_warning[key] = now
         self.get_logger().warning(text() if callable(text) else text)
@@ -495,6 +533,7 @@ class EstimatorNode(Node):
             # and subtracts the pre-reset drops from the period's (WARN level), logging a bogus drop
             self._last_drop_total = 0
         self._stats.clear_errors()
+        self._refresh_feedforward()  # the reset model is served at once
         self._publish_parameters(force=True)
         if self._ckpt_path is not None:
             with self._ckpt_lock:
@@ -543,6 +582,19 @@ class EstimatorNode(Node):
         stats["drops_total"] = int(stats["queue_drops"]) + sum(  # type: ignore[call-overload]
             v for k, v in stats.items() if k.startswith("drops.") and isinstance(v, int))
         stats["checkpoint_path"] = str(self._ckpt_path or "")
+        ff = self._feedforward
+        if ff is not None:
+            for key, count in ff.counts.items():
+                stats[f"feedforward.{key}"] = count
+            stats["feedforward.ready"] = self._serving.ready
+            stats["feedforward.last_error"] = ff.last_error or ""
+            latency, self._ff_latency_ms = self._ff_latency_ms, []
+            if latency:  # stamped by the controller → published here, over the period
+                p50, p99 = np.percentile(latency, (50, 99))
+                stats["feedforward.age_p50_ms"] = float(p50)
+                stats["feedforward.age_p99_ms"] = float(p99)
+                stats["feedforward.age_max_ms"] = float(max(latency))
+                stats["feedforward.answered_in_period"] = len(latency)
         msg = diagnostic_array(self.get_clock().now().to_msg(), f"{self.get_name()}: online learning",
                                ",".join(self._joints), stats,
                                stalled=bool(stats["queue_length"]) and not stats["processed_in_period"])
@@ -573,6 +625,8 @@ class EstimatorNode(Node):
             cpu = time.thread_time()  # a system call (≈ 1 µs): once per batch, not per message
             n = min(len(queue), _BATCH)
             for _ in range(n):
+                if self._desired_sub is not None:
+                    self._serve_waiting_desired_state()  # a controller waits: it goes before learning
                 kind, data, t_recv = queue.popleft()
                 self._process(kind, data, t_recv)
             self._stats.add_learning_cpu(time.thread_time() - cpu, n)
@@ -637,10 +691,83 @@ class EstimatorNode(Node):
         pub = self._pub_model
         if pub.get_subscription_count():  # the model alone: the prediction without the fast correction
             pub.publish(fill(stamp, pred.total if pred.correction is None else pred.total - pred.correction))
+        if self._output == "joint_torques":
+            self._publish_joint_extras(result)
         for pub, value in ((self._pub_param, pred.parametric), (self._pub_resid, pred.residual),
                            (self._pub_std, result.std)):
             if value is not None and pub is not None and pub.get_subscription_count():
                 pub.publish(fill(stamp, value))
+
+    def _publish_joint_extras(self, result: StepResult) -> None:
+        """Joint-torque mode: the deprecated un-namespaced prediction and the gravity torques at q."""
+        fill = self._out_template.fill  # type: ignore[union-attr]
+        stamp = result.sample.stamp_ns
+        if self._pub_legacy.get_subscription_count():
+            self._warn_throttled("legacy topic", "a subscriber reads predicted_joint_torques outside the "
+                                 "node's namespace: deprecated, use ~/predicted_joint_torques", once=True)
+            self._pub_legacy.publish(fill(stamp, result.prediction.total))
+        if self._pub_gravity.get_subscription_count() and self._estimator.parameters is not None:
+            with self._model_lock:
+                gravity = self._serving.gravity(result.sample.q)
+            self._pub_gravity.publish(fill(stamp, gravity))
+
+    # ================================================================== feed-forward (executor thread)
+    def _refresh_feedforward(self) -> None:
+        """Serve a fresh copy of the model to the feed-forward, if learning changed it since the last."""
+        ff = self._feedforward
+        if ff is None or self.config["feedforward.refresh_period"] <= 0 or self._ff_version == self._version:
+            return
+        with self._model_lock:
+            ff.model = self._serving.snapshot()
+            self._ff_version = self._version
+
+    def _serve_waiting_desired_state(self) -> None:
+        """Answer a desired state already waiting in DDS before the next queued sample is learned.
+
+        The same take the executor makes (see :meth:`_drain`): the wait of a controller is bounded by
+        one sample's learning instead of a batch of them.
+        """
+        sub = self._desired_sub
+        try:
+            with sub.handle:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+        except Exception:  # the subscription is being destroyed: the executor will notice
+            return
+        if taken is not None:
+            self._on_desired_state(taken[0])
+
+    def _on_desired_state(self, msg: JointTrajectory) -> None:
+        """Answer a desired state at once with the model's torques (see core.feedforward).
+
+        Its age when answered (node clock at publish − header stamp, for stamped messages: a controller
+        stamps what it sends with its time) is reported in diagnostics (``feedforward.age_*``).
+        """
+        ff = self._feedforward
+        assert ff is not None  # subscribed in joint-torque mode only
+        try:
+            desired = desired_state_from_msg(msg)
+        except RejectedSampleError as err:
+            ff.counts["drops.non_finite"] += 1
+            ff.last_error = text = str(err)
+            self._warn_throttled("desired state", lambda: f"desired state dropped: {text}")
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        with self._model_lock:
+            command = ff.compute(desired, now_ns)
+        if command is None:
+            self._warn_throttled("desired state", lambda: f"desired state dropped: {ff.last_error}")
+            return
+        commands, state, std = feedforward_msgs(command, ff.joints)
+        for pub, out in ((self._pub_ff_commands, commands), (self._pub_ff, state), (self._pub_ff_std, std)):
+            if pub.get_subscription_count():  # each only where someone listens (nobody else can tell)
+                pub.publish(out)
+        if desired.stamp_ns > 0 and len(self._ff_latency_ms) < 100_000:
+            self._ff_latency_ms.append(1e-6 * (self.get_clock().now().nanoseconds - desired.stamp_ns))
+        if command.reason is not None:
+            self._warn_throttled(f"feedforward {command.reason}", lambda: (
+                "feed-forward falls back to the rigid-body part: " + (
+                    "the model is not ready (residual warm-up)" if command.reason == "not_ready"
+                    else f"its std exceeds feedforward.max_std = {ff.max_std:g} N·m")))
 
     # ================================================================== checkpoint thread
     def _checkpoint_loop(self) -> None:

@@ -64,6 +64,7 @@ __all__ = [
     "arm_regressor",
     "perturb_parameters",
     "simulate_arm",
+    "true_parameters",
 ]
 
 
@@ -488,6 +489,27 @@ def _rms(x: np.ndarray) -> list[float]:
     return [float(v) for v in np.sqrt(np.mean(np.asarray(x) ** 2, axis=0))]
 
 
+def true_parameters(config: ArmScenarioConfig) -> np.ndarray:
+    """Return the true rigid-body parameters of a recording's physical robot, before any payload.
+
+    They depend on (robot, seed, perturbation) only: every recording — and the closed-loop plant of
+    :mod:`semiparam_ros.sim.closed_loop` — of one robot and seed is the same physical robot.
+
+    Args:
+        config: The scenario (its ``robot``, ``seed`` and ``perturbation`` are read).
+
+    Returns:
+        Per body ``[m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` (kg, kg·m, kg·m²), the columns of
+        :func:`arm_regressor`.
+    """
+    spec = ARM_ROBOTS[config.robot]
+    params_urdf = arm_regressor(config.robot).urdf_parameters()
+    if config.perturbation is None:
+        return params_urdf.copy()
+    robot_rng = np.random.default_rng([int(config.seed), zlib.crc32(spec.name.encode())])
+    return perturb_parameters(params_urdf, config.perturbation, robot_rng)
+
+
 def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     """Simulate one arm recording (module docstring).
 
@@ -504,8 +526,7 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     reg = arm_regressor(config.robot)
     kin = _kinematics(config.robot)
     n = len(spec.joints)
-    # Physical robot: (robot, seed). Recording: (seed, name) → trajectory, noise, contacts.
-    robot_rng = np.random.default_rng([int(config.seed), zlib.crc32(spec.name.encode())])
+    # Physical robot: (robot, seed) → true_parameters. Recording: (seed, name) → trajectory, noise, contacts.
     rec_seq = np.random.SeedSequence([int(config.seed), zlib.crc32(config.name.encode())])
     rng_traj, rng_joint, rng_torque, rng_contact = (np.random.default_rng(s) for s in rec_seq.spawn(4))
 
@@ -530,11 +551,7 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
         raise ValueError(f"the excitation leaves the joint limits by {-margin:.3g} rad")
 
     params_urdf = reg.urdf_parameters()
-    params_before = (
-        params_urdf.copy()
-        if config.perturbation is None
-        else perturb_parameters(params_urdf, config.perturbation, robot_rng)
-    )
+    params_before = true_parameters(config)
     params_after = params_before.copy()
     pickup = config.pickup_time
     payload_info: dict[str, Any] | None = None

@@ -1,0 +1,212 @@
+"""Benchmark: latency desired state → feed-forward published, with the node learning at 1 kHz.
+
+Starts the node (``python -m semiparam_ros.ros.estimator_node`` with ``config/panda.yaml``: 7 joints,
+joint torques, D = 500) as a separate process, then streams over Fast DDS on loopback, from this process:
+``/joint_states`` at ``--hz`` (a smooth motion whose efforts are the URDF's RNEA torques plus noise, so the
+node learns every sample) and ``/estimator/desired_state`` (``trajectory_msgs/JointTrajectory``, one
+point, stamped with the wall clock at publish) at the same rate, half a period later. Two latencies per
+desired state: the round trip, publish call → receipt of ``/estimator/feedforward`` carrying its stamp
+(this process's clock: the transport both ways and this client's own scheduling included), and the node's
+own measure, stamp → feed-forward published (``feedforward.age_*`` of its diagnostics: transport in, the
+wait behind learning, the prediction, the publish). Runs learning on and off side by side; prints a table
+and writes ``bench/results/bench_feedforward.json``. Target: p99 < 1 ms at 1 kHz.
+
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_feedforward.py [--seconds 20] [--hz 1000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIG = REPO / "config" / "panda.yaml"
+RESULTS = REPO / "bench" / "results" / "bench_feedforward.json"
+
+
+def _percentiles(values: list[float]) -> dict[str, float]:
+    if not values:
+        return {"n": 0}
+    a = np.asarray(values)
+    return {"n": int(a.size), "p50": float(np.percentile(a, 50)), "p90": float(np.percentile(a, 90)),
+            "p99": float(np.percentile(a, 99)), "p999": float(np.percentile(a, 99.9)), "max": float(a.max())}
+
+
+def run(seconds: float, hz: float, learning: bool, tmp: Path) -> dict:
+    """Start the node, stream joint states and desired states, return the measured latencies."""
+    import rclpy
+    from builtin_interfaces.msg import Duration
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.core.estimator import build_regressor
+
+    config = load_config(CONFIG)
+    joints = list(config["robot.joints"])
+    regressor = build_regressor(config)
+    cad = regressor.urdf_parameters()
+    n = len(joints)
+
+    domain = 1 + (os.getpid() * 13 + (7 if learning else 0)) % 100
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
+    os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR")})
+    log_path = tmp / f"node_{'learning' if learning else 'frozen'}.log"
+    log = open(log_path, "w")
+    cmd = [sys.executable, "-m", "semiparam_ros.ros.estimator_node", "--ros-args", "--params-file",
+           str(CONFIG), "-p", f"learning_enabled:={'true' if learning else 'false'}",
+           "-p", "diagnostics.period:=0.5"]
+    proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
+    ps = psutil.Process(proc.pid)
+
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = Node("bench_feedforward", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    received: dict[int, float] = {}
+    diagnostics: list[dict[str, str]] = []
+    lock = threading.Lock()
+
+    def on_ff(msg: JointState) -> None:
+        now = time.perf_counter()
+        with lock:
+            received[msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec] = now
+
+    def on_diag(msg: DiagnosticArray) -> None:
+        with lock:
+            diagnostics.append({kv.key: kv.value for kv in msg.status[0].values})
+
+    node.create_subscription(JointState, "/estimator/feedforward", on_ff,
+                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+    js_pub = node.create_publisher(JointState, "/joint_states",
+                                   QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+    ds_pub = node.create_publisher(JointTrajectory, "/estimator/desired_state", 10)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    sent: dict[int, float] = {}
+    try:
+        deadline = time.monotonic() + 60.0
+        while (node.count_subscribers("/joint_states") == 0 or node.count_subscribers(
+                "/estimator/desired_state") == 0 or node.count_publishers("/estimator/feedforward") == 0):
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise RuntimeError("the node did not come up:\n" + log_path.read_text())
+            time.sleep(0.05)
+        time.sleep(1.0)
+        rng = np.random.default_rng(0)
+        period = 1.0 / hz
+        count = int(seconds * hz)
+        base_ns = 1_000_000_000_000
+        w = 2 * np.pi * np.array([0.11, 0.13, 0.17, 0.19, 0.23, 0.29, 0.31])
+        cpu0, wall0 = ps.cpu_times(), time.perf_counter()
+        start = time.perf_counter()
+        for k in range(count):
+            t = k * period
+            q, dq, ddq = 0.5 * np.sin(w * t), 0.5 * w * np.cos(w * t), -0.5 * w * w * np.sin(w * t)
+            q[3] -= 1.5
+            tau = regressor.regressor(q, dq, ddq) @ cad + 0.05 * rng.standard_normal(n)
+            stamp = base_ns + k * 1_000_000
+            js = JointState()
+            js.header.stamp.sec, js.header.stamp.nanosec = divmod(stamp, 10**9)
+            js.name, js.position, js.velocity, js.effort = joints, q.tolist(), dq.tolist(), tau.tolist()
+            target = start + t
+            while (now := time.perf_counter()) < target:
+                time.sleep(min(target - now, 2e-4))
+            js_pub.publish(js)
+            target = start + t + 0.5 * period
+            ds = JointTrajectory()
+            ds.joint_names = joints
+            point = JointTrajectoryPoint(positions=q.tolist(), velocities=dq.tolist(),
+                                         accelerations=ddq.tolist(), time_from_start=Duration())
+            ds.points = [point]
+            while (now := time.perf_counter()) < target:
+                time.sleep(min(target - now, 2e-4))
+            ds_stamp = time.time_ns()  # a controller stamps with its clock: the node reports the age
+            ds.header.stamp.sec, ds.header.stamp.nanosec = divmod(ds_stamp, 10**9)
+            sent[ds_stamp] = time.perf_counter()
+            ds_pub.publish(ds)
+        play_s = time.perf_counter() - start
+        time.sleep(1.5)
+        cpu1, wall1 = ps.cpu_times(), time.perf_counter()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        log.close()
+    with lock:
+        got = dict(received)
+        diag = diagnostics[-1] if diagnostics else {}
+        all_diag = list(diagnostics)
+    latency = [1e3 * (got[s] - t) for s, t in sent.items() if s in got]
+    skip = int(0.1 * len(latency))  # the first 10 %: the node's caches and the residual's warm-up
+    node_p99 = [float(d["feedforward.age_p99_ms"]) for d in all_diag[2:]
+                if "feedforward.age_p99_ms" in d]
+    node_p50 = [float(d["feedforward.age_p50_ms"]) for d in all_diag[2:]
+                if "feedforward.age_p50_ms" in d]
+    cpu = (cpu1.user - cpu0.user) + (cpu1.system - cpu0.system)
+    return {"learning": learning, "hz": hz, "seconds": seconds, "play_s": play_s,
+            "desired_sent": len(sent), "feedforward_received": len(latency),
+            "latency_ms": _percentiles(latency[skip:]),
+            "node_latency_ms": {"p50_median_of_periods": float(np.median(node_p50)) if node_p50 else None,
+                                "p99_median_of_periods": float(np.median(node_p99)) if node_p99 else None,
+                                "p99_max_of_periods": max(node_p99, default=None)},
+            "node_cpu_percent": 100.0 * cpu / (wall1 - wall0),
+            "samples_learned": int(diag.get("samples_learned", "0")),
+            "feedforward_diagnostics": {k: v for k, v in diag.items() if k.startswith("feedforward.")},
+            "load_average_1min": os.getloadavg()[0]}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seconds", type=float, default=20.0)
+    p.add_argument("--hz", type=float, default=1000.0)
+    p.add_argument("--output", type=Path, default=RESULTS)
+    args = p.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="bench_ff_"))
+    runs = [run(args.seconds, args.hz, learning, tmp) for learning in (True, False)]
+    print("| node | desired states | answered | round trip p50 / p90 / p99 / p99.9 / max [ms] | "
+          "stamped → published p50 / p99 (median of periods) / worst period p99 [ms] | node CPU |")
+    print("|---|---|---|---|---|---|")
+    for r in runs:
+        lat, nl = r["latency_ms"], r["node_latency_ms"]
+        mode = "learning" if r["learning"] else "not learning"
+        print(f"| {mode} at {r['hz']:g} Hz | {r['desired_sent']} | "
+              f"{r['feedforward_received']} | {lat['p50']:.2f} / {lat['p90']:.2f} / {lat['p99']:.2f} / "
+              f"{lat['p999']:.2f} / {lat['max']:.1f} | {nl['p50_median_of_periods']:.2f} / "
+              f"{nl['p99_median_of_periods']:.2f} / {nl['p99_max_of_periods']:.2f} | "
+              f"{r['node_cpu_percent']:.0f} % |")
+    out = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/bench_feedforward.py",
+           "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                       "processor": platform.processor() or platform.machine()},
+           "target": "p99 < 1 ms at 1 kHz", "runs": runs}
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(out, indent=2))
+    print(f"wrote {args.output}")
+
+
+if __name__ == "__main__":
+    main()

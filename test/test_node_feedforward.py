@@ -1,0 +1,229 @@
+"""The node serves controllers over DDS: ``~/desired_state`` → ``~/feedforward*``, ``~/gravity_torques``,
+and a short closed loop of a simulated torque-controlled Panda driven through it.
+
+Expected values come from :func:`semiparam_ros.load_model` on the checkpoint the node warm-starts from
+(the node does not learn in the first test, so both hold one model), and the closed loop is compared with
+the same loop run in-process with the CAD model's feed-forward (RNEA on the URDF).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_helpers import REPO, NodeProcess, TestClient, diagnostic_values, make_ros_env
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from semiparam_ros import load_model
+from semiparam_ros.core.config import load_config
+from semiparam_ros.io.learn import learn_bags
+from semiparam_ros.sim.arm_writer import write_arm_recording
+from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
+from semiparam_ros.sim.closed_loop import ArmPlant, desired_trajectory, pd_gains, run_loop
+
+pytestmark = pytest.mark.ros
+
+PANDA = REPO / "config" / "panda.yaml"
+D = 100
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    root = tmp_path_factory.mktemp("ff_node")
+    rec = simulate_arm(ArmScenarioConfig(name="panda_ff", robot="panda", duration=20.0, rate=200.0, seed=0))
+    bag = write_arm_recording(rec, root / "panda_ff")
+    config = load_config(PANDA).with_overrides({"nonparametric.n_features": D})
+    learn_bags([bag], config, checkpoint=root / "panda.npz")
+    return root / "panda.npz"
+
+
+@pytest.fixture
+def ros_env(tmp_path, monkeypatch):
+    return make_ros_env(tmp_path, monkeypatch)
+
+
+def _trajectory(names, stamp_ns, q, dq=None, ddq=None):
+    msg = JointTrajectory()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 10**9)
+    msg.joint_names = list(names)
+    point = JointTrajectoryPoint(positions=[float(v) for v in q], time_from_start=Duration())
+    if dq is not None:
+        point.velocities = [float(v) for v in dq]
+    if ddq is not None:
+        point.accelerations = [float(v) for v in ddq]
+    msg.points = [point]
+    return msg
+
+
+def _stamp(msg):
+    return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+
+
+def _node(ros_env, checkpoint, *params):
+    return NodeProcess(ros_env, [f"nonparametric.n_features:={D}", f"checkpoint.path:={checkpoint}",
+                                 "checkpoint.period:=0.0", "diagnostics.period:=0.2", *params],
+                       params_file=PANDA)
+
+
+def test_feedforward_gravity_and_parts_over_dds(ros_env, checkpoint, tmp_path):
+    model = load_model(checkpoint)
+    joints = model.joints
+    out_order = list(reversed(joints))
+    ckpt = tmp_path / "copy.npz"
+    ckpt.write_bytes(checkpoint.read_bytes())
+    node = _node(ros_env, ckpt, "learning_enabled:=false",
+                 "feedforward.joints:=[" + ",".join(out_order) + "]")
+    client = TestClient(ros_env)
+    try:
+        commands = client.collect(Float64MultiArray, "/estimator/feedforward_commands")
+        states = client.collect(JointState, "/estimator/feedforward")
+        stds = client.collect(JointState, "/estimator/feedforward/std")
+        gravity = client.collect(JointState, "/estimator/gravity_torques")
+        parametric = client.collect(JointState, "/estimator/predicted_joint_torques/parametric")
+        diagnostics = client.collect(DiagnosticArray, "/diagnostics")
+        desired_pub = client.node.create_publisher(JointTrajectory, "/estimator/desired_state", 10)
+        js_pub = client.node.create_publisher(JointState, "/joint_states",
+                                              QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        assert client.wait_for_publisher("/estimator/feedforward", timeout=60.0), node.output()
+        deadline = time.monotonic() + 30
+        while client.node.count_subscribers("/estimator/desired_state") == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+
+        rng = np.random.default_rng(0)
+        perm = rng.permutation(7)
+        names = [joints[i] for i in perm]
+        sent = {}
+        for k in range(3):
+            q, dq, ddq = rng.uniform(-1, 1, 7), rng.uniform(-1, 1, 7), rng.uniform(-2, 2, 7)
+            q[3] = -1.5
+            stamp = 10**9 * (k + 1)
+            sent[stamp] = (q, dq, ddq)
+            desired_pub.publish(_trajectory(names, stamp, q[perm], dq[perm], ddq[perm]))
+            time.sleep(0.1)
+        # bad ones: an unknown joint, NaN, a short point — counted, never answered
+        # (one at a time: the input keeps only the latest desired state, by design)
+        for msg in (_trajectory([*names[:-1], "gripper"], 5 * 10**9, np.zeros(7)),
+                    _trajectory(names, 6 * 10**9, np.r_[np.nan, np.zeros(6)]),
+                    _trajectory(names, 7 * 10**9, np.zeros(6))):
+            desired_pub.publish(msg)
+            time.sleep(0.1)
+        # missing velocities/accelerations: zeros with a counted warning
+        q4 = np.r_[0.1, 0.2, 0.3, -1.2, 0.1, 1.0, 0.2]
+        sent[8 * 10**9] = (q4, np.zeros(7), np.zeros(7))
+        desired_pub.publish(_trajectory(names, 8 * 10**9, q4[perm]))
+        # joint states for ~/gravity_torques (at the measured posture) and the parts
+        for k in range(40):
+            js = JointState()
+            js.header.stamp.sec, js.header.stamp.nanosec = 20 + k // 100, (k % 100) * 10_000_000
+            js.name = list(joints)
+            js.position = [0.1 * np.sin(0.1 * k + i) for i in range(7)]
+            js.position[3] -= 1.5
+            js.velocity = [0.0] * 7
+            js.effort = [1.0] * 7
+            js_pub.publish(js)
+            time.sleep(0.01)
+        assert states.wait_for(lambda m: len(m) >= 4, timeout=10.0), node.output()
+        assert gravity.wait_for(lambda m: len(m) >= 10, timeout=10.0), node.output()
+        assert parametric.wait_for(lambda m: len(m) >= 10, timeout=10.0), node.output()
+        time.sleep(0.5)
+        assert diagnostics.wait_for(
+            lambda m: diagnostic_values(m[-1]).get("feedforward.published") == str(len(sent)), 10.0)
+        diag = diagnostic_values(diagnostics.snapshot()[-1])
+    finally:
+        client.close()
+        code = node.stop()
+    assert code == 0, node.output()
+
+    back = [joints.index(j) for j in out_order]
+    got = {_stamp(m): m for m in states.snapshot()}
+    assert set(got) == set(sent), (sorted(got), sorted(sent))  # the bad ones were never answered
+    assert len(commands.snapshot()) == len(stds.snapshot()) == len(sent)
+    for stamp, (q, dq, ddq) in sent.items():
+        msg = got[stamp]
+        expected = model.predict(q, dq, ddq)[0]
+        assert list(msg.name) == out_order
+        scale = 1 + np.abs(expected).max()
+        np.testing.assert_allclose(msg.effort, expected[back], rtol=0, atol=1e-9 * scale)
+        np.testing.assert_allclose(msg.position, q[back], rtol=0, atol=0)
+    for cmd in commands.snapshot():
+        assert np.isfinite(cmd.data).all() and len(cmd.data) == 7
+    for g in gravity.snapshot():
+        np.testing.assert_allclose(g.effort, model.gravity(_posture(g)), rtol=0, atol=1e-9)
+    assert diag["feedforward.drops.unknown_joint"] == "1"
+    assert diag["feedforward.drops.non_finite"] == "1" and diag["feedforward.drops.wrong_length"] == "1"
+    assert int(diag["feedforward.missing_velocities"]) >= 1
+    assert diag["feedforward.published"] == str(len(sent))
+
+
+def _posture(msg):
+    """The measured posture the node evaluated ~/gravity_torques at: the joint state of that stamp."""
+    k = round((_stamp(msg) - 20 * 10**9) / 10_000_000)
+    q = np.array([0.1 * np.sin(0.1 * k + i) for i in range(7)])
+    q[3] -= 1.5
+    return q
+
+
+def test_short_closed_loop_through_the_node(ros_env, checkpoint, tmp_path):
+    """A 1.5 s loop at 1 kHz in lockstep over DDS: the learned feed-forward beats the CAD one ≥ 2×."""
+    rate, seconds = 1000.0, 1.5  # the gains' rule (2 Hz on the CAD diagonal) needs a 1 kHz loop
+    plant = ArmPlant("panda", seed=0)
+    t, qd, dqd, ddqd = desired_trajectory("panda", 777, seconds, rate)
+    kp, kd = pd_gains(plant, qd[0])
+    model = load_model(checkpoint)
+    cad_ff = model.cad(qd, dqd, ddqd)
+    cad = run_loop(plant, t, qd, dqd, ddqd, lambda k, *_: cad_ff[k], kp, kd, seed=2)
+
+    ckpt = tmp_path / "copy.npz"
+    ckpt.write_bytes(checkpoint.read_bytes())
+    node = _node(ros_env, ckpt)  # learning on: the node goes on learning from the loop's joint states
+    client = TestClient(ros_env)
+    joints = list(model.joints)
+    replies: dict[int, np.ndarray] = {}
+    cond = threading.Condition()
+
+    def on_ff(msg):
+        with cond:
+            replies[_stamp(msg)] = np.asarray(msg.effort)
+            cond.notify_all()
+
+    try:
+        client.node.create_subscription(JointState, "/estimator/feedforward", on_ff, 100)
+        desired_pub = client.node.create_publisher(JointTrajectory, "/estimator/desired_state", 10)
+        js_pub = client.node.create_publisher(JointState, "/joint_states",
+                                              QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        assert client.wait_for_publisher("/estimator/feedforward", timeout=60.0), node.output()
+        deadline = time.monotonic() + 30
+        while client.node.count_subscribers("/estimator/desired_state") == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        base = 100 * 10**9
+
+        def feed(k, tk, q_m, dq_m, tau):
+            js = JointState()
+            js.header.stamp.sec, js.header.stamp.nanosec = divmod(base + round(tk * 1e9), 10**9)
+            js.name, js.position, js.velocity, js.effort = joints, q_m.tolist(), dq_m.tolist(), tau.tolist()
+            js_pub.publish(js)
+
+        def over_dds(k, tk, q, dq, ddq, *_):
+            stamp = base + round(tk * 1e9)
+            desired_pub.publish(_trajectory(joints, stamp, q, dq, ddq))
+            with cond:
+                assert cond.wait_for(lambda: stamp in replies, timeout=5.0), node.output()
+                return replies[stamp]
+
+        learned = run_loop(plant, t, qd, dqd, ddqd, over_dds, kp, kd, seed=2, measured=feed)
+    finally:
+        client.close()
+        code = node.stop()
+    assert code == 0, node.output()
+    rms_cad = np.sqrt(np.mean(cad.errors(0.5) ** 2))
+    rms_learned = np.sqrt(np.mean(learned.errors(0.5) ** 2))
+    assert rms_learned < 0.5 * rms_cad, (rms_learned, rms_cad)
