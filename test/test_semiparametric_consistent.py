@@ -162,3 +162,32 @@ def test_tracker_fades_with_the_state_distance():
     assert tr.weight(np.array([0.1, 0, 0, 0, 0, 0])) == pytest.approx(math.exp(-0.5))
     assert tr.weight(np.array([0, 0, 0, 2.0, 0, 0])) == pytest.approx(math.exp(-2.0))
     assert tr.weight(np.array([0, 0, 0, 0, 50.0, 50.0])) == 1.0  # accelerations do not count
+
+
+def sparse_regressor(x: np.ndarray) -> np.ndarray:
+    """The regressor above with a structurally zero entry per row (a joint-torque regressor's shape)."""
+    q1, q2, dq1 = x[0], x[1], x[2]
+    return np.array([[math.sin(q1), dq1, 0.0], [0.0, q1 * dq1, 0.5]])
+
+
+def test_residual_keeps_only_the_regressor_entries_that_are_not_zero(monkeypatch):
+    """Learning the identically zero entries of Φ as targets changes nothing but the cost: the model that
+    drops them predicts bit for bit what the full regression predicts, on every sample and after."""
+    import semiparam_ros.core.semiparametric_consistent as mod
+
+    args = dict(lam_parametric=1e-2, lam_nonparametric=1e-1, n_features=60, sigma=1.5, seed=3,
+                standardizer=STD, novelty_scale=0.05, tracker=True)
+    reduced = ConsistentSemiparametricModel(sparse_regressor, 3, 6, 2, **args)
+    np.testing.assert_array_equal(reduced._phi_entries, [0, 1, 4, 5])
+    assert reduced.nonparametric.n_outputs == 2 + 4
+    monkeypatch.setattr(mod, "structural_entries", lambda reg, n_in, t, p, samples=8: np.arange(t * p))
+    full = ConsistentSemiparametricModel(sparse_regressor, 3, 6, 2, **args)
+    assert full.nonparametric.n_outputs == 2 + 6
+    X, Y = data(300, 5)
+    for x, y in zip(X, Y, strict=True):
+        a, b = reduced.predict_learn_one(x, y), full.predict_learn_one(x, y)
+        np.testing.assert_array_equal(a.total, b.total)
+    Xt, _ = data(20, 6)
+    np.testing.assert_array_equal(reduced.predict_model_many(Xt).total, full.predict_model_many(Xt).total)
+    with pytest.raises(CheckpointError, match="regressor entries"):
+        reduced.load_state_dict(full.state_dict())

@@ -82,7 +82,7 @@ from semiparam_ros.core.semiparametric import (
 from semiparam_ros.core.validation import check_finite_array, check_positive_int, check_range
 from semiparam_ros.errors import CheckpointError
 
-__all__ = ["ConsistentSemiparametricModel", "ErrorTracker"]
+__all__ = ["ConsistentSemiparametricModel", "ErrorTracker", "structural_entries"]
 
 
 class ErrorTracker:
@@ -246,6 +246,37 @@ class ErrorTracker:
         self.n_errors = n_errors
 
 
+def structural_entries(regressor: Regressor, n_inputs: int, n_outputs: int, n_params: int,
+                       samples: int = 8) -> np.ndarray:
+    """Flat indices of the entries of ``Φ(x)`` (t × p) that are not identically zero.
+
+    Found at ``samples`` random inputs (standard normal, a fixed seed: the same indices every time): an
+    entry zero at all of them is structurally zero (a smooth function of the state vanishing on a set of
+    measure zero is not hit by chance).
+
+    Args:
+        regressor: Maps x (n_inputs,) to Φ (n_outputs, n_params).
+        n_inputs: Length of x.
+        n_outputs: t.
+        n_params: p.
+        samples: Random inputs tried.
+
+    Returns:
+        Sorted int64 indices into ``Φ.reshape(-1)``.
+
+    Example:
+        >>> import numpy as np
+        >>> structural_entries(lambda x: np.array([[x[0], 0.0], [1.0, x[1] ** 2]]), 2, 2, 2)
+        array([0, 2, 3])
+    """
+    rng = np.random.default_rng(20161)
+    nonzero = np.zeros(n_outputs * n_params, dtype=bool)
+    for _ in range(samples):
+        Phi = np.asarray(regressor(rng.standard_normal(n_inputs)), dtype=np.float64)
+        nonzero |= Phi.reshape(-1) != 0.0
+    return np.flatnonzero(nonzero).astype(np.int64)
+
+
 class _Context(PredictionContext):
     """A prediction context that also keeps the local tracker's reference prediction and weight at x."""
 
@@ -321,7 +352,12 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.parametric = ParametricModel(regressor, n_params, n_outputs, lam=lam_parametric,
                                           forgetting=forgetting_parametric, prior=prior)
         p, t = self.parametric.n_params, self.parametric.n_outputs
-        self.nonparametric = NonparametricModel(int(n_inputs), t * (1 + p), n_features=n_features,
+        # the residual regresses y and the entries of Φ that are not identically zero (about half of a
+        # joint-torque regressor's: a joint's torque does not depend on the bodies before it, friction
+        # columns are diagonal); the others would only be learned as zeros at the cost of their columns
+        self._phi_entries = structural_entries(regressor, int(n_inputs), t, p)
+        self.nonparametric = NonparametricModel(int(n_inputs), t + self._phi_entries.size,
+                                                n_features=n_features,
                                                 sigma=sigma, lam=lam_nonparametric,
                                                 forgetting=forgetting_nonparametric, seed=seed,
                                                 standardizer=standardizer,
@@ -376,7 +412,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         assert v is not None  # asked for
         pk = P[0]
         delta = par_model.rls.weights[:, 0]
-        r = pk[:t] - pk[t:].reshape(t, p) @ delta
+        r = pk[:t] - self._expand(pk[t:]) @ delta
         nu = npm.rls.lam * float(v[0])
         r *= math.exp(-((nu / self.novelty_scale) ** 2))
         return yp, r, var + float(v[0]), phi
@@ -396,6 +432,12 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         fast = model_total + (kappa_fast * self.fast_weight(c, v)) * c
         total = fast + kappa * self.tracker.estimate
         return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
+
+    def _expand(self, values: np.ndarray) -> np.ndarray:
+        """The (t, p) matrix of the residual's Φ part from its learned entries (zeros elsewhere)."""
+        full = np.zeros(self.n_outputs * self.n_params)
+        full[self._phi_entries] = values
+        return full.reshape(self.n_outputs, self.n_params)
 
     def fast_weight(self, c: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Weight of the fast rigid-body correction per output, in [0, 1]: ``max(0, 1 − 9 r̂ v / c²)``.
@@ -465,7 +507,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             P, v = npm.rls._predict_valid(phi, True)
             assert v is not None  # asked for
             delta = par_model.rls.weights[:, 0]
-            r = P[:, :t] - P[:, t:].reshape(n, t, p) @ delta
+            full = np.zeros((n, t * p))
+            full[:, self._phi_entries] = P[:, t:]
+            r = P[:, :t] - full.reshape(n, t, p) @ delta
             nu = npm.rls.lam * v
             r *= np.exp(-((nu / self.novelty_scale) ** 2))[:, None]
             var = var + v[:, None]
@@ -496,7 +540,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             npm.standardizer.partial_fit(xv)
             par_model.rls._defer_checked(par_step)
         else:
-            u = np.concatenate([target, Phi.reshape(-1)]).reshape(1, -1)
+            u = np.concatenate([target, Phi.reshape(-1)[self._phi_entries]]).reshape(1, -1)
             np_step = RecursiveRLS._checked_step(phi, u, owned=True)
             par_model.rls._defer_checked(par_step)
             npm.rls._defer_checked(np_step)
@@ -535,6 +579,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the learners' and the tracker's state as arrays."""
         state = super().state_dict(prefix)
+        state[f"{prefix}phi_entries"] = self._phi_entries.copy()
         state.update(self.tracker.state_dict(f"{prefix}tracker."))
         state.update(self.fast.state_dict(f"{prefix}fast."))
         return state
@@ -550,6 +595,11 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                                velocity_scale=self.tracker.velocity_scale,
                                stats_samples=self.tracker.stats_samples)
         tracker.load_state_dict(state, f"{prefix}tracker.")
+        entries = state.get(f"{prefix}phi_entries")
+        if entries is None or not np.array_equal(np.asarray(entries), self._phi_entries):
+            raise CheckpointError("the residual's regressor entries differ from this model's (a checkpoint "
+                                  "of another robot or structure, or one written before the residual "
+                                  "kept only the regressor's non-zero entries: learn it again)")
         fast = RecursiveRLS.from_state_dict(state, f"{prefix}fast.")
         if fast.n_features != self.n_params or fast.n_outputs != 1:
             raise CheckpointError(f"the fast correction's state has {fast.n_features} parameters, expected "
