@@ -166,7 +166,7 @@ def test_tracker_fades_with_the_state_distance():
 
 def sparse_regressor(x: np.ndarray) -> np.ndarray:
     """The regressor above with a structurally zero entry per row (a joint-torque regressor's shape)."""
-    q1, q2, dq1 = x[0], x[1], x[2]
+    q1, dq1 = x[0], x[2]
     return np.array([[math.sin(q1), dq1, 0.0], [0.0, q1 * dq1, 0.5]])
 
 

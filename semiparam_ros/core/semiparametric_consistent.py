@@ -406,7 +406,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         assert var is not None  # asked for
         if not npm.standardizer.ready:
             return yp, np.zeros(self.n_outputs), var, None
-        t, p = self.n_outputs, self.n_params
+        t = self.n_outputs
         phi = npm._features(xv)
         P, v = npm.rls._predict_valid(phi, True)
         assert v is not None  # asked for
@@ -434,7 +434,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
 
     def _expand(self, values: np.ndarray) -> np.ndarray:
-        """The (t, p) matrix of the residual's Φ part from its learned entries (zeros elsewhere)."""
+        """Return the (t, p) matrix of the residual's Φ part from its learned entries (zeros elsewhere)."""
         full = np.zeros(self.n_outputs * self.n_params)
         full[self._phi_entries] = values
         return full.reshape(self.n_outputs, self.n_params)
