@@ -17,8 +17,10 @@ Topics (relative names, remap with ``-r``):
   ``-p qos_overrides./joint_states.subscription.reliability:=reliable`` (standard QoS overrides);
 * out ``~/predicted_wrench`` (semiparametric prediction, the input's stamp and frame),
   ``~/predicted_wrench/parametric`` (rigid-body part), ``~/predicted_wrench/nonparametric`` (residual);
-  with ``robot.output: joint_torques`` instead ``predicted_joint_torques`` (``sensor_msgs/JointState``,
-  ``effort`` in N·m); every prediction is a priori: it was made before its own sample was learned;
+  with ``robot.output: joint_torques`` instead ``~/predicted_joint_torques`` (``sensor_msgs/JointState``,
+  ``effort`` in N·m) with ``/parametric`` and ``/nonparametric`` (the un-namespaced
+  ``predicted_joint_torques`` of earlier releases is still published, deprecated, for one release);
+  every prediction is a priori: it was made before its own sample was learned;
 * out ``~/predicted_wrench/model`` (or ``~/predicted_joint_torques/model``): the model alone — rigid-body
   part plus the residual where the state is known, without the fast tracker of its recent error
   (``semiparametric.combination: consistent``; the same as the prediction for the other combinations):
@@ -32,6 +34,17 @@ Topics (relative names, remap with ``-r``):
   ``~/predicted_joint_torques/std`` (``JointState``, ``effort`` = external torques / σ [N·m]); σ is +inf
   before the first sample (see :mod:`semiparam_ros.core.uncertainty`); a sample the contact gate
   refuses to learn is still predicted and published (:mod:`semiparam_ros.core.gate`);
+* for controllers (``robot.output: joint_torques``; :mod:`semiparam_ros.core.feedforward`): in
+  ``~/desired_state`` (``trajectory_msgs/JointTrajectory``, best effort, depth 1: only the latest
+  matters), answered at once — before the next queued sample is learned — on ``~/feedforward_commands``
+  (``std_msgs/Float64MultiArray``, τ_ff [N·m] in the order of ``feedforward.joints``: a
+  ``JointGroupEffortController``'s ``~/commands``), ``~/feedforward`` (``JointState``: stamp = the time
+  evaluated, position/velocity = the desired state used, effort = τ_ff) and ``~/feedforward/std``
+  (effort = σ); the model is served from a copy refreshed every ``feedforward.refresh_period``; it falls
+  back to the rigid-body part while not ready or where σ > ``feedforward.max_std``; drops, fallbacks and
+  the age of answered states are in diagnostics (``feedforward.*``); out ``~/gravity_torques``
+  (``JointState``, effort = gravity torques of the identified inertias at each sample's measured
+  posture, N·m);
 * out ``~/inertial_parameters`` (``std_msgs/Float64MultiArray``, base parameters in physical units, then
   friction/offset terms such as ``lwr_0_joint.viscous``, names comma-joined in ``layout.dim[0].label``;
   reliable + transient local, depth 1): published once per diagnostics period when learning changed them,
