@@ -94,6 +94,8 @@ def test_cross_parameter_rules():
                          "acceleration.polyorder": 6})
     with pytest.raises(ValueError, match=r"unknown parameter 'nonparametric\.lambda'"):
         base.with_overrides({"nonparametric.lambda": 1.0})
+    with pytest.raises(ValueError, match=r"did you mean 'adaptation\.time_constant'"):
+        base.with_overrides({"adaptaton.time_constant": 1.0})
 
 
 def test_load_errors_name_the_file(tmp_path):

@@ -48,6 +48,9 @@ def test_invalid_startup_values_exit_with_a_clear_message(ros_env, tmp_path):
         # the contact gate's parameters (core/gate.py)
         "gate_threshold": (["gate.threshold:=0.0"], ["gate.threshold", "> 0"]),
         "gate_duration": (["gate.max_contact_duration:=-3.0"], ["gate.max_contact_duration", ">= 0"]),
+        # a misspelt name is refused with the closest known one (rclpy would keep it silently)
+        "misspelt": (["adaptaton.time_constant:=5.0"], ["unknown parameter 'adaptaton.time_constant'",
+                                                        "did you mean 'adaptation.time_constant'"]),
     }
     procs = {name: NodeProcess(ros_env, params, tag=name) for name, (params, _) in cases.items()}
     for name, (_, needles) in cases.items():
@@ -122,3 +125,26 @@ def test_runtime_parameters_learning_switch_reset_remap_and_sim_time(ros_env, tm
         client.close()
         code = node.stop()
     assert code == 0, node.output()
+
+
+def test_misspelt_name_in_a_parameter_file_and_print_defaults(ros_env, tmp_path):
+    import subprocess
+    import sys
+
+    from semiparam_ros.core.config import PARAMETERS
+
+    params = tmp_path / "typo.yaml"
+    params.write_text("estimator:\n  ros__parameters:\n    use_sim_time: false\n"
+                      "    gate:\n      treshold: 4.0\n")
+    proc = NodeProcess(ros_env, params_file=params, tag="typo")
+    assert proc.wait(timeout=120) == 2
+    out = proc.output()
+    proc.stop()
+    assert "unknown parameter 'gate.treshold'" in out and "did you mean 'gate.threshold'" in out, out
+    assert "Traceback" not in out
+    listing = subprocess.run([sys.executable, "-m", "semiparam_ros.ros.estimator_node", "--print-defaults"],
+                             capture_output=True, text=True, timeout=120, env=ros_env.env, check=True).stdout
+    lines = listing.splitlines()
+    assert [line.split(" (")[0] for line in lines] == [p.name for p in PARAMETERS]
+    assert any(line.startswith("gate.threshold (double, > 0 and <= 1e+06, default 5.0, settable at run time)")
+               for line in lines), lines

@@ -34,8 +34,10 @@ __all__ = [
     "PARAMETERS",
     "EstimatorConfig",
     "ParameterSpec",
+    "describe_parameters",
     "load_config",
     "parameter_spec",
+    "unknown_parameter_message",
     "validate_value",
     "write_config",
 ]
@@ -332,7 +334,38 @@ def parameter_spec(name: str) -> ParameterSpec:
     try:
         return _SPECS[name]
     except KeyError:
-        raise ConfigurationError(f"unknown parameter {name!r}; known: {', '.join(sorted(_SPECS))}") from None
+        raise ConfigurationError(unknown_parameter_message(name)) from None
+
+
+def unknown_parameter_message(name: str) -> str:
+    """Say that ``name`` is no parameter and name the closest ones (a misspelling is the usual cause).
+
+    Example:
+        >>> unknown_parameter_message("adaptaton.time_constant").split(": ")[1]
+        "did you mean 'adaptation.time_constant' or 'uncertainty.noise_time_constant'? (every parameter"
+    """
+    import difflib
+
+    close = difflib.get_close_matches(name, list(_SPECS), n=3, cutoff=0.6)
+    hint = (f"did you mean {' or '.join(repr(c) for c in close)}?" if close
+            else f"known groups: {', '.join(sorted({n.split('.')[0] for n in _SPECS}))}")
+    return f"unknown parameter {name!r}: {hint} (every parameter: the node's --print-defaults)"
+
+
+def describe_parameters() -> str:
+    """Return every parameter with its type, range, default and meaning, one line each (``--print-defaults``).
+
+    Example:
+        >>> print(describe_parameters().splitlines()[0])
+        robot.urdf (string, default ''): URDF file path; empty = the iCub URDF of example-robot-data
+    """
+    lines = []
+    for spec in PARAMETERS:
+        rng = spec.range_text()
+        kind = spec.type if rng == "any value" else f"{spec.type}, {rng}"
+        runtime = "" if spec.read_only else ", settable at run time"
+        lines.append(f"{spec.name} ({kind}, default {spec.default!r}{runtime}): {spec.description}")
+    return "\n".join(lines)
 
 
 def _number(name: str, value: Any, integer: bool) -> float | int:

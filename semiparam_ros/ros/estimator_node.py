@@ -126,7 +126,7 @@ from threadpoolctl import threadpool_limits
 from trajectory_msgs.msg import JointTrajectory
 
 from semiparam_ros.core.checkpoint import atomic_save_npz
-from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.config import EstimatorConfig, describe_parameters
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult, rmse_window_samples
 from semiparam_ros.core.feedforward import FeedForward
 from semiparam_ros.core.messages import JointStateData, WrenchData
@@ -926,7 +926,7 @@ def parse_node_args(args: list[str]) -> argparse.Namespace:
         args: The command line without the program name and without ROS arguments.
 
     Returns:
-        The options: ``executor`` (a key of :data:`EXECUTORS`).
+        The options: ``executor`` (a key of :data:`EXECUTORS`), ``print_defaults``.
 
     Raises:
         SystemExit: Unknown option or executor name (argparse prints the usage).
@@ -935,6 +935,8 @@ def parse_node_args(args: list[str]) -> argparse.Namespace:
     parser.add_argument("--executor", choices=tuple(EXECUTORS), default=next(iter(EXECUTORS)),
                         help="rclpy executor spinning the node (default: %(default)s; measured in "
                              "docs/performance.md)")
+    parser.add_argument("--print-defaults", action="store_true",
+                        help="print every parameter with its type, range, default and meaning, and exit")
     return parser.parse_args(args)
 
 
@@ -954,6 +956,9 @@ def main(args: list[str] | None = None) -> int:
     """
     argv = sys.argv[1:] if args is None else list(args)
     options = parse_node_args(rclpy.utilities.remove_ros_args(["estimator", *argv])[1:])
+    if options.print_defaults:
+        print(describe_parameters())
+        return 0
     rclpy.init(args=argv)
     node: EstimatorNode | None = None
     code = 0

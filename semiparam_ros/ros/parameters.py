@@ -41,6 +41,7 @@ from semiparam_ros.core.config import (
     EstimatorConfig,
     ParameterSpec,
     parameter_spec,
+    unknown_parameter_message,
     validate_value,
 )
 from semiparam_ros.errors import ConfigurationError
@@ -156,11 +157,34 @@ def declare_parameters(node: Node, specs: Iterable[ParameterSpec] = PARAMETERS) 
         except InvalidParameterValueException as err:
             raise ParameterError(
                 f"parameter {spec.name!r} is out of range: must be {spec.range_text()}; {err}") from err
+    _refuse_unknown_overrides(node, {spec.name for spec in specs})
     flat = {spec.name: _read(node, spec) for spec in specs}
     try:
         return EstimatorConfig.from_flat(flat)
     except ConfigurationError as err:
         raise ParameterError(str(err)) from err
+
+
+#: Parameters rclpy itself reads (besides ``qos_overrides.*``): not ours, not misspellings.
+_ROS_OWN = frozenset({"use_sim_time", "start_type_description_service"})
+
+
+def _refuse_unknown_overrides(node: Node, declared: set[str]) -> None:
+    """Refuse a start-up value (parameter file or ``-p``) for a parameter the node does not have.
+
+    rclpy keeps such values silently (a misspelt ``adaptaton.time_constant`` would leave the default in
+    force); the node reads them from ``Node._parameter_overrides`` (rclpy has no public accessor) and
+    stops with the closest known names.
+
+    Raises:
+        ParameterError: Naming the first unknown parameter and its closest known names.
+    """
+    overrides = getattr(node, "_parameter_overrides", {})
+    unknown = sorted(name for name in overrides if name not in declared and name not in _ROS_OWN
+                     and not name.startswith("qos_overrides."))
+    if unknown:
+        more = f" (and {len(unknown) - 1} more: {unknown[1:]})" if len(unknown) > 1 else ""
+        raise ParameterError(unknown_parameter_message(unknown[0]) + more)
 
 
 def make_parameter_validator(
