@@ -92,7 +92,14 @@ _ICUB_JOINTS = ("r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbo
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
     # robot
-    ParameterSpec("robot.urdf", "string", "", "URDF file path; empty = the iCub URDF of example-robot-data"),
+    ParameterSpec("robot.urdf", "string", "",
+                  "URDF: a file path, package://<package>/<path> (the ament index, then the pip prefixes), "
+                  "example-robot-data://<path>, or topic:<name> (the node waits for robot_state_publisher's "
+                  "transient-local std_msgs/String, e.g. topic:/robot_description); empty = the iCub URDF "
+                  "of example-robot-data"),
+    ParameterSpec("robot.description_timeout", "double", 0.0,
+                  "with robot.urdf: 'topic:<name>', how long the node waits for the URDF on that topic at "
+                  "start-up [s]; 0 = as long as it takes", min=0.0, max=1e6),
     ParameterSpec("robot.joints", "string_array", list(_ICUB_JOINTS),
                   "moving joints used for learning, in this order (q [rad], dq [rad/s], ddq [rad/s^2])"),
     ParameterSpec("robot.locked_joints", "string_array", [],

@@ -97,6 +97,10 @@ _ICUB_RELATIVE = "robots/icub_description/robots/icub.urdf"
 EXTRA_COLUMN_KINDS: tuple[str, ...] = ("viscous", "coulomb", "offset", "armature")
 #: Prefix of a ``robot.urdf`` value that names a file of the installed example-robot-data wheel.
 EXAMPLE_ROBOT_DATA_SCHEME = "example-robot-data://"
+#: ``robot.urdf`` prefix of a file inside a ROS package (``package://<package>/<path>``).
+PACKAGE_SCHEME = "package://"
+#: ``robot.urdf`` prefix naming a topic that publishes the URDF text (``topic:/robot_description``).
+TOPIC_SCHEME = "topic:"
 
 #: Relative rank tolerance of the base-parameter QR (on unit-norm columns). Structural dependencies show
 #: up at ~1e-15 relative; identifiable directions of the robots tested here are above ~1e-4.
@@ -162,24 +166,87 @@ def example_robot_data_path(relative: str) -> pathlib.Path:
     )
 
 
+def package_file(package: str, relative: str) -> pathlib.Path:
+    """Return a file of a ROS package: its share folder from the ament index, else a pip prefix's.
+
+    Tried in order: ``ament_index_python.get_package_share_directory(package)`` (a ROS install or a
+    colcon workspace that is sourced), then ``share/<package>`` under ``sys.prefix`` and under each
+    site-packages' ``cmeel.prefix`` (where PyPI wheels such as example-robot-data put theirs).
+
+    Args:
+        package: ROS package name.
+        relative: Path below its share folder.
+
+    Returns:
+        The absolute path of the existing file.
+
+    Raises:
+        FileNotFoundError: Naming every place tried.
+    """
+    tried: list[str] = []
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+
+        try:
+            path = pathlib.Path(get_package_share_directory(package)) / relative
+            if path.is_file():
+                return path.resolve()
+            tried.append(str(path))
+        except PackageNotFoundError:
+            tried.append(f"the ament index (no package {package!r})")
+        except OSError:  # AMENT_PREFIX_PATH unset: no ROS environment sourced
+            tried.append("the ament index (AMENT_PREFIX_PATH is not set)")
+    except ImportError:  # pragma: no cover - ament_index_python is a dependency
+        tried.append("the ament index (ament_index_python not installed)")
+    bases = [pathlib.Path(sys.prefix) / "share" / package]
+    for key in ("purelib", "platlib"):
+        site_dir = sysconfig.get_paths().get(key)
+        base = pathlib.Path(site_dir) / "cmeel.prefix" / "share" / package if site_dir else None
+        if base is not None and base not in bases:
+            bases.append(base)
+    for base in bases:
+        path = base / relative
+        if path.is_file():
+            return path.resolve()
+        tried.append(str(path))
+    raise FileNotFoundError(f"package://{package}/{relative} not found; tried {'; '.join(tried)}")
+
+
 def resolve_urdf(spec: str) -> pathlib.Path:
     """Return the URDF file that a ``robot.urdf`` value names.
 
     Args:
-        spec: ``""`` for the iCub URDF of example-robot-data; ``"example-robot-data://<relative>"`` for
-            another file of that wheel (e.g. ``example-robot-data://robots/panda_description/urdf/panda.urdf``);
-            anything else is a file path (``~`` expanded; relative paths are taken from the current folder).
+        spec: ``""`` for the iCub URDF of example-robot-data; ``"package://<package>/<path>"`` for a file
+            of a ROS package (:func:`package_file`: the ament index, then the pip prefixes);
+            ``"example-robot-data://<relative>"`` for a file of example-robot-data (the ROS package if
+            installed, else the wheel; e.g. ``example-robot-data://robots/panda_description/urdf/
+            panda.urdf``); anything else is a file path (``~`` expanded; relative paths are taken from the
+            current folder). ``"topic:<name>"`` (the URDF published on a topic) is resolved by the node.
 
     Returns:
-        The path (not checked for existence unless it comes from example-robot-data).
+        The path (not checked for existence when it is a plain file path).
 
     Raises:
-        FileNotFoundError: If an example-robot-data file is named and not installed.
+        FileNotFoundError: If a package or example-robot-data file is named and not found.
+        ConfigurationError: For a ``topic:`` value (offline tools need a file).
     """
     if not spec:
         return icub_urdf_path()
+    if spec.startswith(TOPIC_SCHEME):
+        raise ConfigurationError(f"robot.urdf = {spec!r} names a topic: only the node can read it; give "
+                                 "offline tools the URDF file (e.g. ros2 param get /robot_state_publisher "
+                                 "robot_description)")
+    if spec.startswith(PACKAGE_SCHEME):
+        package, _, relative = spec[len(PACKAGE_SCHEME):].partition("/")
+        if not package or not relative:
+            raise FileNotFoundError(f"robot.urdf = {spec!r}: expected package://<package>/<path>")
+        return package_file(package, relative)
     if spec.startswith(EXAMPLE_ROBOT_DATA_SCHEME):
-        return example_robot_data_path(spec[len(EXAMPLE_ROBOT_DATA_SCHEME):])
+        relative = spec[len(EXAMPLE_ROBOT_DATA_SCHEME):]
+        try:
+            return package_file("example-robot-data", relative)
+        except FileNotFoundError:
+            return example_robot_data_path(relative)
     return pathlib.Path(spec).expanduser()
 
 
@@ -398,9 +465,13 @@ class RigidBodyRegressor:
             for name, j in urdf_joints.items()
         }
 
+        missing = [name for name in joint_names if name not in urdf_joints]
+        if missing:
+            moving = [n for n, j in urdf_joints.items() if j.get("type") in _MOVING_TYPES]
+            raise ConfigurationError(f"unknown joint {missing[0]!r}" + (f" (and {missing[1:]})" if missing[1:]
+                                     else "") + f": not a joint of the URDF{where}; its moving joints: "
+                                     f"{moving}")
         for name in joint_names:
-            if name not in urdf_joints:
-                raise ConfigurationError(f"unknown joint {name!r}: not a joint of the URDF{where}")
             jtype = urdf_joints[name].get("type")
             if jtype not in _MOVING_TYPES:
                 raise ConfigurationError(

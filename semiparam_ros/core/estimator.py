@@ -104,7 +104,8 @@ _STRUCTURAL = (
 )
 
 
-def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None) -> RigidBodyRegressor:
+def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None,
+                    source: str = "the checkpoint's URDF") -> RigidBodyRegressor:
     """Build the rigid-body regressor described by a configuration.
 
     With ``robot.output: joint_torques``, ``parametric.friction`` / ``offsets`` / ``armature`` append the
@@ -113,7 +114,9 @@ def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None) -> Rig
 
     Args:
         config: Estimator configuration (``robot.*`` and ``parametric.*``).
-        urdf_xml: URDF text to use instead of the file ``robot.urdf`` names (a checkpoint's own copy).
+        urdf_xml: URDF text to use instead of the file ``robot.urdf`` names (a checkpoint's own copy, or
+            what a robot_description topic published).
+        source: Where ``urdf_xml`` came from, for messages.
 
     Returns:
         The regressor of the F/T sensor wrench or of the joint torques.
@@ -128,8 +131,6 @@ def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None) -> Rig
         if not path.is_file():
             raise FileNotFoundError(f"URDF file not found: {path}")
         urdf_xml, source = path.read_text(encoding="utf-8"), str(path)
-    else:
-        source = "the checkpoint's URDF"
     return RigidBodyRegressor(
         urdf_xml,
         config["robot.joints"],

@@ -287,6 +287,7 @@ def diagnostic_array(
     stats: Mapping[str, object],
     *,
     stalled: bool = False,
+    waiting: bool = False,
 ) -> DiagnosticArray:
     """Build the ``/diagnostics`` message of the estimator.
 
@@ -296,6 +297,7 @@ def diagnostic_array(
         hardware_id: Robot / sensor identifier.
         stats: Values to publish (see the module docstring), including ``drops.<reason>`` entries.
         stalled: Input is waiting but none was processed during the period.
+        waiting: The node is waiting for its robot description (WARN, nothing learned yet).
 
     Returns:
         The message with one :class:`DiagnosticStatus`.
@@ -303,7 +305,9 @@ def diagnostic_array(
     status = DiagnosticStatus()
     status.name = name
     status.hardware_id = hardware_id
-    if stalled:
+    if waiting:
+        status.level, status.message = DiagnosticStatus.WARN, "waiting for the robot description"
+    elif stalled:
         status.level, status.message = DiagnosticStatus.ERROR, "stalled: queued input is not processed"
     elif int(stats.get("drops_in_period", 0)) > 0:  # type: ignore[call-overload]
         status.level, status.message = DiagnosticStatus.WARN, "input dropped (see drops.*)"

@@ -120,14 +120,15 @@ from rclpy.qos import (
 )
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from threadpoolctl import threadpool_limits
 from trajectory_msgs.msg import JointTrajectory
 
 from semiparam_ros.core.checkpoint import atomic_save_npz
 from semiparam_ros.core.config import EstimatorConfig, describe_parameters
-from semiparam_ros.core.estimator import OnlineEstimator, StepResult, rmse_window_samples
+from semiparam_ros.core.dynamics import TOPIC_SCHEME
+from semiparam_ros.core.estimator import OnlineEstimator, StepResult, build_regressor, rmse_window_samples
 from semiparam_ros.core.feedforward import FeedForward
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.serving import LearnedModel
@@ -224,8 +225,13 @@ class EstimatorNode(Node):
         self._ckpt_path = Path(cfg["checkpoint.path"]).expanduser() if cfg["checkpoint.path"] else None
         self._ckpt_period = float(cfg["checkpoint.period"])
 
+        urdf_xml = None
+        if str(cfg["robot.urdf"]).startswith(TOPIC_SCHEME):
+            urdf_xml = self._wait_for_description(str(cfg["robot.urdf"])[len(TOPIC_SCHEME):],
+                                                  float(cfg["robot.description_timeout"]))
         try:
-            self._estimator = OnlineEstimator(cfg)
+            regressor = build_regressor(cfg, urdf_xml, source=f"published on {cfg['robot.urdf']}")
+            self._estimator = OnlineEstimator(cfg, regressor=regressor)
         except (ConfigurationError, OSError) as err:
             raise StartupError(f"cannot build the estimator: {err}") from err
         self._warm_up_kernels()
@@ -363,6 +369,51 @@ class EstimatorNode(Node):
             f"estimating {self._output} of joints {list(self._joints)}: {est.regressor.n_base} base "
             f"parameters, D = {cfg['nonparametric.n_features']} random features; learning "
             f"{'enabled' if est.learning_enabled else 'disabled'}; inputs {', '.join(inputs)}")
+
+    def _wait_for_description(self, topic: str, timeout_s: float) -> str:
+        """Wait for the URDF text on ``topic`` (robot_state_publisher's transient-local ``std_msgs/String``).
+
+        Logs where it waits, every 5 s until it arrives, and publishes a WARN diagnostic meanwhile.
+
+        Raises:
+            StartupError: Nothing arrived within ``timeout_s`` (> 0), or the context shut down.
+        """
+        received: list[str] = []
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        def take(msg: String) -> None:
+            received.append(msg.data)
+
+        sub = self.create_subscription(String, topic, take, qos)
+        diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        name = self.resolve_topic_name(topic)
+        executor = SingleThreadedExecutor(context=self.context)
+        executor.add_node(self)
+        start = time.monotonic()
+        next_note = start
+        try:
+            while not received:
+                now = time.monotonic()
+                if timeout_s > 0 and now - start > timeout_s:
+                    raise StartupError(f"no robot description on {name} within robot.description_timeout = "
+                                       f"{timeout_s:g} s (is robot_state_publisher running?)")
+                if now >= next_note:
+                    next_note = now + 5.0
+                    self.get_logger().info(f"waiting for the robot description on {name} (std_msgs/String, "
+                                           "transient local, as robot_state_publisher publishes it)")
+                    diag.publish(diagnostic_array(self.get_clock().now().to_msg(),
+                                                  f"{self.get_name()}: online learning", "",
+                                                  {"waiting_for_robot_description": name}, waiting=True))
+                executor.spin_once(timeout_sec=0.1)
+                if not rclpy.ok(context=self.context):
+                    raise StartupError(f"shut down while waiting for the robot description on {name}")
+        finally:
+            executor.remove_node(self)
+            executor.shutdown(timeout_sec=1.0)
+            self.destroy_subscription(sub)
+            self.destroy_publisher(diag)
+        self.get_logger().info(f"robot description received on {name} ({len(received[-1])} characters)")
+        return received[-1]
 
     def _warm_up_kernels(self) -> int:
         """Run every compiled kernel of a step once before input arrives, on a throw-away estimator.
