@@ -129,3 +129,31 @@ def test_set_forgetting_continues_the_closed_form_recursion():
     with pytest.raises(ValueError):
         rls.set_forgetting(1.5)
     assert rls.forgetting == beta
+
+
+def test_gate_and_noise_state_survive_a_checkpoint(tmp_path):
+    """After a restart from a checkpoint the gate is engaged at once and σ is the saved one: an outlier
+    right after the warm start is a contact (gated), not a warm-up sample learned."""
+    from semiparam_ros.core.config import EstimatorConfig
+    from semiparam_ros.core.estimator import OnlineEstimator
+    from semiparam_ros.core.messages import JointStateData
+
+    config = EstimatorConfig.defaults().with_overrides({
+        "robot.output": "joint_torques", "nonparametric.n_features": 20, "gate.warmup": 1.0})
+    est = OnlineEstimator(config)
+    joints = tuple(config["robot.joints"])
+    rng = np.random.default_rng(0)
+    for k in range(300):  # 3 s at 100 Hz of smooth motion, torques a smooth function of the state
+        q = 0.3 * np.sin(0.5 * k * 0.01 + np.arange(4))
+        est.process_joint_state(JointStateData(T0 + k * DT, joints, q, np.cos(q), np.sin(q) + 0.01 *
+                                               rng.standard_normal(4)))
+    assert est.gate.counts[Verdict.INLIER] > 0
+    est.save(tmp_path / "c.npz")
+    fresh = OnlineEstimator(config)
+    fresh.load(tmp_path / "c.npz")
+    np.testing.assert_array_equal(fresh.noise.s2, est.noise.s2)
+    assert fresh.gate.counts == est.gate.counts
+    std = fresh.noise.std(np.zeros(4))
+    assert fresh.gate.decide(T0 + 10**12, 100 * std, std) is Verdict.GATED  # engaged: no new warm-up
+    cold = OnlineEstimator(config)
+    assert cold.gate.decide(T0, np.full(4, 1e6), np.ones(4)) is Verdict.WARMUP

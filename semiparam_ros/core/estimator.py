@@ -770,8 +770,9 @@ class OnlineEstimator:
         The node takes this snapshot under its model lock (a memory copy) and writes it from another
         thread with :func:`~semiparam_ros.core.checkpoint.atomic_save_npz`, so learning never waits for disk.
 
-        A checkpoint is self-contained: besides the learned state (``model.*``) and the noise estimate behind
-        σ (``noise.*``) it holds the whole configuration (``meta.config``, JSON), the URDF text
+        A checkpoint is self-contained: besides the learned state (``model.*``), the noise estimate behind
+        σ (``noise.*``) and the contact gate's state (``gate.*``: its warm-up over, its counts; so neither
+        σ nor the gate warms up again after a restart) it holds the whole configuration (``meta.config``, JSON), the URDF text
         (``meta.urdf``), the robot's identity (``meta.robot``: its name and CAD base parameters) and the
         versions that wrote it (``meta.versions``), so :func:`semiparam_ros.load_model` needs nothing else.
 
@@ -780,6 +781,7 @@ class OnlineEstimator:
         """
         state = {key: np.array(value, copy=True) for key, value in self.model.state_dict("model.").items()}
         state.update(self.noise.state_dict("noise."))
+        state.update(self.gate.state_dict("gate."))
         state["meta.version"] = np.array(_CHECKPOINT_VERSION)
         state["meta.fingerprint"] = np.array(self._fingerprint())
         state["meta.n_samples_learned"] = np.array(self.n_samples_learned)
@@ -839,10 +841,13 @@ class OnlineEstimator:
             self._check_robot(path, state["meta.robot"])
         model = self.model.copy()
         noise = NoiseScale(self.model.n_outputs, self.noise.time_constant_s)
+        gate = ContactGate(self.gate.config)
         try:
             model.load_state_dict(state, "model.")
-            if "noise.s2" in state:
+            if "noise.s2" in state:  # checkpoints written before they carried σ and the gate have neither
                 noise.load_state_dict(state, "noise.")
+            if "gate.warm" in state:
+                gate.load_state_dict(state, "gate.")
         except CheckpointError as err:
             raise CheckpointError(f"{path}: {err}") from err
         except (TypeError, KeyError, IndexError, OverflowError, ValueError) as err:
@@ -850,6 +855,7 @@ class OnlineEstimator:
             raise CheckpointError(f"{path}: corrupt checkpoint: {type(err).__name__}: {err}") from err
         self.model = model
         self.noise = noise
+        self.gate = gate
         self.n_samples_learned = n_learned
         if self.forgetting is not None:
             self._apply_forgetting(self.forgetting)

@@ -119,6 +119,29 @@ class ContactGate:
         if not self._warm:
             self._first_ns = None
 
+    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Return what outlives a restart: whether the warm-up is over, and the counts per verdict.
+
+        An open excursion is not saved: its start is a stamp of the stream that ended.
+        """
+        return {f"{prefix}warm": np.array(int(self._warm), dtype=np.int64),
+                f"{prefix}counts": np.array([self.counts[v] for v in Verdict], dtype=np.int64)}
+
+    def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
+        """Restore :meth:`state_dict`'s arrays (validated before anything changes).
+
+        Raises:
+            KeyError: A key is missing.
+            ValueError: Wrong sizes or negative counts.
+        """
+        warm = int(np.asarray(state[f"{prefix}warm"]))
+        counts = np.asarray(state[f"{prefix}counts"]).reshape(-1)
+        if warm not in (0, 1) or counts.shape != (len(Verdict),) or (counts < 0).any():
+            raise ValueError(f"gate state is corrupt: warm={warm}, counts={counts}")
+        self.reset()
+        self._warm = bool(warm)
+        self.counts = {v: int(c) for v, c in zip(Verdict, counts, strict=True)}
+
     @property
     def in_excursion(self) -> bool:
         """Whether the last sample was an outlier (a contact, or a change being adopted)."""
