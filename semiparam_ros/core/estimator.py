@@ -773,8 +773,9 @@ class OnlineEstimator:
         A checkpoint is self-contained: besides the learned state (``model.*``), the noise estimate behind
         σ (``noise.*``) and the contact gate's state (``gate.*``: its warm-up over, its counts; so neither
         σ nor the gate warms up again after a restart) it holds the whole configuration (``meta.config``,
-        JSON), the URDF text (``meta.urdf``), the robot's identity (``meta.robot``: its name and CAD base parameters) and the
-        versions that wrote it (``meta.versions``), so :func:`semiparam_ros.load_model` needs nothing else.
+        JSON), the URDF text (``meta.urdf``), the robot's identity (``meta.robot``: its name and CAD base
+        parameters) and the versions that wrote it (``meta.versions``), so
+        :func:`semiparam_ros.load_model` needs nothing else.
 
         Returns:
             Checkpoint arrays by key (``model.*`` learned state, ``noise.*``, ``meta.*``).
