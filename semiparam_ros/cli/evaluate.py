@@ -167,6 +167,12 @@ def build_parser() -> argparse.ArgumentParser:
              "values: 0 0.1 1 10 frozen)",
     )
     p.add_argument("--horizon-plot", type=Path, help="write the error-by-age figure (PNG) here")
+    p.add_argument("--per-sample", type=Path, metavar="FILE.csv",
+                   help="paper protocol: write every test sample (stamp, measured, each model's prediction "
+                        "and std per component) as CSV here")
+    p.add_argument("--per-sample-plot", type=Path, metavar="FILE.png",
+                   help="paper protocol: measured vs each model's prediction over time, one panel per "
+                        "joint/axis")
     p.add_argument(
         "--no-progress",
         action="store_true",
@@ -193,6 +199,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                      "--contacts (contact evaluation)")
     if args.payload is not None and args.test is not None:
         parser.error("--payload and --test are exclusive")
+    if (args.per_sample or args.per_sample_plot) and args.test is None:
+        parser.error("--per-sample and --per-sample-plot go with the paper protocol (--train and --test)")
     from semiparam_ros.eval.horizon import DEFAULT_HORIZONS  # heavy imports after argument checks
     from semiparam_ros.eval.run import run_evaluate
 
@@ -223,6 +231,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             markdown_path=args.markdown,
             horizons=None if args.horizons is None else (args.horizons or DEFAULT_HORIZONS),
             horizon_plot_path=args.horizon_plot,
+            per_sample_path=args.per_sample,
+            per_sample_plot_path=args.per_sample_plot,
             progress=not args.no_progress,
         )
     except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created

@@ -303,6 +303,7 @@ class ProtocolResult:
         samples_train: Number of training samples.
         first_s: Length of the initial segment [s].
         output: What the outputs are (groups, components, units).
+        stamps_ns: Stamp of every test sample [ns], ``(splits, split_size)``.
     """
 
     kinds: tuple[str, ...]
@@ -319,6 +320,7 @@ class ProtocolResult:
     samples_train: int
     first_s: float
     output: OutputSpec
+    stamps_ns: np.ndarray | None = None
 
     @property
     def samples_test(self) -> int:
@@ -480,7 +482,8 @@ def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, te
     return ProtocolResult(kinds=kinds, bounds=bounds, predictions=predictions, targets=targets,
                           targets_true=targets_true, time_s=time_s, sample_period_s=period, window=window,
                           first=first, first_s=first_s, update_ns=update_ns, train_ns=train_ns,
-                          samples_train=len(train_data), output=output)
+                          samples_train=len(train_data), output=output,
+                          stamps_ns=np.stack([test_data.stamps_ns[a:b] for a, b in bounds]))
 
 
 def progress_enabled(requested: bool) -> bool:

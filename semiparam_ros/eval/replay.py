@@ -137,9 +137,21 @@ def load_samples(path: str | Path, config: EstimatorConfig, topics: Topics | Non
     try:
         arrays = SampleArrays.from_samples(samples, truth, limit=limit)
     except ValueError as err:
+        drops = {k: v for k, v in pipeline.drops.items() if v}
+        if drops.get("missing_joint"):
+            raise ValueError(f"{path}: {_missing_joints(path, topics.joint_states, config)}") from err
         raise ValueError(f"{path}: no usable samples on {topics.joint_states} + {topics.wrench} "
-                         f"(drops: {dict(pipeline.drops)}): {err}") from err
+                         f"(drops: {drops}): {err}") from err
     return arrays, dict(pipeline.drops)
+
+
+def _missing_joints(path: str | Path, topic: str, config: EstimatorConfig) -> str:
+    """Say which configured joints the bag's joint states lack, and which names they have."""
+    first = next(iter(read_messages(path, joint_states_topic=topic, wrench_topic=None)), None)
+    names = [] if first is None else list(first.names)  # type: ignore[union-attr]
+    missing = [j for j in config["robot.joints"] if j not in names]
+    return (f"the joint states on {topic} lack the configured joint(s) {missing} (robot.joints); "
+            f"they name {names}")
 
 
 def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,

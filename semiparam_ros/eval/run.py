@@ -18,6 +18,7 @@ from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.contacts import contact_report, run_contacts
 from semiparam_ros.eval.figures import plot_adaptation, plot_contacts, plot_protocol
 from semiparam_ros.eval.horizon import horizon_figure, horizon_markdown
+from semiparam_ros.eval.per_sample import per_sample_figure, write_per_sample
 from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags, load_samples
 from semiparam_ros.eval.report import adaptation_report, protocol_report, write_json
 from semiparam_ros.eval.selection import TUNED_KEYS, grid_table, holdout_search, protocol_search
@@ -122,6 +123,8 @@ def run_evaluate(
     markdown_path: Path | None = None,
     horizons: Sequence[float | str] | None = None,
     horizon_plot_path: Path | None = None,
+    per_sample_path: Path | None = None,
+    per_sample_plot_path: Path | None = None,
     progress: bool = True,
 ) -> str:
     """Run an evaluation and write its outputs.
@@ -156,6 +159,9 @@ def run_evaluate(
         horizons: Paper protocol: also score every model by its age (seconds, 0 = one step, ``"frozen"``;
             :mod:`semiparam_ros.eval.horizon`), written under ``"horizons"`` in the JSON.
         horizon_plot_path: Figure of the error by the age of the model (with ``horizons``).
+        per_sample_path: Paper protocol: every test sample's measured output and each model's prediction
+            and std, as CSV (:mod:`semiparam_ros.eval.per_sample`).
+        per_sample_plot_path: Paper protocol: measured vs predicted over time, one panel per component.
         progress: Show a progress bar (only when stderr is a terminal).
 
     Returns:
@@ -225,6 +231,10 @@ def run_evaluate(
             plot_protocol(report, plot_path)
         if plot_truth_path is not None:
             plot_protocol(report, plot_truth_path, truth=True)
+        if per_sample_path is not None:
+            write_per_sample(result, per_sample_path, cfg["uncertainty.noise_time_constant"])
+        if per_sample_plot_path is not None:
+            per_sample_figure(result, per_sample_plot_path, title=f"{Path(train).name} → {Path(test).name}")
     if json_path is not None:
         write_json(report, json_path)
     if markdown_path is not None:
