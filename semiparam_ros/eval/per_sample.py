@@ -3,10 +3,12 @@
 Columns of the table (one row per test sample, in time order): ``split``, ``stamp_ns`` (exact integers),
 ``time_s`` (from the first test sample), ``measured.<c>`` for each output component c (a joint name, or
 ``fx … tz``), then for each model ``<model>.<c>`` (its a-priori prediction) and ``<model>.std.<c>``.
+
 The std is the running noise scale of that model's own a-priori errors
 (:class:`~semiparam_ros.core.uncertainty.NoiseScale` with ``uncertainty.noise_time_constant``, updated
-after each sample as the node does), without the posterior variance term ``z A⁻¹ zᵀ`` that the protocol's learners do not return: what the node publishes as σ once
-the model has seen the region. Units: N·m for joint torques; N and N·m for a wrench.
+after each sample as the node does), without the posterior variance term ``z A⁻¹ zᵀ`` that the
+protocol's learners do not return: what the node publishes as σ once the model has seen the region.
+Units: N·m for joint torques; N and N·m for a wrench.
 """
 
 from __future__ import annotations
