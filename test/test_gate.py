@@ -157,3 +157,18 @@ def test_gate_and_noise_state_survive_a_checkpoint(tmp_path):
     assert fresh.gate.decide(T0 + 10**12, 100 * std, std) is Verdict.GATED  # engaged: no new warm-up
     cold = OnlineEstimator(config)
     assert cold.gate.decide(T0, np.full(4, 1e6), np.ones(4)) is Verdict.WARMUP
+
+
+def test_an_outlier_where_the_model_does_not_know_the_state_is_novel_motion_not_a_contact():
+    gate = ContactGate(GateConfig(threshold=3.0, max_contact_duration_s=0.5, warmup_s=0.0, novelty=1.0))
+    std, big = np.ones(2), np.array([10.0, 0.0])
+    assert gate.decide(T0, big, std, novelty=0.5) is Verdict.GATED       # a known state: a contact
+    assert gate.in_excursion
+    v = gate.decide(T0 + DT, big, std, novelty=5.0)                      # the model is uncertain there
+    assert v is Verdict.NOVEL and v.learn and not gate.in_excursion
+    assert gate.decide(T0 + 2 * DT, big, std, novelty=1.0) is Verdict.GATED   # not above: a contact again
+    assert gate.decide(T0 + 3 * DT, np.zeros(2), std, novelty=9.0) is Verdict.INLIER
+    off = ContactGate(GateConfig(threshold=3.0, warmup_s=0.0, novelty=0.0))
+    assert off.decide(T0, big, std, novelty=1e9) is Verdict.GATED
+    with pytest.raises(ValueError, match="gate.novelty"):
+        GateConfig(novelty=-1.0)

@@ -303,6 +303,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "learning goes on; 0 = the live model (it changes at every sample: measured to inject "
                   "torque jitter that degrades closed-loop tracking, docs/feedforward.md)",
                   min=0.0, max=1e6),
+    ParameterSpec("gate.novelty", "double", 1.0,
+                  "relative predictive variance z A^-1 z^T (dimensionless: the model's own uncertainty in "
+                  "units of the noise variance) above which an outlier is motion the model has not seen, "
+                  "learned, not a contact; 0 = every outlier is a contact", min=0.0, max=1e12,
+                  read_only=False),
     # run time
     ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)", read_only=False),
     ParameterSpec("queue_size", "integer", 1000,

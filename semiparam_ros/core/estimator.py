@@ -570,7 +570,7 @@ class OnlineEstimator:
         if self.learning_enabled and self.gate_enabled:
             error = y - prediction.total
             std = self.noise.std(variance)
-            verdict = self.gate.decide(sample.stamp_ns, error, std)
+            verdict = self.gate.decide(sample.stamp_ns, error, std, float(variance.max()))
             learned = verdict.learn
             if learned:
                 model._learn_ahead_valid(ahead, y)
@@ -894,7 +894,7 @@ def software_versions() -> dict[str, str]:
 def _gate_config(config: EstimatorConfig) -> GateConfig:
     return GateConfig(threshold=config["gate.threshold"],
                       max_contact_duration_s=config["gate.max_contact_duration"],
-                      warmup_s=config["gate.warmup"])
+                      warmup_s=config["gate.warmup"], novelty=config["gate.novelty"])
 
 
 def _scalar(value: np.ndarray, kind: type[int] | type[str]) -> Any:

@@ -39,6 +39,13 @@ not_learned.gated_contact       samples predicted but not learned: residual beyo
                                 less than gate.max_contact_duration (a contact); since start or ~/reset
 gate_enabled                    ``true`` / ``false`` (gate.enabled)
 gate_in_excursion               ``true`` while the last sample's residual was beyond the gate threshold
+gate_novel_samples              outliers learned as motion the model has not seen (relative predictive
+                                variance above gate.novelty), not as contacts
+feedforward.*                   joint torques: desired states answered (published), fallbacks to the
+                                rigid-body part (fallback.not_ready, fallback.std), drops by reason,
+                                missing velocities/accelerations, ready, last_error, and the age of the
+                                answered desired states (age_p50_ms, age_p99_ms, age_max_ms: node clock
+                                at publish − header stamp)
 forgetting                      per-sample β from adaptation.time_constant at the measured rate (-1:
                                 not measured yet, or adaptation.time_constant = 0)
 checkpoint_path                 configured path ('' = disabled)

@@ -130,6 +130,7 @@ from semiparam_ros.core.config import EstimatorConfig, describe_parameters
 from semiparam_ros.core.dynamics import TOPIC_SCHEME
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult, build_regressor, rmse_window_samples
 from semiparam_ros.core.feedforward import FeedForward
+from semiparam_ros.core.gate import Verdict
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
@@ -636,6 +637,7 @@ class EstimatorNode(Node):
                 stats[f"not_learned.{reason}"] = count
             stats["gate_enabled"] = est.gate_enabled
             stats["gate_in_excursion"] = est.gate.in_excursion
+            stats["gate_novel_samples"] = est.gate.counts[Verdict.NOVEL]
             stats["forgetting"] = est.forgetting if est.forgetting is not None else -1.0
         stats["queue_length"] = len(self._queue)
         stats["queue_size"] = self._queue_size
