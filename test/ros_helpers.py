@@ -110,12 +110,13 @@ class NodeProcess:
     """The estimator node as a subprocess (``python -m semiparam_ros.ros.estimator_node``)."""
 
     def __init__(self, ros_env: RosEnv, params: Iterable[str] = (), *, params_file: Path | None = CONFIG,
-                 extra_args: Iterable[str] = (), tag: str = "node", executor: str | None = None) -> None:
+                 extra_args: Iterable[str] = (), tag: str = "node", executor: str | None = None,
+                 node_args: Iterable[str] = ()) -> None:
         self.log_path = ros_env.tmp / f"{tag}_{next(_COUNTER)}.log"
         cmd = [sys.executable, "-m", "semiparam_ros.ros.estimator_node"]
         if executor is not None:
             cmd += ["--executor", executor]
-        cmd += ["--ros-args"]
+        cmd += [*node_args, "--ros-args"]
         if params_file is not None:
             cmd += ["--params-file", str(params_file)]
         for p in params:

@@ -170,5 +170,5 @@ def test_an_outlier_where_the_model_does_not_know_the_state_is_novel_motion_not_
     assert gate.decide(T0 + 3 * DT, np.zeros(2), std, novelty=9.0) is Verdict.INLIER
     off = ContactGate(GateConfig(threshold=3.0, warmup_s=0.0, novelty=0.0))
     assert off.decide(T0, big, std, novelty=1e9) is Verdict.GATED
-    with pytest.raises(ValueError, match="gate.novelty"):
+    with pytest.raises(ValueError, match=r"gate\.novelty"):
         GateConfig(novelty=-1.0)

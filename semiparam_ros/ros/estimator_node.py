@@ -194,6 +194,8 @@ class EstimatorNode(Node):
 
     Args:
         node_name: Node name (parameters are read from this name's block of the parameter file).
+        deferred: Only declare the parameters; :meth:`_build` makes the rest (the lifecycle node's
+            configure, :mod:`semiparam_ros.ros.lifecycle_node`).
         **kwargs: Passed to :class:`rclpy.node.Node` (e.g. ``context``, ``parameter_overrides``).
 
     Raises:
@@ -201,24 +203,36 @@ class EstimatorNode(Node):
             node is destroyed before raising.
     """
 
-    def __init__(self, node_name: str = "estimator", **kwargs: Any) -> None:
+    def __init__(self, node_name: str = "estimator", *, deferred: bool = False, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
+        #: Whether inputs are processed and outputs published (a lifecycle node: only while active).
+        self._active = True
         try:
-            self._setup()
+            self._declare()
+            if not deferred:
+                self._build()
         except BaseException:
             self._stop_threads(save=False)
             self.destroy_node()
             raise
 
     # ================================================================== set-up
-    def _setup(self) -> None:
-        self._stopping = threading.Event()
+    def _declare(self) -> None:
+        """Declare and validate the parameters (a lifecycle node does this at construction)."""
         self._last_warning: dict[str, float] = {}  # key → monotonic time of the last throttled warning
         self._ckpt_thread: threading.Thread | None = None
         try:
             self.config: EstimatorConfig = declare_parameters(self)
         except ParameterError as err:
             raise StartupError(f"invalid parameter: {err}") from err
+
+    def _build(self, urdf_xml: str | None = None) -> None:
+        """Build the estimator, its entities and threads (a lifecycle node: on configure).
+
+        Args:
+            urdf_xml: The URDF text when it came from a topic already (``robot.urdf: topic:…``).
+        """
+        self._stopping = threading.Event()
         cfg = self.config
         self._output = cfg["robot.output"]
         self._joints = tuple(cfg["robot.joints"])
@@ -226,8 +240,7 @@ class EstimatorNode(Node):
         self._ckpt_path = Path(cfg["checkpoint.path"]).expanduser() if cfg["checkpoint.path"] else None
         self._ckpt_period = float(cfg["checkpoint.period"])
 
-        urdf_xml = None
-        if str(cfg["robot.urdf"]).startswith(TOPIC_SCHEME):
+        if urdf_xml is None and str(cfg["robot.urdf"]).startswith(TOPIC_SCHEME):
             urdf_xml = self._wait_for_description(str(cfg["robot.urdf"])[len(TOPIC_SCHEME):],
                                                   float(cfg["robot.description_timeout"]))
         try:
@@ -459,11 +472,15 @@ class EstimatorNode(Node):
                                  "input queue full: dropping the oldest message (learning cannot keep up)")
 
     def _on_joint_state(self, msg: bytes) -> None:
+        if not self._active:  # an inactive lifecycle node: inputs are not taken
+            return
         self._intake("joint_states", msg)
         self._drain("joint_states")
         self._process_queued()
 
     def _on_wrench(self, msg: bytes) -> None:
+        if not self._active:
+            return
         self._intake("wrench", msg)
         self._drain("wrench")
         self._process_queued()
@@ -810,6 +827,8 @@ class EstimatorNode(Node):
         """
         ff = self._feedforward
         assert ff is not None  # subscribed in joint-torque mode only
+        if not self._active:
+            return
         try:
             desired = desired_state_from_msg(msg)
         except RejectedSampleError as err:
@@ -988,6 +1007,8 @@ def parse_node_args(args: list[str]) -> argparse.Namespace:
     parser.add_argument("--executor", choices=tuple(EXECUTORS), default=next(iter(EXECUTORS)),
                         help="rclpy executor spinning the node (default: %(default)s; measured in "
                              "docs/performance.md)")
+    parser.add_argument("--lifecycle", action="store_true",
+                        help="run as a managed (lifecycle) node: configure, activate, deactivate, cleanup")
     parser.add_argument("--print-defaults", action="store_true",
                         help="print every parameter with its type, range, default and meaning, and exit")
     return parser.parse_args(args)
@@ -1020,7 +1041,12 @@ def main(args: list[str] | None = None) -> int:
         # One BLAS/OpenMP thread: the learner's small dense operations do not profit from more, and on a
         # small machine extra threads only compete with DDS and the checkpoint writer.
         with threadpool_limits(1):
-            node = EstimatorNode()
+            if options.lifecycle:
+                from semiparam_ros.ros.lifecycle_node import LifecycleEstimatorNode
+
+                node = LifecycleEstimatorNode()
+            else:
+                node = EstimatorNode()
             # Everything built so far (modules, compiled kernels, the model: ≈ 130 000 tracked objects)
             # lives as long as the process: out of the collector's reach, a full collection takes
             # ≈ 0.5 ms instead of ≈ 100 ms (a latency spike every few minutes at 1 kHz).
