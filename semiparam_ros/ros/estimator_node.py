@@ -93,14 +93,16 @@ from __future__ import annotations
 import argparse
 import collections
 import concurrent.futures
+import functools
 import gc
 import math
+import signal
 import sys
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import rclpy
@@ -119,6 +121,7 @@ from rclpy.qos import (
     ReliabilityPolicy,
 )
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
@@ -183,6 +186,30 @@ _SPIN_TIMEOUT_S = 0.1  # EventsExecutor.spin_once timeout (see spin())
 _MAX_DRAIN = 64  # messages taken per subscription callback at most (bounds the executor's time away)
 _WARM_UP_MAX_SAMPLES = 2000  # synthetic 1 kHz samples the kernel warm-up feeds at most (_warm_up_kernels)
 _SAVE_TIMEOUT_S = 5.0  # ~/save waits this long for the checkpoint thread, then replies failure
+
+
+_Callback = TypeVar("_Callback", bound=Callable[..., Any])
+
+
+def _quiet_at_shutdown(method: _Callback) -> _Callback:
+    """Let a callback that the shutdown interrupted end quietly.
+
+    SIGTERM and SIGINT invalidate the context asynchronously, from rclpy's signal handler: a callback in
+    the middle of a publish then gets a RuntimeError ("publisher's context is invalid"). That is the
+    shutdown, not a bug: the callback returns, and ``main`` learns the queue and writes the final
+    checkpoint. With the context still valid any exception propagates (a programming error).
+    """
+
+    @functools.wraps(method)
+    def guarded(self: EstimatorNode, *args: Any) -> Any:
+        try:
+            return method(self, *args)
+        except Exception:
+            if self.context.ok():
+                raise
+            return None
+
+    return guarded  # type: ignore[return-value]
 
 
 class StartupError(RuntimeError):
@@ -471,6 +498,7 @@ class EstimatorNode(Node):
             self._warn_throttled("queue_full",
                                  "input queue full: dropping the oldest message (learning cannot keep up)")
 
+    @_quiet_at_shutdown
     def _on_joint_state(self, msg: bytes) -> None:
         if not self._active:  # an inactive lifecycle node: inputs are not taken
             return
@@ -478,6 +506,7 @@ class EstimatorNode(Node):
         self._drain("joint_states")
         self._process_queued()
 
+    @_quiet_at_shutdown
     def _on_wrench(self, msg: bytes) -> None:
         if not self._active:
             return
@@ -642,6 +671,7 @@ class EstimatorNode(Node):
             self._ckpt_period = float(known["checkpoint.period"])
             self._ckpt_event.set()
 
+    @_quiet_at_shutdown
     def _on_diagnostics_timer(self) -> None:
         stats = self._stats.snapshot()
         with self._model_lock:
@@ -697,6 +727,7 @@ class EstimatorNode(Node):
         self._published_version = version
 
     # ================================================================== learning (executor thread)
+    @_quiet_at_shutdown
     def _process_queued(self) -> None:
         """Run the estimator on queued input: at most a batch, so inputs, services and timers get turns.
 
@@ -795,6 +826,7 @@ class EstimatorNode(Node):
             self._pub_gravity.publish(fill(stamp, gravity))
 
     # ================================================================== feed-forward (executor thread)
+    @_quiet_at_shutdown
     def _refresh_feedforward(self) -> None:
         """Serve a fresh copy of the model to the feed-forward, if learning changed it since the last."""
         ff = self._feedforward
@@ -819,6 +851,7 @@ class EstimatorNode(Node):
         if taken is not None:
             self._on_desired_state(taken[0])
 
+    @_quiet_at_shutdown
     def _on_desired_state(self, msg: JointTrajectory) -> None:
         """Answer a desired state at once with the model's torques (see core.feedforward).
 
@@ -978,17 +1011,29 @@ EXECUTORS: dict[str, Callable[..., Executor]] = {
 }
 
 
-def spin(executor: Executor) -> None:
-    """Spin until the context shuts down (raises ``ExternalShutdownException`` then, like ``spin``).
+def spin(executor: Executor, stop: threading.Event | None = None) -> None:
+    """Spin until ``stop`` is set or the context shuts down.
 
     rclpy 7.1.6's ``EventsExecutor.spin()`` (and ``spin_once()`` without a timeout) runs no timer
-    callback at all; ``spin_once`` with a timeout does, so the events executor is driven by that loop.
+    callback at all; ``spin_once`` with a timeout does, so both executors are driven by that loop, which
+    also sees ``stop`` (set by the signal handlers of :func:`main`) within ``_SPIN_TIMEOUT_S``.
     """
-    if isinstance(executor, SingleThreadedExecutor):
-        executor.spin()
-        return
-    while rclpy.ok(context=executor.context):
+    while rclpy.ok(context=executor.context) and not (stop is not None and stop.is_set()):
         executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
+
+
+def _stop_on_signals(stop: threading.Event) -> None:
+    """SIGINT and SIGTERM only set ``stop``: whatever callback runs finishes, then ``main`` shuts down.
+
+    rclpy's own handlers would invalidate the context under a running callback (its publish fails) and
+    Python's SIGINT raises KeyboardInterrupt wherever the main thread is; either reached the executor as
+    an exception in a callback (logged FATAL) and could cost the final checkpoint.
+    """
+    def handler(signum: int, frame: Any) -> None:
+        stop.set()
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, handler)
 
 
 def parse_node_args(args: list[str]) -> argparse.Namespace:
@@ -1033,7 +1078,9 @@ def main(args: list[str] | None = None) -> int:
     if options.print_defaults:
         print(describe_parameters())
         return 0
-    rclpy.init(args=argv)
+    stop = threading.Event()
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    _stop_on_signals(stop)
     node: EstimatorNode | None = None
     code = 0
     crashed = False
@@ -1053,12 +1100,18 @@ def main(args: list[str] | None = None) -> int:
             gc.freeze()
             executor = EXECUTORS[options.executor]()
             executor.add_node(node)
-            spin(executor)
+            spin(executor, stop)
     except StartupError as err:
         print(f"[estimator] FATAL: {err}", file=sys.stderr, flush=True)
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception as err:
+        if node is None or node.context.ok():
+            crashed = True
+            raise
+        # the signal handler invalidated the context under the executor: a shutdown, not a crash
+        print(f"[estimator] shutting down (interrupted: {err})", file=sys.stderr, flush=True)
     except BaseException:
         crashed = True
         raise
