@@ -22,7 +22,7 @@ from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["atomic_open", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["atomic_open", "atomic_write_bytes", "atomic_write_text", "remove_stale_temporaries"]
 
 
 def atomic_open(path: str | os.PathLike[str], mode: str = "w") -> AbstractContextManager[IO[Any]]:
@@ -65,6 +65,30 @@ def _atomic(path: Path, mode: str) -> Iterator[IO[Any]]:
             pass
         raise
     _fsync_dir(path.parent)
+
+
+def remove_stale_temporaries(path: str | os.PathLike[str]) -> list[Path]:
+    """Delete the temporary files that interrupted atomic writes of ``path`` left behind.
+
+    A process killed between creating ``.<name>.<random>.tmp`` and renaming it (SIGKILL, power loss)
+    leaves the temporary file; the destination itself is intact. Call at start-up, before writing.
+
+    Args:
+        path: The destination whose temporaries to remove.
+
+    Returns:
+        The files removed.
+    """
+    path = Path(path)
+    removed = []
+    for stale in path.parent.glob(f".{path.name}.*.tmp"):
+        if len(stale.name) == len(path.name) + 22:  # ".", name, ".", 16 hex digits, ".tmp"
+            try:
+                stale.unlink()
+                removed.append(stale)
+            except OSError:  # gone meanwhile, or not ours to delete: leave it
+                pass
+    return removed
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:

@@ -148,3 +148,15 @@ def test_misspelt_name_in_a_parameter_file_and_print_defaults(ros_env, tmp_path)
     assert [line.split(" (")[0] for line in lines] == [p.name for p in PARAMETERS]
     assert any(line.startswith("gate.threshold (double, > 0 and <= 1e+06, default 5.0, settable at run time)")
                for line in lines), lines
+
+
+def test_missing_or_unparseable_parameter_file_is_one_line_and_exit_2(ros_env, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("estimator:\n  ros__parameters:\n    gate: [1, 2\n")
+    for name, path in (("missing", tmp_path / "nope.yaml"), ("unparseable", bad)):
+        proc = NodeProcess(ros_env, params_file=path, tag=name)
+        assert proc.wait(timeout=120) == 2, (name, proc.output())
+        out = proc.output()
+        proc.stop()
+        lines = [line for line in out.splitlines() if line.strip()]
+        assert len(lines) == 1 and lines[0].startswith("[estimator] FATAL:") and str(path) in lines[0], out

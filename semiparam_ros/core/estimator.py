@@ -854,6 +854,15 @@ class OnlineEstimator:
         except (TypeError, KeyError, IndexError, OverflowError, ValueError) as err:
             # e.g. a counter stored as a vector: the learners' checks expect scalars; still a bad file
             raise CheckpointError(f"{path}: corrupt checkpoint: {type(err).__name__}: {err}") from err
+        _check_magnitudes(path, state)
+        try:  # a probe: a state that loads but cannot predict would refuse every sample afterwards
+            probe = model.predict_one(np.zeros(3 * self._n_joints))
+            finite = bool(np.isfinite(probe.total).all())
+        except RejectedSampleError:
+            finite = False
+        if not finite:
+            raise CheckpointError(f"{path}: corrupt checkpoint: its model's prediction at q = q̇ = q̈ = 0 is "
+                                  "not finite")
         self.model = model
         self.noise = noise
         self.gate = gate
@@ -889,6 +898,20 @@ def software_versions() -> dict[str, str]:
 
     return {"semiparam_ros": __version__, "python": platform.python_version(), "numpy": np.__version__,
             "pinocchio": str(pinocchio.__version__)}
+
+
+def _check_magnitudes(path: str | Path, state: dict[str, np.ndarray]) -> None:
+    """Refuse a checkpoint whose learned numbers are NaN, inf or beyond ±MAX_ABS_INPUT.
+
+    Raises:
+        CheckpointError: Naming the first such array.
+    """
+    for key, value in state.items():
+        arr = np.asarray(value)
+        if key.startswith(("model.", "noise.")) and arr.dtype.kind == "f" and arr.size:
+            if not np.abs(arr).max() <= MAX_ABS_INPUT:
+                raise CheckpointError(f"{path}: corrupt checkpoint: {key} holds NaN, inf or values beyond "
+                                      f"{MAX_ABS_INPUT:g}")
 
 
 def _gate_config(config: EstimatorConfig) -> GateConfig:

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from semiparam_ros.errors import RejectedSampleError
+
 __all__ = [
     "JointStateData",
     "Sample",
@@ -40,8 +42,15 @@ def stamp_to_ns(sec: int, nanosec: int) -> int:
 
     Returns:
         ``sec * 10**9 + nanosec``.
+
+    Raises:
+        RejectedSampleError: ``nanosec`` outside ``[0, 1e9)`` (an invalid stamp: ``0xFFFFFFFF`` would
+            otherwise read as a time 4.3 s ahead and the samples after it as out of order).
     """
-    return int(sec) * _NS_PER_S + int(nanosec)
+    ns = int(nanosec)
+    if not 0 <= ns < _NS_PER_S:
+        raise RejectedSampleError(f"invalid stamp: nanosec = {ns} is not in [0, 1e9)")
+    return int(sec) * _NS_PER_S + ns
 
 
 def ns_to_stamp(stamp_ns: int) -> tuple[int, int]:

@@ -43,7 +43,7 @@ from semiparam_ros.core.messages import (
     stamp_to_ns,
     wrench_from_msg,
 )
-from semiparam_ros.errors import BagError
+from semiparam_ros.errors import BagError, RejectedSampleError
 from semiparam_ros.io.mcap_scan import McapScan, ScannedChannel
 
 if TYPE_CHECKING:
@@ -386,12 +386,16 @@ def read_messages(
 
 
 def _read_messages(path: Path, topics: dict[str, str | None]) -> Iterator[JointStateData | WrenchData]:
+    invalid = 0
     for decode, conn, _log_time, raw in _stream(path, topics):
         msg = _deserialize(decode, raw, conn, path)
-        if conn.msgtype == JOINT_STATE_TYPE:
-            yield joint_state_from_msg(msg)
-        else:
-            yield wrench_from_msg(msg)
+        try:
+            yield joint_state_from_msg(msg) if conn.msgtype == JOINT_STATE_TYPE else wrench_from_msg(msg)
+        except RejectedSampleError:  # an invalid stamp: the node drops such a message too
+            invalid += 1
+    if invalid:
+        warnings.warn(f"bag {str(path)!r}: {invalid} messages with an invalid stamp (nanosec >= 1e9) were "
+                      "skipped", BagRecoveryWarning, stacklevel=3)
 
 
 def iter_samples(

@@ -51,6 +51,7 @@ forgetting                      per-sample β from adaptation.time_constant at t
 checkpoint_path                 configured path ('' = disabled)
 checkpoint_age_s                seconds since the last successful checkpoint write (-1 = never)
 checkpoint_errors               failed checkpoint writes
+checkpoint_failed               ``true`` while the last checkpoint write failed (level ERROR)
 ==============================  =================================================================
 
 Level: ERROR if input is queued but nothing was processed for a whole period (stalled), WARN if messages
@@ -140,6 +141,7 @@ class NodeStatistics:
         self.node_drops: dict[str, int] = {}
         self.last_checkpoint_time: float | None = None
         self.checkpoint_errors = 0
+        self.last_checkpoint_failed = False
 
     def set_rmse_window(self, rmse_window: int) -> None:
         """Change the running RMSE window [samples], keeping the most recent errors (e.g. at a new rate)."""
@@ -255,6 +257,7 @@ class NodeStatistics:
                 checkpoint_age_s=(now - self.last_checkpoint_time
                                   if self.last_checkpoint_time is not None else -1.0),
                 checkpoint_errors=self.checkpoint_errors,
+                checkpoint_failed=self.last_checkpoint_failed,
             )
             if self.output == "wrench":
                 snap["rmse_force_N"] = self._rmse_total.rmse(slice(0, 3))
@@ -273,6 +276,7 @@ class NodeStatistics:
     def mark_checkpoint(self, ok: bool) -> None:
         """Record the outcome of a checkpoint write."""
         with self._lock:
+            self.last_checkpoint_failed = not ok
             if ok:
                 self.last_checkpoint_time = time.monotonic()
             else:
@@ -312,7 +316,9 @@ def diagnostic_array(
     status = DiagnosticStatus()
     status.name = name
     status.hardware_id = hardware_id
-    if waiting:
+    if stats.get("checkpoint_failed") is True:
+        status.level, status.message = DiagnosticStatus.ERROR, "the last checkpoint write failed"
+    elif waiting:
         status.level, status.message = DiagnosticStatus.WARN, "waiting for the robot description"
     elif stalled:
         status.level, status.message = DiagnosticStatus.ERROR, "stalled: queued input is not processed"

@@ -128,6 +128,7 @@ from std_srvs.srv import Trigger
 from threadpoolctl import threadpool_limits
 from trajectory_msgs.msg import JointTrajectory
 
+from semiparam_ros.atomic import remove_stale_temporaries
 from semiparam_ros.core.checkpoint import atomic_save_npz
 from semiparam_ros.core.config import EstimatorConfig, describe_parameters
 from semiparam_ros.core.dynamics import TOPIC_SCHEME
@@ -186,6 +187,7 @@ _SPIN_TIMEOUT_S = 0.1  # EventsExecutor.spin_once timeout (see spin())
 _MAX_DRAIN = 64  # messages taken per subscription callback at most (bounds the executor's time away)
 _WARM_UP_MAX_SAMPLES = 2000  # synthetic 1 kHz samples the kernel warm-up feeds at most (_warm_up_kernels)
 _SAVE_TIMEOUT_S = 5.0  # ~/save waits this long for the checkpoint thread, then replies failure
+_MAX_LOST_PER_EVENT = 100_000  # a larger lost-message count in one event is a middleware counter glitch
 
 
 _Callback = TypeVar("_Callback", bound=Callable[..., Any])
@@ -248,6 +250,8 @@ class EstimatorNode(Node):
         """Declare and validate the parameters (a lifecycle node does this at construction)."""
         self._last_warning: dict[str, float] = {}  # key → monotonic time of the last throttled warning
         self._ckpt_thread: threading.Thread | None = None
+        #: Whether the final checkpoint (at shutdown) was written, or none was due; ``main`` exits 1 if not.
+        self.final_checkpoint_ok = True
         try:
             self.config: EstimatorConfig = declare_parameters(self)
         except ParameterError as err:
@@ -276,16 +280,7 @@ class EstimatorNode(Node):
         except (ConfigurationError, OSError) as err:
             raise StartupError(f"cannot build the estimator: {err}") from err
         self._warm_up_kernels()
-        if self._ckpt_path is not None and cfg["checkpoint.load_on_start"] and self._ckpt_path.exists():
-            try:
-                self._estimator.load(self._ckpt_path)
-            except CheckpointError as err:
-                raise StartupError(
-                    f"cannot warm start from checkpoint {self._ckpt_path}: {err}\n"
-                    "Delete or move it, point checkpoint.path elsewhere, or set "
-                    "checkpoint.load_on_start:=false to overwrite it.") from err
-            self.get_logger().info(
-                f"warm start from {self._ckpt_path} ({self._estimator.n_samples_learned} samples learned)")
+        self._warm_start(bool(cfg["checkpoint.load_on_start"]))
         self._estimator.learning_enabled = bool(cfg["learning_enabled"])
         self._serving = LearnedModel(self._estimator)  # the model at any state (feed-forward, gravity)
         self._feedforward: FeedForward | None = None
@@ -410,6 +405,35 @@ class EstimatorNode(Node):
             f"estimating {self._output} of joints {list(self._joints)}: {est.regressor.n_base} base "
             f"parameters, D = {cfg['nonparametric.n_features']} random features; learning "
             f"{'enabled' if est.learning_enabled else 'disabled'}; inputs {', '.join(inputs)}")
+
+    def _warm_start(self, load_on_start: bool) -> None:
+        """Remove stale temporaries of the checkpoint, then load it or say why the start is cold.
+
+        Raises:
+            StartupError: The checkpoint exists but cannot be loaded (corrupt, another structure or robot,
+                absurd values); the message says how to proceed.
+        """
+        path = self._ckpt_path
+        if path is None:
+            self.get_logger().info("cold start: checkpoint.path is empty (no checkpoints)")
+            return
+        for stale in remove_stale_temporaries(path):
+            self.get_logger().warning(f"removed {stale}, left by an interrupted checkpoint write")
+        if not load_on_start:
+            self.get_logger().info("cold start: checkpoint.load_on_start is false")
+            return
+        if not path.exists():
+            self.get_logger().info(f"cold start: no checkpoint at {path} yet (it will be written there)")
+            return
+        try:
+            self._estimator.load(path)
+        except CheckpointError as err:
+            raise StartupError(
+                f"cannot warm start from checkpoint {path}: {err}\n"
+                "Delete or move it, point checkpoint.path elsewhere, or set "
+                "checkpoint.load_on_start:=false to overwrite it.") from err
+        self.get_logger().info(
+            f"warm start from {path} ({self._estimator.n_samples_learned} samples learned)")
 
     def _wait_for_description(self, topic: str, timeout_s: float) -> str:
         """Wait for the URDF text on ``topic`` (robot_state_publisher's transient-local ``std_msgs/String``).
@@ -566,11 +590,23 @@ class EstimatorNode(Node):
         return warn
 
     def _message_lost_counter(self, topic: str) -> Callable[[Any], None]:
+        last = [0]  # the middleware's running total at the last event
+
         def count(event: Any) -> None:
-            self._stats.count_drop("dds_message_lost", int(event.total_count_change))
+            # the running total, taken as a delta and checked: one oversized message made Fast DDS report
+            # a change of 2**31 (a wrapped 32-bit counter); a loss can never exceed the messages sent
+            total = int(event.total_count)
+            delta = total - last[0]
+            last[0] = max(last[0], total)
+            if not 0 <= delta <= _MAX_LOST_PER_EVENT:
+                self._warn_throttled(f"lost count {topic}", lambda: (
+                    f"the middleware reported an implausible lost-message count on "
+                    f"{self.resolve_topic_name(topic)} (total {total}, change {delta}): counted as 1"))
+                delta = 1
+            self._stats.count_drop("dds_message_lost", delta)
             self._warn_throttled(f"lost {topic}", lambda: (
-                f"{event.total_count_change} messages on {self.resolve_topic_name(topic)} were lost in the "
-                "middleware (history overflow: the node is not taking them fast enough)"))
+                f"{delta} messages on {self.resolve_topic_name(topic)} were lost in the middleware "
+                "(history overflow: the node is not taking them fast enough)"))
 
         return count
 
@@ -912,6 +948,7 @@ class EstimatorNode(Node):
             for future in requests:
                 future.set_result(result)
             if stopping:
+                self.final_checkpoint_ok = result[0] or self._ckpt_path is None
                 return
 
     def _version_changed(self) -> bool:
@@ -1022,6 +1059,11 @@ def spin(executor: Executor, stop: threading.Event | None = None) -> None:
         executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
 
 
+def _first_line(err: BaseException) -> str:
+    """Return the message of an rcl error without its C source locations (``…, at /project/src/…``)."""
+    return str(err).split(", at /")[0].strip()
+
+
 def _stop_on_signals(stop: threading.Event) -> None:
     """SIGINT and SIGTERM only set ``stop``: whatever callback runs finishes, then ``main`` shuts down.
 
@@ -1066,7 +1108,8 @@ def main(args: list[str] | None = None) -> int:
         args: Command-line arguments (``[--executor NAME] --ros-args ...``); ``sys.argv[1:]`` when None.
 
     Returns:
-        Process exit code: 0 on a clean shutdown, 2 if the node could not start.
+        Process exit code: 0 on a clean shutdown, 1 if its final checkpoint could not be written, 2 if the
+        node could not start.
 
     Raises:
         Exception: A programming error inside a callback propagates out of ``spin`` (the ROS habit: the
@@ -1074,7 +1117,12 @@ def main(args: list[str] | None = None) -> int:
             periodic checkpoint); the node is destroyed without learning the queue or saving first.
     """
     argv = sys.argv[1:] if args is None else list(args)
-    options = parse_node_args(rclpy.utilities.remove_ros_args(["estimator", *argv])[1:])
+    try:
+        options = parse_node_args(rclpy.utilities.remove_ros_args(["estimator", *argv])[1:])
+    except RuntimeError as err:  # rcl's RCLInvalidROSArgsError: a missing or unparseable parameter file
+        print(f"[estimator] FATAL: invalid ROS arguments or parameter file: {_first_line(err)}",
+              file=sys.stderr, flush=True)
+        return 2
     if options.print_defaults:
         print(describe_parameters())
         return 0
@@ -1121,6 +1169,10 @@ def main(args: list[str] | None = None) -> int:
                 node.abort()
             else:
                 node.shutdown()
+                if not node.final_checkpoint_ok:
+                    print("[estimator] ERROR: the final checkpoint could not be written (see the log above)",
+                          file=sys.stderr, flush=True)
+                    code = 1
             node.destroy_node()
         rclpy.try_shutdown()
     return code
