@@ -75,3 +75,21 @@ def test_a_joint_the_bag_lacks_is_named_with_the_bags_names(bags, capsys):
     assert "lack the configured joint(s) ['r_wrist_yaw']" in err, err
     assert "they name ['r_shoulder_pitch', 'r_shoulder_roll', 'r_shoulder_yaw', 'r_elbow']" in err, err
     assert "drops" not in err
+
+
+def test_evaluate_on_a_truncated_bag_says_so_in_the_json_and_the_report(bags, tmp_path, capsys):
+    import json
+
+    mcap = next((bags / "test").glob("*.mcap"))
+    raw = mcap.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(raw[: int(0.7 * len(raw))])
+    out = tmp_path / "report.json"
+    code = evaluate_cli.main([
+        "--train", str(bags / "train"), "--test", str(cut), "--config", str(CONFIG),
+        "--set", "robot.output=joint_torques", "--set", "nonparametric.n_features=30",
+        "--models", "P", "--splits", "2", "--window", "0.5", "--no-progress", "--json", str(out)])
+    assert code == 0
+    notes = json.loads(out.read_text())["protocol"]["recovered_bags"]
+    assert len(notes) == 1 and "cut.mcap" in notes[0] and "recovered" in notes[0]
+    assert "WARNING: bag" in capsys.readouterr().out

@@ -8,6 +8,7 @@ returns the text printed on the terminal.
 from __future__ import annotations
 
 import sys
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -30,6 +31,7 @@ from semiparam_ros.eval.tables import (
     contacts_table,
     protocol_table,
 )
+from semiparam_ros.io.bags import BagRecoveryWarning
 
 __all__ = ["default_config_path", "evaluation_text", "load_evaluation_config", "run_evaluate", "run_tune"]
 
@@ -202,27 +204,35 @@ def run_evaluate(
     else:
         if train is None or test is None:
             raise ValueError("the paper protocol needs --train and --test")
-        result, info = evaluate_bags(
-            train,
-            test,
-            cfg,
-            topics=topics,
-            kinds=models or KINDS,
-            splits=splits,
-            split_size=split_size,
-            window_s=window_s,
-            first_s=first_s,
-            train_limit=train_limit,
-            test_limit=test_limit,
-            test_skip=test_skip,
-            horizons=horizons,
-            progress=progress,
-        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", BagRecoveryWarning)
+            result, info = evaluate_bags(
+                train,
+                test,
+                cfg,
+                topics=topics,
+                kinds=models or KINDS,
+                splits=splits,
+                split_size=split_size,
+                window_s=window_s,
+                first_s=first_s,
+                train_limit=train_limit,
+                test_limit=test_limit,
+                test_skip=test_skip,
+                horizons=horizons,
+                progress=progress,
+            )
+        recovered = _recovered(caught)
+        if recovered:
+            # a truncated or damaged bag was read as far as possible: the report says so, with what was lost
+            info["recovered_bags"] = recovered
         horizon = info.pop("horizons", None)
         if horizon is not None:
             info["horizons"] = horizon.to_json()
         report = protocol_report(result, config=cfg.to_flat(), protocol=info)
         text = evaluation_text(report)
+        for note in recovered:
+            text = f"WARNING: {note}\n\n" + text
         if horizon is not None:
             text += "\n## By the age of the model\n\n" + horizon_markdown(horizon)
             if horizon_plot_path is not None:
@@ -240,6 +250,18 @@ def run_evaluate(
     if markdown_path is not None:
         atomic_write_text(markdown_path, text)
     return text
+
+
+def _recovered(caught: list[warnings.WarningMessage]) -> list[str]:
+    """Return the bag-recovery warnings' texts (once each); pass every other warning on."""
+    notes: list[str] = []
+    for w in caught:
+        if issubclass(w.category, BagRecoveryWarning):
+            if str(w.message) not in notes:
+                notes.append(str(w.message))
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return notes
 
 
 def run_tune(
