@@ -111,3 +111,27 @@ def test_stale_temporaries_cold_start_and_a_disk_that_refuses_the_checkpoint(tmp
         code = node.stop()
     assert code == 1, node.output()  # the final checkpoint could not be written either
     assert "the final checkpoint could not be written" in node.output()
+
+
+def test_oversized_joint_states_are_refused_cheaply_and_the_name_cache_is_bounded():
+    from semiparam_ros.core.estimator import build_pipeline
+    from semiparam_ros.core.messages import JointStateData
+
+    big = JointState()
+    n = 200_000
+    big.name = [f"joint_{i}" for i in range(n)]
+    big.position = big.velocity = big.effort = [0.0] * n
+    raw = bytes(serialize_message(big))
+    start = time.perf_counter()
+    with pytest.raises(RejectedSampleError, match="oversized JointState"):
+        joint_state_from_cdr(raw, max_names=1024)
+    assert time.perf_counter() - start < 0.05  # refused from its header, its names never decoded
+    assert len(joint_state_from_cdr(raw).names) == n  # without a bound it decodes (the offline readers)
+    # distinct large name lists: the pipeline's cache keeps a bounded amount of name text
+    pipeline = build_pipeline(load_config(CONFIG))
+    for k in range(40):
+        names = tuple(f"k{k}_{i:06d}" for i in range(20_000)) + tuple(JOINTS)
+        pipeline.add_joint_state(JointStateData(10**9 + k * 10**7, names, np.zeros(len(names)),
+                                                np.zeros(len(names)), np.zeros(len(names))))
+    assert pipeline._name_cache_bytes <= 1 << 20
+    assert sum(sum(len(s) for s in key) for key in pipeline._name_cache) <= 1 << 20

@@ -138,6 +138,7 @@ DROP_REASONS = (
 """Every key of :attr:`SamplePipeline.drops`, in screening order."""
 
 _NAME_CACHE_SIZE = 16
+_NAME_CACHE_BYTES = 1 << 20  # the name cache holds at most about this much name text (bounded memory)
 _NO_BOUND = sys.float_info.max  # "no bound": still rejects inf (and NaN) in the one-pass check
 
 
@@ -264,6 +265,7 @@ class SamplePipeline:
         self._tol_ns = round(self.sync_tolerance * 1e9)
         self._buffer_ns = round(self.buffer_s * 1e9)
         self._name_cache: dict[tuple[str, ...], np.ndarray | str] = {}
+        self._name_cache_bytes = 0  # approximate content size of the cached name lists
         self.drops: dict[str, int] = dict.fromkeys(DROP_REASONS, 0)
         self.n_samples = 0
         self.n_restarts = 0  # clock restarts detected (restart_after backwards stamps in a row)
@@ -341,9 +343,15 @@ class SamplePipeline:
                 result = np.array([position[j] for j in self.joints], dtype=np.intp)
             else:
                 result = DROP_MISSING_JOINT
-        if len(self._name_cache) >= _NAME_CACHE_SIZE:
-            self._name_cache.pop(next(iter(self._name_cache)))
-        self._name_cache[names] = result
+        size = sum(len(n) for n in names) + 8 * len(names)
+        if size <= _NAME_CACHE_BYTES // 4:  # a huge name list is answered, not kept
+            while self._name_cache and (len(self._name_cache) >= _NAME_CACHE_SIZE
+                                        or self._name_cache_bytes + size > _NAME_CACHE_BYTES):
+                old = next(iter(self._name_cache))
+                self._name_cache_bytes -= sum(len(n) for n in old) + 8 * len(old)
+                del self._name_cache[old]
+            self._name_cache[names] = result
+            self._name_cache_bytes += size
         return result
 
     def add_joint_state(self, msg: JointStateData) -> list[Sample]:

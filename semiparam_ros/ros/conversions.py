@@ -328,27 +328,55 @@ def _cdr_doubles(raw: bytes, pos: int) -> tuple[np.ndarray, int]:
 
 
 _U32 = struct.Struct("<I")
+#: A joint name costs at least 8 bytes of CDR (length, one character, terminator, padding) plus 24 for
+#: its position, velocity and effort; the header and frame of a sane message fit in 64 kB.
+_MIN_BYTES_PER_NAME = 8
+_MAX_FIXED_BYTES = 65536
+
+
+def _name_count(raw: bytes) -> int | None:
+    """Return the number of names of a little-endian CDR JointState without decoding them (None: unknown)."""
+    try:
+        if raw[:2] != _CDR_LE:
+            return None
+        _, pos = _cdr_string(raw, _PAYLOAD_START + 8)
+        (n_names,) = _U32.unpack_from(raw, _align(pos, 4))
+        return int(n_names)
+    except (struct.error, UnicodeDecodeError, _NotFastPathError):
+        return None
 #: Frame + names section (bytes from the end of the stamp), its names and end offset, of the last JointState
 #: read: a robot sends the same names every time, so one byte comparison replaces decoding them.
 _last_names: tuple[bytes, tuple[str, ...], int] = (b"", (), 0)
 
 
-def joint_state_from_cdr(raw: bytes) -> JointStateData:
+def joint_state_from_cdr(raw: bytes, max_names: int | None = None) -> JointStateData:
     """Convert a serialised ``sensor_msgs/JointState`` into :class:`JointStateData`.
 
     Equal to ``joint_state_from_msg(deserialize_message(raw, JointState))``, which is what runs for any
     encapsulation other than little-endian CDR or bytes the fast reader does not expect.
 
+    A message cut short inside its trailing alignment padding still holds every value and is decoded as
+    is (correctly: nothing is lost); one cut inside a value is refused by the deserialiser.
+
     Args:
         raw: The serialised message (CDR with its 4-byte encapsulation header).
+        max_names: Refuse a message with more joint names than this before decoding them (a 10⁶-name
+            message would otherwise take the node's thread for about a second); None for no bound.
 
     Returns:
         The plain-array view (content not validated, as :func:`joint_state_from_msg`).
 
     Raises:
-        RejectedSampleError: If the bytes are not a JointState (rclpy cannot deserialise them).
+        RejectedSampleError: If the bytes are not a JointState (rclpy cannot deserialise them), the stamp
+            is invalid, or there are more than ``max_names`` names.
     """
     global _last_names
+    if max_names is not None and len(raw) > _MIN_BYTES_PER_NAME * max_names + _MAX_FIXED_BYTES:
+        n_names = _name_count(raw)
+        if n_names is None or n_names > max_names:
+            raise RejectedSampleError(f"oversized JointState: {len(raw)} bytes"
+                                      + ("" if n_names is None else f", {n_names} names")
+                                      + f" (at most {max_names} names accepted)")
     try:
         if raw[:2] != _CDR_LE:
             raise _NotFastPathError

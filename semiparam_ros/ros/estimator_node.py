@@ -187,6 +187,7 @@ _SPIN_TIMEOUT_S = 0.1  # EventsExecutor.spin_once timeout (see spin())
 _MAX_DRAIN = 64  # messages taken per subscription callback at most (bounds the executor's time away)
 _WARM_UP_MAX_SAMPLES = 2000  # synthetic 1 kHz samples the kernel warm-up feeds at most (_warm_up_kernels)
 _SAVE_TIMEOUT_S = 5.0  # ~/save waits this long for the checkpoint thread, then replies failure
+_MIN_NAME_BOUND = 1024
 _MAX_LOST_PER_EVENT = 100_000  # a larger lost-message count in one event is a middleware counter glitch
 
 
@@ -267,6 +268,9 @@ class EstimatorNode(Node):
         cfg = self.config
         self._output = cfg["robot.output"]
         self._joints = tuple(cfg["robot.joints"])
+        # a JointState with more names than this is refused before its names are decoded (a robot lists
+        # its joints, perhaps a few hands and grippers more: not thousands)
+        self._max_names = max(_MIN_NAME_BOUND, 16 * len(self._joints))
         self._frame_id = cfg["robot.frame_id"]
         self._ckpt_path = Path(cfg["checkpoint.path"]).expanduser() if cfg["checkpoint.path"] else None
         self._ckpt_period = float(cfg["checkpoint.period"])
@@ -543,7 +547,8 @@ class EstimatorNode(Node):
         self._stats.count_input(kind)
         try:
             if isinstance(msg, bytes):
-                data = joint_state_from_cdr(msg) if kind == "joint_states" else wrench_from_cdr(msg)
+                data = (joint_state_from_cdr(msg, self._max_names) if kind == "joint_states"
+                        else wrench_from_cdr(msg))
             else:
                 data = joint_state_from_msg(msg) if kind == "joint_states" else wrench_from_msg(msg)
         except RejectedSampleError as err:  # a message the conversion refuses: a counted drop
