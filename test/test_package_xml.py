@@ -16,7 +16,7 @@ from ros_helpers import REPO
 #: Keys of the rosdep database used here (ros/rosdistro 8468e88ccd523427f9131e39d2af0938f1c298b2).
 VALID_KEYS = frozenset({
     "rclpy", "builtin_interfaces", "rcl_interfaces", "sensor_msgs", "geometry_msgs", "std_msgs", "std_srvs",
-    "diagnostic_msgs", "rosgraph_msgs", "trajectory_msgs", "ament_index_python", "launch", "launch_ros",
+    "diagnostic_msgs", "rosgraph_msgs", "trajectory_msgs", "lifecycle_msgs", "launch", "launch_ros",
     "pinocchio", "python3-numpy", "python3-scipy", "python3-numba", "python3-yaml", "python3-matplotlib",
     "python3-tqdm", "python3-joblib", "python3-rosbags-pip", "python3-pytest", "python3-hypothesis",
     "python3-sklearn", "python3-psutil",
@@ -26,7 +26,7 @@ KEY_OF = {
     "rclpy": "rclpy", "builtin_interfaces": "builtin_interfaces", "rcl_interfaces": "rcl_interfaces",
     "sensor_msgs": "sensor_msgs", "geometry_msgs": "geometry_msgs", "std_msgs": "std_msgs",
     "std_srvs": "std_srvs", "diagnostic_msgs": "diagnostic_msgs", "rosgraph_msgs": "rosgraph_msgs",
-    "trajectory_msgs": "trajectory_msgs", "ament_index_python": "ament_index_python",
+    "trajectory_msgs": "trajectory_msgs", "lifecycle_msgs": "lifecycle_msgs",
     "pinocchio": "pinocchio", "numpy": "python3-numpy", "scipy": "python3-scipy", "numba": "python3-numba",
     "yaml": "python3-yaml", "matplotlib": "python3-matplotlib", "tqdm": "python3-tqdm",
     "joblib": "python3-joblib", "rosbags": "python3-rosbags-pip", "pytest": "python3-pytest",
@@ -35,8 +35,8 @@ KEY_OF = {
 #: Import name → pip distribution, for libraries without a rosdep key.
 PIP_ONLY = {"threadpoolctl": "threadpoolctl", "zstandard": "zstandard", "lz4": "lz4",
             "example_robot_data": "example-robot-data", "mcap": "mcap", "mcap_ros2": "mcap-ros2-support"}
-#: Keys needed without a Python import: the launch file's packages.
-NOT_IMPORTED = {"launch", "launch_ros"}
+#: Keys needed without a Python import of ours: the launch file's packages; rclpy.lifecycle's messages.
+NOT_IMPORTED = {"launch", "launch_ros", "lifecycle_msgs"}
 LOCAL = {"semiparam_ros", "ros_helpers", "reference_rrls", "__future__"}
 
 

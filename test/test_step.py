@@ -226,7 +226,7 @@ def test_gated_estimator_step_equals_predict_then_learn_one(kind):
         # reference: the former two-pass step
         ahead = predict_with_variance(ref.model, s.x)
         std = ref.noise.std(ahead.variance)
-        verdict = ref.gate.decide(s.stamp_ns, s.y - ahead.total, std)
+        verdict = ref.gate.decide(s.stamp_ns, s.y - ahead.total, std, float(np.max(ahead.variance)))
         if verdict.learn:
             ref.model.learn_one(s.x, s.y)
             # the noise scale of the model's errors (a consistent SP's fast correction left out)
@@ -242,7 +242,7 @@ def test_gated_estimator_step_equals_predict_then_learn_one(kind):
             scale = np.abs(ahead.total).max() + 1.0
             np.testing.assert_allclose(got.prediction.total, ahead.total, rtol=0, atol=1e-9 * scale)
             np.testing.assert_allclose(got.std, std, rtol=1e-9)
-    assert verdicts == {"warmup", "inlier", "gated"}
+    assert {"warmup", "inlier", "gated"} <= verdicts  # "novel" too where the random states are new
     assert est.n_samples_learned == ref.model.n_samples_seen
 
 

@@ -290,6 +290,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("gate.warmup", "double", 10.0,
                   "time from the first sample during which every sample is learned and the noise "
                   "estimate settles before the gate engages [s]", min=0.0, max=1e6, read_only=False),
+    ParameterSpec("gate.novelty", "double", 1.0,
+                  "relative predictive variance z A^-1 z^T (dimensionless: the model's own uncertainty in "
+                  "units of the noise variance) above which an outlier is motion the model has not seen, "
+                  "learned, not a contact; 0 = every outlier is a contact", min=0.0, max=1e12,
+                  read_only=False),
     # feed-forward at desired states (joint torques; core/feedforward.py)
     ParameterSpec("feedforward.joints", "string_array", [],
                   "joint order of ~/feedforward_commands and ~/feedforward (a JointGroupEffortController's "
@@ -303,11 +308,6 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "learning goes on; 0 = the live model (it changes at every sample: measured to inject "
                   "torque jitter that degrades closed-loop tracking, docs/feedforward.md)",
                   min=0.0, max=1e6),
-    ParameterSpec("gate.novelty", "double", 1.0,
-                  "relative predictive variance z A^-1 z^T (dimensionless: the model's own uncertainty in "
-                  "units of the noise variance) above which an outlier is motion the model has not seen, "
-                  "learned, not a contact; 0 = every outlier is a contact", min=0.0, max=1e12,
-                  read_only=False),
     # run time
     ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)", read_only=False),
     ParameterSpec("queue_size", "integer", 1000,

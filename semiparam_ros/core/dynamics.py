@@ -46,6 +46,7 @@ Their URDF value is 0 (the URDF's ``<dynamics damping>`` is not used: it is a si
 from __future__ import annotations
 
 import math
+import os
 import pathlib
 import site
 import sys
@@ -169,9 +170,11 @@ def example_robot_data_path(relative: str) -> pathlib.Path:
 def package_file(package: str, relative: str) -> pathlib.Path:
     """Return a file of a ROS package: its share folder from the ament index, else a pip prefix's.
 
-    Tried in order: ``ament_index_python.get_package_share_directory(package)`` (a ROS install or a
-    colcon workspace that is sourced), then ``share/<package>`` under ``sys.prefix`` and under each
-    site-packages' ``cmeel.prefix`` (where PyPI wheels such as example-robot-data put theirs).
+    Tried in order: the ament index — for each prefix of ``AMENT_PREFIX_PATH`` (a sourced ROS install or
+    colcon workspace), the package is there when ``share/ament_index/resource_index/packages/<package>``
+    exists, and its share folder is ``share/<package>`` (what ``ament_index_python`` reads, read here
+    without importing ROS packages into the core) — then ``share/<package>`` under ``sys.prefix`` and
+    under each site-packages' ``cmeel.prefix`` (where PyPI wheels such as example-robot-data put theirs).
 
     Args:
         package: ROS package name.
@@ -184,20 +187,20 @@ def package_file(package: str, relative: str) -> pathlib.Path:
         FileNotFoundError: Naming every place tried.
     """
     tried: list[str] = []
-    try:
-        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
-
-        try:
-            path = pathlib.Path(get_package_share_directory(package)) / relative
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    if not prefixes:
+        tried.append("the ament index (AMENT_PREFIX_PATH is not set)")
+    for prefix in prefixes:
+        marker = pathlib.Path(prefix, "share", "ament_index", "resource_index", "packages", package)
+        if marker.is_file():
+            path = pathlib.Path(prefix, "share", package, relative)
             if path.is_file():
                 return path.resolve()
             tried.append(str(path))
-        except PackageNotFoundError:
-            tried.append(f"the ament index (no package {package!r})")
-        except OSError:  # AMENT_PREFIX_PATH unset: no ROS environment sourced
-            tried.append("the ament index (AMENT_PREFIX_PATH is not set)")
-    except ImportError:  # pragma: no cover - ament_index_python is a dependency
-        tried.append("the ament index (ament_index_python not installed)")
+            break  # the first prefix that has the package is the one in use (ament's overlay order)
+    else:
+        if prefixes:
+            tried.append(f"the ament index (no package {package!r} in AMENT_PREFIX_PATH)")
     bases = [pathlib.Path(sys.prefix) / "share" / package]
     for key in ("purelib", "platlib"):
         site_dir = sysconfig.get_paths().get(key)
