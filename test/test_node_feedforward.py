@@ -66,6 +66,19 @@ def _stamp(msg):
     return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
 
 
+def _controller(client, node):
+    """A controller's publishers (desired states, joint states), once the node listens and answers."""
+    desired_pub = client.node.create_publisher(JointTrajectory, "/estimator/desired_state", 10)
+    js_pub = client.node.create_publisher(JointState, "/joint_states",
+                                          QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    assert client.wait_for_publisher("/estimator/feedforward", timeout=60.0), node.output()
+    deadline = time.monotonic() + 30
+    while client.node.count_subscribers("/estimator/desired_state") == 0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    return desired_pub, js_pub
+
+
 def _node(ros_env, checkpoint, *params):
     return NodeProcess(ros_env, [f"nonparametric.n_features:={D}", f"checkpoint.path:={checkpoint}",
                                  "checkpoint.period:=0.0", "diagnostics.period:=0.2", *params],
@@ -88,14 +101,7 @@ def test_feedforward_gravity_and_parts_over_dds(ros_env, checkpoint, tmp_path):
         gravity = client.collect(JointState, "/estimator/gravity_torques")
         parametric = client.collect(JointState, "/estimator/predicted_joint_torques/parametric")
         diagnostics = client.collect(DiagnosticArray, "/diagnostics")
-        desired_pub = client.node.create_publisher(JointTrajectory, "/estimator/desired_state", 10)
-        js_pub = client.node.create_publisher(JointState, "/joint_states",
-                                              QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-        assert client.wait_for_publisher("/estimator/feedforward", timeout=60.0), node.output()
-        deadline = time.monotonic() + 30
-        while client.node.count_subscribers("/estimator/desired_state") == 0 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(0.5)
+        desired_pub, js_pub = _controller(client, node)
 
         rng = np.random.default_rng(0)
         perm = rng.permutation(7)
@@ -196,14 +202,7 @@ def test_short_closed_loop_through_the_node(ros_env, checkpoint, tmp_path):
 
     try:
         client.node.create_subscription(JointState, "/estimator/feedforward", on_ff, 100)
-        desired_pub = client.node.create_publisher(JointTrajectory, "/estimator/desired_state", 10)
-        js_pub = client.node.create_publisher(JointState, "/joint_states",
-                                              QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-        assert client.wait_for_publisher("/estimator/feedforward", timeout=60.0), node.output()
-        deadline = time.monotonic() + 30
-        while client.node.count_subscribers("/estimator/desired_state") == 0 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(0.5)
+        desired_pub, js_pub = _controller(client, node)
         base = 100 * 10**9
 
         def feed(k, tk, q_m, dq_m, tau):

@@ -575,14 +575,12 @@ class EstimatorNode(Node):
         for _ in range(_MAX_DRAIN):
             took = False
             for sub_kind, sub in order:
-                try:
-                    with sub.handle:
-                        taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                except Exception:  # the subscription is being destroyed: the executor will notice
+                taken = _take(sub)
+                if taken is _GONE:
                     return
                 if taken is not None:
                     took = True
-                    self._intake(sub_kind, taken[0])
+                    self._intake(sub_kind, taken)
             if not took:
                 return
 
@@ -883,14 +881,9 @@ class EstimatorNode(Node):
         The same take the executor makes (see :meth:`_drain`): the wait of a controller is bounded by
         one sample's learning instead of a batch of them.
         """
-        sub = self._desired_sub
-        try:
-            with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
-        except Exception:  # the subscription is being destroyed: the executor will notice
-            return
-        if taken is not None:
-            self._on_desired_state(taken[0])
+        taken = _take(self._desired_sub)
+        if taken is not None and taken is not _GONE:
+            self._on_desired_state(taken)
 
     @_quiet_at_shutdown
     def _on_desired_state(self, msg: JointTrajectory) -> None:
@@ -1062,6 +1055,24 @@ def spin(executor: Executor, stop: threading.Event | None = None) -> None:
     """
     while rclpy.ok(context=executor.context) and not (stop is not None and stop.is_set()):
         executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
+
+
+#: What :func:`_take` returns for a subscription being destroyed.
+_GONE: Any = object()
+
+
+def _take(sub: Any) -> Any:
+    """Take one waiting message of a subscription the way the executor does, or None when none waits.
+
+    Returns :data:`_GONE` when the subscription is being destroyed (the executor will notice). Not
+    public rclpy API (see :meth:`EstimatorNode._drain`).
+    """
+    try:
+        with sub.handle:
+            taken = sub.handle.take_message(sub.msg_type, sub.raw)
+    except Exception:
+        return _GONE
+    return None if taken is None else taken[0]
 
 
 def _first_line(err: BaseException) -> str:
