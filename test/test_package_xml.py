@@ -19,7 +19,7 @@ VALID_KEYS = frozenset({
     "diagnostic_msgs", "rosgraph_msgs", "trajectory_msgs", "lifecycle_msgs", "launch", "launch_ros",
     "pinocchio", "python3-numpy", "python3-scipy", "python3-numba", "python3-yaml", "python3-matplotlib",
     "python3-tqdm", "python3-joblib", "python3-rosbags-pip", "python3-pytest", "python3-hypothesis",
-    "python3-sklearn", "python3-psutil",
+    "python3-sklearn", "python3-psutil", "python3-cvxpy-pip",
 })
 #: Import name → rosdep key.
 KEY_OF = {
@@ -30,7 +30,7 @@ KEY_OF = {
     "pinocchio": "pinocchio", "numpy": "python3-numpy", "scipy": "python3-scipy", "numba": "python3-numba",
     "yaml": "python3-yaml", "matplotlib": "python3-matplotlib", "tqdm": "python3-tqdm",
     "joblib": "python3-joblib", "rosbags": "python3-rosbags-pip", "pytest": "python3-pytest",
-    "hypothesis": "python3-hypothesis", "sklearn": "python3-sklearn",
+    "hypothesis": "python3-hypothesis", "sklearn": "python3-sklearn", "cvxpy": "python3-cvxpy-pip",
 }
 #: Import name → pip distribution, for libraries without a rosdep key.
 PIP_ONLY = {"threadpoolctl": "threadpoolctl", "zstandard": "zstandard", "lz4": "lz4",

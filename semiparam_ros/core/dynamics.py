@@ -698,6 +698,21 @@ class RigidBodyRegressor:
         )
 
     @property
+    def body_links(self) -> tuple[tuple[str, ...], ...]:
+        """For each body of ``π`` (in ``body_names`` order), the URDF links its parameters include.
+
+        The body's own link first, then the links the reduced model merged into it (fixed children, and
+        the children of locked joints at their configured positions).
+        """
+        model = self._model
+        out = []
+        for body, jid in zip(self.body_names, self._body_jids, strict=True):
+            names = [f.name for f in model.frames
+                     if f.type == pin.FrameType.BODY and f.parentJoint == int(jid) and f.name != body]
+            out.append((body, *names))
+        return tuple(out)
+
+    @property
     def urdf_xml(self) -> str:
         """The URDF text this regressor was built from (what a self-contained checkpoint stores)."""
         return self._urdf_xml

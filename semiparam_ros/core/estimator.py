@@ -671,6 +671,11 @@ class OnlineEstimator:
         """
         return self.physical_parameters(self.model)
 
+    @property
+    def column_scale(self) -> np.ndarray:
+        """The column scales c of the rigid-body learner (θ = c ⊙ π_b; ones without column scaling)."""
+        return self._scale.copy()
+
     def physical_parameters(self, model: Model) -> np.ndarray | None:
         """Return the base parameters of a model of this estimator (its own or a copy) in physical units.
 

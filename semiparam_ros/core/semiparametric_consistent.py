@@ -80,7 +80,7 @@ from semiparam_ros.core.semiparametric import (
     _TwoStageModel,
 )
 from semiparam_ros.core.validation import check_finite_array, check_positive_int, check_range
-from semiparam_ros.errors import CheckpointError
+from semiparam_ros.errors import CheckpointError, RejectedSampleError
 
 __all__ = ["ConsistentSemiparametricModel", "ErrorTracker", "structural_entries"]
 
@@ -468,19 +468,50 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             pred = Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
         return pred
 
-    def predict_model(self, x: Any) -> Prediction:
+    def predict_model(self, x: Any, rigid: np.ndarray | None = None) -> Prediction:
         """Predict model(x) alone (rigid-body part + weighted residual; no fast correction).
 
         What a feed-forward term at a desired state uses: it does not depend on the last measurement.
+
+        Args:
+            x: The input ``[q, q̇, q̈]``.
+            rigid: Rigid-body parameters to predict with instead of the learned ones (the learner's units,
+                e.g. a physically consistent projection). The residual stays consistent with them: it
+                learned ``y − Φπ₀`` and ``Φ``, so ``r = E[y − Φπ₀] − E[Φ](π − π₀)`` for any π.
 
         Raises:
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
         yp, r, var, _ = self._model_valid(xv, Phi)
+        if rigid is not None:
+            yp, r = self._with_rigid(Phi[None], yp[None], r[None], xv[None], np.asarray(rigid))
+            yp, r = yp[0], r[0]
         return Prediction(yp, r, yp + r, var)
 
-    def predict_model_many(self, X: Any) -> Prediction:
+    def _with_rigid(self, Phi: np.ndarray, yp: np.ndarray, r: np.ndarray, X: np.ndarray,
+                    rigid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Re-evaluate ``(ŷ_P, g·r)`` of rows (N, t) with other rigid-body parameters (see predict_model)."""
+        par_model, npm = self.parametric, self.nonparametric
+        if rigid.shape != (self.n_params,) or not np.isfinite(rigid).all():
+            raise RejectedSampleError(f"rigid must be {self.n_params} finite parameters")
+        delta_new = rigid - par_model.prior
+        delta_old = par_model.rls.weights[:, 0]
+        yp_new = Phi @ rigid
+        if not npm.standardizer.ready:
+            return yp_new, r
+        # the weighted residual moves by −g·E[Φ](δ_new − δ_old): E[Φ] from the residual's own prediction
+        phi = np.ascontiguousarray(npm.rff._map(npm.standardizer._apply(X)))
+        P, v = npm.rls._predict_valid(phi, True)
+        assert v is not None  # asked for
+        n, t = X.shape[0], self.n_outputs
+        full = np.zeros((n, t * self.n_params))
+        full[:, self._phi_entries] = P[:, t:]
+        weight = np.exp(-(((npm.rls.lam * v) / self.novelty_scale) ** 2))[:, None]
+        shift = full.reshape(n, t, self.n_params) @ (delta_new - delta_old)
+        return yp_new, r - weight * shift
+
+    def predict_model_many(self, X: Any, rigid: np.ndarray | None = None) -> Prediction:
         """:meth:`predict_model` of N inputs at once (arrays of shape (N, t); ``variance`` included).
 
         The regressors are evaluated row by row; both learners then predict all rows with one matrix
@@ -489,6 +520,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
 
         Args:
             X: (N, n_inputs) inputs ``[q, q̇, q̈]``.
+            rigid: Rigid-body parameters to predict with instead of the learned ones (see
+                :meth:`predict_model`).
 
         Returns:
             The model's prediction per row: rigid-body part, weighted residual, total, relative variance.
@@ -513,6 +546,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             nu = npm.rls.lam * v
             r *= np.exp(-((nu / self.novelty_scale) ** 2))[:, None]
             var = var + v[:, None]
+        if rigid is not None:
+            yp, r = self._with_rigid(Phi, yp, r, X2, np.asarray(rigid))
         return Prediction(yp, r, yp + r, var)
 
     # ------------------------------------------------------------------ learning
