@@ -47,7 +47,9 @@ def test_fresh_model_falls_back_to_the_cad_model():
     q[3] = -1.5
     cmd = ff.compute(DesiredState(5, ff.joints, (_point(q, dq, ddq),)), now_ns=0)
     assert cmd is not None and cmd.source == "rigid_body" and cmd.reason == "not_ready"
-    np.testing.assert_allclose(cmd.tau, pin.rnea(pm, data, q, dq, ddq), rtol=0, atol=1e-9)
+    # the rigid-body part: the CAD model, through the consistent projection (its solver's accuracy)
+    rnea = pin.rnea(pm, data, q, dq, ddq)
+    np.testing.assert_allclose(cmd.tau, rnea, rtol=0, atol=1e-3 * np.abs(rnea).max())
     assert ff.counts["fallback.not_ready"] == 1 and ff.counts["published"] == 1
 
 

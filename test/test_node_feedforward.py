@@ -91,7 +91,7 @@ def test_feedforward_gravity_and_parts_over_dds(ros_env, checkpoint, tmp_path):
     out_order = list(reversed(joints))
     ckpt = tmp_path / "copy.npz"
     ckpt.write_bytes(checkpoint.read_bytes())
-    node = _node(ros_env, ckpt, "learning_enabled:=false",
+    node = _node(ros_env, ckpt, "learning_enabled:=false", "parametric.consistent:=false",
                  "feedforward.joints:=[" + ",".join(out_order) + "]")
     client = TestClient(ros_env)
     try:
@@ -154,7 +154,7 @@ def test_feedforward_gravity_and_parts_over_dds(ros_env, checkpoint, tmp_path):
     assert len(commands.snapshot()) == len(stds.snapshot()) == len(sent)
     for stamp, (q, dq, ddq) in sent.items():
         msg = got[stamp]
-        expected = model.predict(q, dq, ddq)[0]
+        expected = model.predict(q, dq, ddq, consistent=False)[0]
         assert list(msg.name) == out_order
         scale = 1 + np.abs(expected).max()
         np.testing.assert_allclose(msg.effort, expected[back], rtol=0, atol=1e-9 * scale)
@@ -226,3 +226,43 @@ def test_short_closed_loop_through_the_node(ros_env, checkpoint, tmp_path):
     rms_cad = np.sqrt(np.mean(cad.errors(0.5) ** 2))
     rms_learned = np.sqrt(np.mean(learned.errors(0.5) ** 2))
     assert rms_learned < 0.5 * rms_cad, (rms_learned, rms_cad)
+
+
+def test_feedforward_uses_the_consistent_projection_solved_in_a_worker(ros_env, checkpoint, tmp_path):
+    """With parametric.consistent (the default) the served model predicts with the worker process's
+    physically consistent parameters: the same numbers as load_model(ckpt).predict(consistent=True)."""
+    pytest.importorskip("cvxpy")
+    model = load_model(checkpoint)
+    joints = model.joints
+    ckpt = tmp_path / "copy.npz"
+    ckpt.write_bytes(checkpoint.read_bytes())
+    node = _node(ros_env, ckpt, "learning_enabled:=false", "parametric.consistent_period:=0.5")
+    client = TestClient(ros_env)
+    try:
+        states = client.collect(JointState, "/estimator/feedforward")
+        diagnostics = client.collect(DiagnosticArray, "/diagnostics")
+        desired_pub, _ = _controller(client, node)
+        assert diagnostics.wait_for(
+            lambda m: bool(m) and diagnostic_values(m[-1]).get("consistent.in_use") == "true", 60.0), \
+            node.output()
+        time.sleep(1.5)  # the served copy takes the solution at its next refresh (1 s)
+        rng = np.random.default_rng(3)
+        sent = {}
+        for k in range(3):
+            q, dq, ddq = rng.uniform(-1, 1, 7), rng.uniform(-1, 1, 7), rng.uniform(-2, 2, 7)
+            q[3] = -1.5
+            sent[10**9 * (k + 1)] = (q, dq, ddq)
+            desired_pub.publish(_trajectory(joints, 10**9 * (k + 1), q, dq, ddq))
+            time.sleep(0.1)
+        assert states.wait_for(lambda m: len(m) >= 3, timeout=10.0), node.output()
+    finally:
+        client.close()
+        code = node.stop()
+    assert code == 0, node.output()
+    for msg in states.snapshot():
+        q, dq, ddq = sent[_stamp(msg)]
+        expected = model.predict(q, dq, ddq, consistent=True)[0]
+        unconstrained = model.predict(q, dq, ddq, consistent=False)[0]
+        scale = 1 + np.abs(expected).max()
+        np.testing.assert_allclose(msg.effort, expected, rtol=0, atol=1e-6 * scale)
+        assert np.abs(np.asarray(msg.effort) - unconstrained).max() > 1e-6 * scale  # not the other one

@@ -168,6 +168,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "ridge regularization of the rigid-body (base inertial parameter) stage; with "
                   "parametric.column_scaling it acts on dimensionless parameters (see core.estimator)",
                   min=0.0, min_exclusive=True, max=1e12),
+    ParameterSpec("parametric.consistent", "bool", True,
+                  "predict at desired states (feed-forward, load_model) with the physically consistent "
+                  "rigid-body parameters, projected from the online estimate in a worker process every "
+                  "parametric.consistent_period (docs/identification.md: real KUKA, frozen on a faster "
+                  "motion, 2.7x lower error); false = the unconstrained estimate"),
+    ParameterSpec("parametric.consistent_period", "double", 10.0,
+                  "how often the node re-solves the consistent projection when learning changed the "
+                  "model [s]", min=0.1, max=1e6),
     ParameterSpec("parametric.prior", "string", "urdf",
                   "what the rigid-body stage is regularized toward (and predicts before any data): 'urdf' = "
                   "the URDF's base parameters (RNEA with the URDF; zero friction and offsets), 'zero' = all "

@@ -96,11 +96,13 @@ class LearnedModel:
     """
 
     def __init__(self, estimator: OnlineEstimator, *, model: Model | None = None,
-                 noise_s2: np.ndarray | None = None) -> None:
+                 noise_s2: np.ndarray | None = None, solve: bool = True) -> None:
         self.estimator = estimator
         self._frozen = model
         self._frozen_s2 = noise_s2
         self._consistent: tuple[tuple[int, int], ConsistentEstimate] | None = None
+        self._attached: ConsistentEstimate | None = None
+        self._solve = bool(solve)
         #: Software versions that wrote the checkpoint (empty for a live estimator).
         self.versions: dict[str, Any] = {}
         regressor = estimator.regressor
@@ -121,7 +123,11 @@ class LearnedModel:
         """
         s2 = self._noise_s2()
         return LearnedModel(self.estimator, model=self._model().copy(),
-                            noise_s2=None if s2 is None else s2.copy())
+                            noise_s2=None if s2 is None else s2.copy(), solve=self._solve)
+
+    def attach_consistent(self, estimate: ConsistentEstimate | None) -> None:
+        """Use a consistent estimate solved elsewhere (the node's worker process) instead of solving here."""
+        self._attached = estimate
 
     def consistent(self) -> ConsistentEstimate:
         """Return the physically consistent per-link parameters of the rigid-body part (cached).
@@ -136,6 +142,8 @@ class LearnedModel:
         """
         from semiparam_ros.core.identification import consistent_parameters
 
+        if self._attached is not None:
+            return self._attached
         model = self._model()
         par = model if isinstance(model, ParametricModel) else getattr(model, "parametric", None)
         if par is None:
@@ -218,10 +226,14 @@ class LearnedModel:
         raise RejectedSampleError(f"q, dq, ddq must have shape ({n},) or (N, {n}) for joints "
                                   f"{list(self.joints)}, got {shape}")
 
-    def _model_rows(self, X: np.ndarray, consistent: bool = False) -> Prediction:
+    def _model_rows(self, X: np.ndarray, consistent: bool | None = None) -> Prediction:
         """Return the model (no fast correction) at each row of X with its relative variance, all (N, t)."""
         model = self._model()
         rigid = None
+        if consistent is None:  # the configuration's choice, where it can be had without solving here
+            consistent = (bool(self.config["parametric.consistent"])
+                          and (self._attached is not None or self._solve)
+                          and isinstance(model, ConsistentSemiparametricModel | ParametricModel))
         if consistent:
             if not isinstance(model, ConsistentSemiparametricModel | ParametricModel):
                 raise ValueError("consistent=True needs the consistent SP (the default) or the P learner")
@@ -248,7 +260,8 @@ class LearnedModel:
             return np.full(variance.shape, np.inf)
         return np.sqrt(s2 * (1.0 + np.fmax(variance, 0.0)))
 
-    def predict_parts(self, q: Any, dq: Any, ddq: Any, *, consistent: bool = False) -> ModelPrediction:
+    def predict_parts(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None
+                      ) -> ModelPrediction:
         """Return the model and its parts at one state or N states.
 
         Args:
@@ -257,7 +270,9 @@ class LearnedModel:
             ddq: Accelerations, same shape [rad/s²].
             consistent: Use the physically consistent rigid-body parameters (:meth:`consistent`) instead
                 of the unconstrained estimate; the residual follows them. Better outside the excited range
-                (real KUKA, frozen on a faster motion: 2.7× lower error; docs/identification.md).
+                (real KUKA, frozen on a faster motion: 2.7× lower error; docs/identification.md). None:
+                ``parametric.consistent`` of the configuration (on by default; a model that may not
+                solve here — the node's served copy — uses it once its worker's solution is attached).
 
         Returns:
             Total, rigid-body part, residual and σ, each (t,) or (N, t).
@@ -274,7 +289,7 @@ class LearnedModel:
             return ModelPrediction(total[0].copy(), rigid[0].copy(), residual[0].copy(), std[0].copy())
         return ModelPrediction(total, rigid, residual, std)
 
-    def predict(self, q: Any, dq: Any, ddq: Any, *, consistent: bool = False
+    def predict(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None
                 ) -> tuple[np.ndarray, np.ndarray]:
         """``(τ, σ)``: the model at one state (n,) → (t,), or N states (N, n) → (N, t).
 

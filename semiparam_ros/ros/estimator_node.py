@@ -135,6 +135,7 @@ from semiparam_ros.core.dynamics import TOPIC_SCHEME
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult, build_regressor, rmse_window_samples
 from semiparam_ros.core.feedforward import FeedForward
 from semiparam_ros.core.gate import Verdict
+from semiparam_ros.core.identification import ProjectionWorker
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
@@ -286,7 +287,11 @@ class EstimatorNode(Node):
         self._warm_up_kernels()
         self._warm_start(bool(cfg["checkpoint.load_on_start"]))
         self._estimator.learning_enabled = bool(cfg["learning_enabled"])
-        self._serving = LearnedModel(self._estimator)  # the model at any state (feed-forward, gravity)
+        # the model at any state (feed-forward, gravity); never solves the consistent projection here
+        self._serving = LearnedModel(self._estimator, solve=False)
+        self._projection: ProjectionWorker | None = None
+        self._projection_version = -1
+        self._ff_solved = -1
         self._feedforward: FeedForward | None = None
         self._desired_sub: Any = None
         self._ff_latency_ms: list[float] = []  # desired state stamped → feed-forward published, this period
@@ -389,6 +394,12 @@ class EstimatorNode(Node):
         self.create_timer(float(cfg["diagnostics.period"]), self._on_diagnostics_timer, clock=steady)
         # The feed-forward is served from a copy of the model refreshed at a low rate (a model that changes
         # at every sample makes the torque it commands jitter: docs/feedforward.md).
+        if self._feedforward is not None and cfg["parametric.consistent"]:
+            # the consistent projection for the feed-forward, in a worker process (cvxpy holds the GIL)
+            self._projection = ProjectionWorker(cfg.to_flat(), self._estimator.regressor.urdf_xml)
+            self._submit_projection()
+            self.create_timer(float(cfg["parametric.consistent_period"]), self._submit_projection,
+                              clock=steady)
         self._ff_version = -1
         if self._feedforward is not None and cfg["feedforward.refresh_period"] > 0:
             self._refresh_feedforward()
@@ -739,6 +750,13 @@ class EstimatorNode(Node):
             for key, count in ff.counts.items():
                 stats[f"feedforward.{key}"] = count
             stats["feedforward.ready"] = self._serving.ready
+            worker = self._projection
+            if worker is not None:  # the consistent projection (parametric.consistent)
+                stats["consistent.solutions"] = worker.solved
+                stats["consistent.in_use"] = worker.latest is not None
+                if worker.latest is not None:
+                    stats["consistent.solve_ms"] = 1e3 * worker.latest.solve_s
+                stats["consistent.error"] = worker.error or ""
             stats["feedforward.last_error"] = ff.last_error or ""
             latency, self._ff_latency_ms = self._ff_latency_ms, []
             if latency:  # stamped by the controller → published here, over the period
@@ -866,14 +884,37 @@ class EstimatorNode(Node):
 
     # ================================================================== feed-forward (executor thread)
     @_quiet_at_shutdown
-    def _refresh_feedforward(self) -> None:
-        """Serve a fresh copy of the model to the feed-forward, if learning changed it since the last."""
-        ff = self._feedforward
-        if ff is None or self.config["feedforward.refresh_period"] <= 0 or self._ff_version == self._version:
+    def _submit_projection(self) -> None:
+        """Send the rigid-body learner's state to the projection worker, if learning changed it."""
+        worker = self._projection
+        if worker is None:
+            return
+        if self.config["feedforward.refresh_period"] <= 0 and worker.latest is not None:
+            self._serving.attach_consistent(worker.latest)  # the live model is served: attach it there
+        if self._projection_version == self._version:
             return
         with self._model_lock:
-            ff.model = self._serving.snapshot()
+            par = self._estimator.model.parametric  # type: ignore[union-attr]  # SP: always a rigid part
+            theta, R, lam = par.parameters.copy(), par.rls.R.copy(), par.rls.lam
+            version = self._version
+        if worker.submit(theta, R, self._estimator.column_scale, lam):
+            self._projection_version = version
+
+    @_quiet_at_shutdown
+    def _refresh_feedforward(self) -> None:
+        """Serve a fresh copy of the model to the feed-forward, if learning or the projection changed."""
+        ff = self._feedforward
+        worker = self._projection
+        solved = worker.solved if worker is not None else 0
+        if ff is None or (self._ff_version == self._version and self._ff_solved == solved):
+            return
+        with self._model_lock:
+            served = self._serving.snapshot()
+            if worker is not None:
+                served.attach_consistent(worker.latest)
+            ff.model = served
             self._ff_version = self._version
+            self._ff_solved = solved
 
     def _serve_waiting_desired_state(self) -> None:
         """Answer a desired state already waiting in DDS before the next queued sample is learned.
@@ -975,6 +1016,10 @@ class EstimatorNode(Node):
         if stopping is None:
             return
         stopping.set()
+        worker = getattr(self, "_projection", None)
+        if worker is not None:
+            worker.close()
+            self._projection = None
         thread = getattr(self, "_ckpt_thread", None)
         if thread is not None:
             if not save:
