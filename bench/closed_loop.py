@@ -79,17 +79,24 @@ def main() -> None:
     refresh = float(config["feedforward.refresh_period"])  # the node's default
 
     def online_law(refresh_s: float) -> tuple:
-        """Learning online from each tick's measurement; the feed-forward served as the node serves it."""
-        live = LearnedModel(load_model(work / "panda.npz").estimator)
+        """Learning online from each tick's measurement; the feed-forward served as the node serves it.
+
+        The consistent projection is re-solved every second (the node's worker does it every
+        ``parametric.consistent_period``) and attached to the served model, as in the node.
+        """
+        live = LearnedModel(load_model(work / "panda.npz").estimator, solve=False)
         served = [live.snapshot() if refresh_s > 0 else live]
-        every = max(1, round(refresh_s * rate))
+        every = max(1, round(refresh_s * rate)) if refresh_s > 0 else round(rate)
         start_ns = 10**18  # any epoch: the estimator measures its own rate
 
         def feed(k: int, tk: float, q_m: np.ndarray, dq_m: np.ndarray, tau: np.ndarray) -> None:
             live.estimator.process_joint_state(JointStateData(start_ns + round(tk * 1e9), joints, q_m, dq_m,
                                                               tau))
-            if refresh_s > 0 and k % every == 0:
-                served[0] = live.snapshot()
+            if k % every == 0:
+                consistent = LearnedModel(live.estimator).consistent()  # what the worker would send
+                if refresh_s > 0:
+                    served[0] = live.snapshot()
+                served[0].attach_consistent(consistent)
 
         return (lambda k, tk, q, dq, ddq, *_: served[0].predict(q, dq, ddq)[0]), feed
 

@@ -42,7 +42,10 @@ Topics (relative names, remap with ``-r``):
   evaluated, position/velocity = the desired state used, effort = τ_ff) and ``~/feedforward/std``
   (effort = σ); the model is served from a copy refreshed every ``feedforward.refresh_period``; it falls
   back to the rigid-body part while not ready or where σ > ``feedforward.max_std``; drops, fallbacks and
-  the age of answered states are in diagnostics (``feedforward.*``); out ``~/gravity_torques``
+  the age of answered states are in diagnostics (``feedforward.*``); with ``parametric.consistent`` the
+  served copy predicts with the physically consistent parameters a worker process re-solves every
+  ``parametric.consistent_period`` (:class:`~semiparam_ros.core.identification.ProjectionWorker`,
+  ``consistent.*`` in diagnostics); out ``~/gravity_torques``
   (``JointState``, effort = gravity torques of the identified inertias at each sample's measured
   posture, N·m);
 * out ``~/inertial_parameters`` (``std_msgs/Float64MultiArray``, base parameters in physical units, then
