@@ -191,3 +191,28 @@ def test_residual_keeps_only_the_regressor_entries_that_are_not_zero(monkeypatch
     np.testing.assert_array_equal(reduced.predict_model_many(Xt).total, full.predict_model_many(Xt).total)
     with pytest.raises(CheckpointError, match="regressor entries"):
         reduced.load_state_dict(full.state_dict())
+
+
+def test_predicting_with_other_rigid_parameters_moves_the_residual_with_them():
+    """``rigid`` = the learned parameters gives the learned prediction; other parameters move the
+    rigid-body part by Φ(π' − π̂) and the weighted residual by −g·E[Φ](π' − π̂)."""
+    m = model()
+    X, Y = data(300, 7)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    own = m.parametric.parameters
+    other = own + np.array([0.3, -0.2, 0.1])
+    Xt, _ = data(10, 8)
+    for x in Xt:
+        base = m.predict_model(x)
+        same = m.predict_model(x, own)
+        np.testing.assert_allclose(same.total, base.total, rtol=1e-12, atol=1e-12)
+        moved = m.predict_model(x, other)
+        np.testing.assert_allclose(moved.parametric, regressor(x) @ other, rtol=1e-12)
+        # the residual's E[Φ] is what it learned of Φ: its change is −g·E[Φ]·(π' − π̂)
+        assert not np.allclose(moved.residual, base.residual)
+    batch = m.predict_model_many(Xt, other)
+    for i, x in enumerate(Xt):
+        np.testing.assert_allclose(batch.total[i], m.predict_model(x, other).total, rtol=1e-9, atol=1e-12)
+    with pytest.raises(RejectedSampleError):
+        m.predict_model(Xt[0], np.array([np.nan, 0.0, 0.0]))

@@ -398,12 +398,17 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.fast.set_forgetting(self._fast_forgetting(sample_period_s))
 
     # ------------------------------------------------------------------ prediction
-    def _model_valid(self, xv: np.ndarray, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                      np.ndarray | None]:
-        """``(ŷ_P, g·r, relative variance, φ or None)`` for a validated x and its regressor."""
+    def _model_valid(self, xv: np.ndarray, Phi: np.ndarray, rigid: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(ŷ_P, g·r, relative variance, φ or None)`` for a validated x and its regressor.
+
+        ``rigid``: other rigid-body parameters to predict with (see :meth:`predict_model`).
+        """
         par_model, npm = self.parametric, self.nonparametric
         yp, var = par_model._predict_phi(Phi, True)
         assert var is not None  # asked for
+        if rigid is not None:
+            yp = Phi @ rigid
         if not npm.standardizer.ready:
             return yp, np.zeros(self.n_outputs), var, None
         t = self.n_outputs
@@ -411,7 +416,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         P, v = npm.rls._predict_valid(phi, True)
         assert v is not None  # asked for
         pk = P[0]
-        delta = par_model.rls.weights[:, 0]
+        delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
         r = pk[:t] - self._expand(pk[t:]) @ delta
         nu = npm.rls.lam * float(v[0])
         r *= math.exp(-((nu / self.novelty_scale) ** 2))
@@ -483,33 +488,16 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        yp, r, var, _ = self._model_valid(xv, Phi)
-        if rigid is not None:
-            yp, r = self._with_rigid(Phi[None], yp[None], r[None], xv[None], np.asarray(rigid))
-            yp, r = yp[0], r[0]
+        yp, r, var, _ = self._model_valid(xv, Phi, self._checked_rigid(rigid))
         return Prediction(yp, r, yp + r, var)
 
-    def _with_rigid(self, Phi: np.ndarray, yp: np.ndarray, r: np.ndarray, X: np.ndarray,
-                    rigid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Re-evaluate ``(ŷ_P, g·r)`` of rows (N, t) with other rigid-body parameters (see predict_model)."""
-        par_model, npm = self.parametric, self.nonparametric
-        if rigid.shape != (self.n_params,) or not np.isfinite(rigid).all():
+    def _checked_rigid(self, rigid: np.ndarray | None) -> np.ndarray | None:
+        if rigid is None:
+            return None
+        arr = np.asarray(rigid, dtype=np.float64)
+        if arr.shape != (self.n_params,) or not np.isfinite(arr).all():
             raise RejectedSampleError(f"rigid must be {self.n_params} finite parameters")
-        delta_new = rigid - par_model.prior
-        delta_old = par_model.rls.weights[:, 0]
-        yp_new = Phi @ rigid
-        if not npm.standardizer.ready:
-            return yp_new, r
-        # the weighted residual moves by −g·E[Φ](δ_new − δ_old): E[Φ] from the residual's own prediction
-        phi = np.ascontiguousarray(npm.rff._map(npm.standardizer._apply(X)))
-        P, v = npm.rls._predict_valid(phi, True)
-        assert v is not None  # asked for
-        n, t = X.shape[0], self.n_outputs
-        full = np.zeros((n, t * self.n_params))
-        full[:, self._phi_entries] = P[:, t:]
-        weight = np.exp(-(((npm.rls.lam * v) / self.novelty_scale) ** 2))[:, None]
-        shift = full.reshape(n, t, self.n_params) @ (delta_new - delta_old)
-        return yp_new, r - weight * shift
+        return arr
 
     def predict_model_many(self, X: Any, rigid: np.ndarray | None = None) -> Prediction:
         """:meth:`predict_model` of N inputs at once (arrays of shape (N, t); ``variance`` included).
@@ -533,21 +521,22 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         par_model, npm = self.parametric, self.nonparametric
         Phi = par_model._phi_rows(X2)
         yp, var = par_model._predict_phi_rows(Phi)
+        rigid = self._checked_rigid(rigid)
+        if rigid is not None:
+            yp = Phi @ rigid
         r = np.zeros_like(yp)
         if npm.standardizer.ready:
             n, t, p = Phi.shape
             phi = np.ascontiguousarray(npm.rff._map(npm.standardizer._apply(X2)))
             P, v = npm.rls._predict_valid(phi, True)
             assert v is not None  # asked for
-            delta = par_model.rls.weights[:, 0]
+            delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
             full = np.zeros((n, t * p))
             full[:, self._phi_entries] = P[:, t:]
             r = P[:, :t] - full.reshape(n, t, p) @ delta
             nu = npm.rls.lam * v
             r *= np.exp(-((nu / self.novelty_scale) ** 2))[:, None]
             var = var + v[:, None]
-        if rigid is not None:
-            yp, r = self._with_rigid(Phi, yp, r, X2, np.asarray(rigid))
         return Prediction(yp, r, yp + r, var)
 
     # ------------------------------------------------------------------ learning
