@@ -44,7 +44,7 @@ def _percentiles(values: list[float]) -> dict[str, float]:
             "p99": float(np.percentile(a, 99)), "p999": float(np.percentile(a, 99.9)), "max": float(a.max())}
 
 
-def run(seconds: float, hz: float, learning: bool, tmp: Path) -> dict:
+def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool = True) -> dict:
     """Start the node, stream joint states and desired states, return the measured latencies."""
     import rclpy
     from builtin_interfaces.msg import Duration
@@ -69,11 +69,12 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path) -> dict:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
     os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR")})
-    log_path = tmp / f"node_{'learning' if learning else 'frozen'}.log"
+    log_path = tmp / f"node_{'learning' if learning else 'frozen'}_{int(consistent)}.log"
     log = open(log_path, "w")
     cmd = [sys.executable, "-m", "semiparam_ros.ros.estimator_node", "--ros-args", "--params-file",
            str(CONFIG), "-p", f"learning_enabled:={'true' if learning else 'false'}",
-           "-p", "diagnostics.period:=0.5"]
+           "-p", "diagnostics.period:=0.5",
+           "-p", f"parametric.consistent:={'true' if consistent else 'false'}"]
     proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
     ps = psutil.Process(proc.pid)
 
@@ -168,7 +169,7 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path) -> dict:
     node_p50 = [float(d["feedforward.age_p50_ms"]) for d in all_diag[2:]
                 if "feedforward.age_p50_ms" in d]
     cpu = (cpu1.user - cpu0.user) + (cpu1.system - cpu0.system)
-    return {"learning": learning, "hz": hz, "seconds": seconds, "play_s": play_s,
+    return {"learning": learning, "consistent": consistent, "hz": hz, "seconds": seconds, "play_s": play_s,
             "desired_sent": len(sent), "feedforward_received": len(latency),
             "latency_ms": _percentiles(latency[skip:]),
             "node_latency_ms": {"p50_median_of_periods": float(np.median(node_p50)) if node_p50 else None,
@@ -187,13 +188,15 @@ def main() -> None:
     p.add_argument("--output", type=Path, default=RESULTS)
     args = p.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_ff_"))
-    runs = [run(args.seconds, args.hz, learning, tmp) for learning in (True, False)]
+    runs = [run(args.seconds, args.hz, learning, tmp, consistent)
+            for learning, consistent in ((True, True), (True, False), (False, True))]
     print("| node | desired states | answered | round trip p50 / p90 / p99 / p99.9 / max [ms] | "
           "stamped → published p50 / p99 (median of periods) / worst period p99 [ms] | node CPU |")
     print("|---|---|---|---|---|---|")
     for r in runs:
         lat, nl = r["latency_ms"], r["node_latency_ms"]
-        mode = "learning" if r["learning"] else "not learning"
+        mode = ("learning" if r["learning"] else "not learning") + (
+            ", consistent" if r["consistent"] else ", unconstrained")
         print(f"| {mode} at {r['hz']:g} Hz | {r['desired_sent']} | "
               f"{r['feedforward_received']} | {lat['p50']:.2f} / {lat['p90']:.2f} / {lat['p99']:.2f} / "
               f"{lat['p999']:.2f} / {lat['max']:.1f} | {nl['p50_median_of_periods']:.2f} / "
