@@ -239,6 +239,12 @@ def test_feedforward_uses_the_consistent_projection_solved_in_a_worker(ros_env, 
     node = _node(ros_env, ckpt, "learning_enabled:=false", "parametric.consistent_period:=0.5")
     client = TestClient(ros_env)
     try:
+        from geometry_msgs.msg import InertiaStamped
+        from ros_helpers import LATCHED_QOS
+
+        links = client.collect(InertiaStamped, "/estimator/link_inertias",
+                               QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE,
+                                          durability=LATCHED_QOS.durability))
         states = client.collect(JointState, "/estimator/feedforward")
         diagnostics = client.collect(DiagnosticArray, "/diagnostics")
         desired_pub, _ = _controller(client, node)
@@ -255,10 +261,23 @@ def test_feedforward_uses_the_consistent_projection_solved_in_a_worker(ros_env, 
             desired_pub.publish(_trajectory(joints, 10**9 * (k + 1), q, dq, ddq))
             time.sleep(0.1)
         assert states.wait_for(lambda m: len(m) >= 3, timeout=10.0), node.output()
+        assert links.wait_for(lambda m: len(m) >= 7, timeout=10.0), node.output()
+        reply = client.trigger("/estimator/export_urdf")
+        assert reply.success, reply.message
     finally:
         client.close()
         code = node.stop()
     assert code == 0, node.output()
+    estimate = model.consistent()
+    by_link = {m.header.frame_id: m for m in links.snapshot()}
+    assert set(by_link) == set(estimate.body_names)
+    for i, link in enumerate(estimate.body_names):
+        mass, com, _ = estimate.link(i)
+        got = by_link[link].inertia
+        assert got.m == pytest.approx(mass, rel=1e-6)
+        np.testing.assert_allclose([got.com.x, got.com.y, got.com.z], com, rtol=1e-5, atol=1e-9)
+    urdf = tmp_path / "copy_identified.urdf"
+    assert urdf.is_file() and "<inertial>" in urdf.read_text() and "dynamics" in urdf.read_text()
     for msg in states.snapshot():
         q, dq, ddq = sent[_stamp(msg)]
         expected = model.predict(q, dq, ddq, consistent=True)[0]

@@ -33,12 +33,13 @@ from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import InertiaStamped, WrenchStamped
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from semiparam_ros.core.feedforward import DesiredState, FeedForwardCommand, TrajectoryPoint
+from semiparam_ros.core.identification import ConsistentEstimate
 from semiparam_ros.core.messages import (
     JointStateData,
     WrenchData,
@@ -159,6 +160,32 @@ def desired_state_from_msg(msg: Any) -> DesiredState:
         raise RejectedSampleError(f"a trajectory point holds non-numeric values: {err}") from err
     return DesiredState(int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), tuple(msg.joint_names),
                         tuple(points))
+
+
+def link_inertia_msgs(estimate: ConsistentEstimate, stamp_ns: int) -> list[InertiaStamped]:
+    """One ``geometry_msgs/InertiaStamped`` per identified link (the consistent estimate).
+
+    Args:
+        estimate: The physically consistent per-link parameters.
+        stamp_ns: Header stamp [ns].
+
+    Returns:
+        Per body: ``header.frame_id`` = the link, ``m`` [kg], ``com`` [m] in the link frame, the inertia
+        about the centre of mass in the link's axes [kg·m²] — what a URDF's ``<inertial>`` holds.
+    """
+    out = []
+    for i, link in enumerate(estimate.body_names):
+        mass, com, inertia = estimate.link(i)
+        msg = InertiaStamped()
+        msg.header.stamp = stamp_msg(stamp_ns)
+        msg.header.frame_id = link
+        msg.inertia.m = float(mass)
+        msg.inertia.com.x, msg.inertia.com.y, msg.inertia.com.z = (float(v) for v in com)
+        i_ = msg.inertia
+        i_.ixx, i_.ixy, i_.ixz = float(inertia[0, 0]), float(inertia[0, 1]), float(inertia[0, 2])
+        i_.iyy, i_.iyz, i_.izz = float(inertia[1, 1]), float(inertia[1, 2]), float(inertia[2, 2])
+        out.append(msg)
+    return out
 
 
 def feedforward_msgs(command: FeedForwardCommand, joints: Sequence[str]

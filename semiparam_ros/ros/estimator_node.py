@@ -45,7 +45,10 @@ Topics (relative names, remap with ``-r``):
   the age of answered states are in diagnostics (``feedforward.*``); with ``parametric.consistent`` the
   served copy predicts with the physically consistent parameters a worker process re-solves every
   ``parametric.consistent_period`` (:class:`~semiparam_ros.core.identification.ProjectionWorker`,
-  ``consistent.*`` in diagnostics); out ``~/gravity_torques``
+  ``consistent.*`` in diagnostics), published per link on ``~/link_inertias``
+  (``geometry_msgs/InertiaStamped``, frame_id = the link, mass, centre of mass and inertia about it;
+  reliable, transient local) and written as a URDF next to the checkpoint by ``~/export_urdf``
+  (``std_srvs/Trigger``); out ``~/gravity_torques``
   (``JointState``, effort = gravity torques of the identified inertias at each sample's measured
   posture, N·m);
 * out ``~/inertial_parameters`` (``std_msgs/Float64MultiArray``, base parameters in physical units, then
@@ -110,7 +113,7 @@ from typing import Any, TypeVar
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import InertiaStamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -131,14 +134,14 @@ from std_srvs.srv import Trigger
 from threadpoolctl import threadpool_limits
 from trajectory_msgs.msg import JointTrajectory
 
-from semiparam_ros.atomic import remove_stale_temporaries
+from semiparam_ros.atomic import atomic_write_text, remove_stale_temporaries
 from semiparam_ros.core.checkpoint import atomic_save_npz
 from semiparam_ros.core.config import EstimatorConfig, describe_parameters
 from semiparam_ros.core.dynamics import TOPIC_SCHEME
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult, build_regressor, rmse_window_samples
 from semiparam_ros.core.feedforward import FeedForward
 from semiparam_ros.core.gate import Verdict
-from semiparam_ros.core.identification import ProjectionWorker
+from semiparam_ros.core.identification import ProjectionWorker, export_urdf
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
@@ -149,6 +152,7 @@ from semiparam_ros.ros.conversions import (
     joint_state_from_cdr,
     joint_state_from_msg,
     joint_torques_msg,
+    link_inertia_msgs,
     parameters_msg,
     wrench_from_cdr,
     wrench_from_msg,
@@ -400,6 +404,13 @@ class EstimatorNode(Node):
         if self._feedforward is not None and cfg["parametric.consistent"]:
             # the consistent projection for the feed-forward, in a worker process (cvxpy holds the GIL)
             self._projection = ProjectionWorker(cfg.to_flat(), self._estimator.regressor.urdf_xml)
+            n_links = self._estimator.regressor.n_bodies
+            latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=n_links,
+                                 reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            self._pub_links = publisher(InertiaStamped, "~/link_inertias", latched)
+            self.create_service(Trigger, "~/export_urdf", self._on_export_urdf)
+            self._links_published = 0
             self._submit_projection()
             self.create_timer(float(cfg["parametric.consistent_period"]), self._submit_projection,
                               clock=steady)
@@ -918,6 +929,29 @@ class EstimatorNode(Node):
             ff.model = served
             self._ff_version = self._version
             self._ff_solved = solved
+        if worker is not None and worker.latest is not None and self._links_published != solved:
+            for msg in link_inertia_msgs(worker.latest, self.get_clock().now().nanoseconds):
+                self._pub_links.publish(msg)
+            self._links_published = solved
+
+    def _on_export_urdf(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """Write the URDF with the newest consistent parameters next to the checkpoint (identification)."""
+        worker = self._projection
+        estimate = None if worker is None else worker.latest
+        if estimate is None or self._ckpt_path is None:
+            response.success = False
+            response.message = ("no consistent estimate yet (the worker solves every "
+                                "parametric.consistent_period)" if estimate is None
+                                else "checkpoint.path is empty: the URDF is written next to the checkpoint")
+            return response
+        path = self._ckpt_path.with_name(self._ckpt_path.stem + "_identified.urdf")
+        try:
+            atomic_write_text(path, export_urdf(self._estimator.regressor, estimate))
+        except OSError as err:
+            response.success, response.message = False, f"cannot write {path}: {err}"
+            return response
+        response.success, response.message = True, f"wrote {path}"
+        return response
 
     def _serve_waiting_desired_state(self) -> None:
         """Answer a desired state already waiting in DDS before the next queued sample is learned.
