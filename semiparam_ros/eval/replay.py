@@ -30,7 +30,7 @@ from semiparam_ros.eval.protocol import (
     run_adaptation,
     run_protocol,
 )
-from semiparam_ros.io.bags import iter_samples, read_messages, topic_info
+from semiparam_ros.io.bags import absolute_topic, iter_samples, read_messages, topic_info
 
 __all__ = [
     "CASCADE_SP",
@@ -70,10 +70,6 @@ FROZEN_P = "SPfrozenP"
 EXTRA_KINDS: tuple[str, ...] = (JOINT_SP, CASCADE_SP, FROZEN_P)
 
 
-def _absolute(topic: str) -> str:
-    return topic if topic.startswith("/") else "/" + topic
-
-
 @dataclass(frozen=True)
 class Topics:
     """Bag topics to read.
@@ -92,8 +88,8 @@ class Topics:
     def from_config(cls, config: EstimatorConfig, joint_states: str | None = None,
                     wrench: str | None = None) -> Topics:
         """Topics from the configuration (``topics.*``, made absolute), optionally overridden."""
-        return cls(joint_states=_absolute(joint_states or config["topics.joint_states"]),
-                   wrench=_absolute(wrench or config["topics.wrench"]))
+        return cls(joint_states=absolute_topic(joint_states or config["topics.joint_states"]),
+                   wrench=absolute_topic(wrench or config["topics.wrench"]))
 
 
 def load_samples(path: str | Path, config: EstimatorConfig, topics: Topics | None = None, *,

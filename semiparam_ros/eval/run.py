@@ -8,7 +8,6 @@ returns the text printed on the terminal.
 from __future__ import annotations
 
 import sys
-import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,7 +30,7 @@ from semiparam_ros.eval.tables import (
     contacts_table,
     protocol_table,
 )
-from semiparam_ros.io.bags import BagRecoveryWarning
+from semiparam_ros.io.bags import recovery_notes
 
 __all__ = ["default_config_path", "evaluation_text", "load_evaluation_config", "run_evaluate", "run_tune"]
 
@@ -204,8 +203,7 @@ def run_evaluate(
     else:
         if train is None or test is None:
             raise ValueError("the paper protocol needs --train and --test")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", BagRecoveryWarning)
+        with recovery_notes() as recovered:
             result, info = evaluate_bags(
                 train,
                 test,
@@ -222,7 +220,6 @@ def run_evaluate(
                 horizons=horizons,
                 progress=progress,
             )
-        recovered = _recovered(caught)
         if recovered:
             # a truncated or damaged bag was read as far as possible: the report says so, with what was lost
             info["recovered_bags"] = recovered
@@ -250,18 +247,6 @@ def run_evaluate(
     if markdown_path is not None:
         atomic_write_text(markdown_path, text)
     return text
-
-
-def _recovered(caught: list[warnings.WarningMessage]) -> list[str]:
-    """Return the bag-recovery warnings' texts (once each); pass every other warning on."""
-    notes: list[str] = []
-    for w in caught:
-        if issubclass(w.category, BagRecoveryWarning):
-            if str(w.message) not in notes:
-                notes.append(str(w.message))
-        else:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return notes
 
 
 def run_tune(

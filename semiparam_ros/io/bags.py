@@ -22,6 +22,7 @@ Every other failure to read or write a bag raises :class:`~semiparam_ros.errors.
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -60,10 +61,12 @@ __all__ = [
     "BagWriter",
     "TopicArrays",
     "TopicInfo",
+    "absolute_topic",
     "iter_raw",
     "iter_samples",
     "read_messages",
     "read_topic_arrays",
+    "recovery_notes",
     "topic_info",
 ]
 
@@ -212,6 +215,33 @@ def _stream(path: Path, topics: dict[str, str | None]) -> Iterator[tuple[Decoder
 
 class BagRecoveryWarning(UserWarning):
     """A bag was read in part: the MCAP file is truncated (no footer) or has chunks that do not decode."""
+
+
+@contextlib.contextmanager
+def recovery_notes() -> Iterator[list[str]]:
+    """Collect the :class:`BagRecoveryWarning` texts raised inside the block, once each, into a list.
+
+    For tools that report recovered bags in their own output instead of as warnings; every other warning
+    is passed on unchanged when the block ends.
+
+    Yields:
+        The list the notes are appended to (filled when the block ends).
+    """
+    notes: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", BagRecoveryWarning)
+        yield notes
+    for w in caught:
+        if issubclass(w.category, BagRecoveryWarning):
+            if str(w.message) not in notes:
+                notes.append(str(w.message))
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+
+
+def absolute_topic(topic: str) -> str:
+    """Return a topic name as recorded in a bag: a relative name (the node's ``topics.*``) gets a ``/``."""
+    return topic if topic.startswith("/") else "/" + topic
 
 
 def _recover(scan: McapScan, path: Path, topics: dict[str, str | None], *, resume: tuple[int, int] | None,

@@ -11,7 +11,6 @@ state restarts (:meth:`OnlineEstimator.start_recording`). The result is a self-c
 from __future__ import annotations
 
 import time
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +18,7 @@ from pathlib import Path
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import OnlineEstimator
 from semiparam_ros.core.messages import JointStateData
-from semiparam_ros.io.bags import BagRecoveryWarning, read_messages, topic_info
+from semiparam_ros.io.bags import absolute_topic, read_messages, recovery_notes, topic_info
 
 __all__ = ["LearnProgress", "LearnReport", "learn_bags"]
 
@@ -81,10 +80,6 @@ class LearnReport:
         return self.log_s / self.wall_s if self.wall_s > 0 else float("inf")
 
 
-def _absolute(topic: str) -> str:
-    return topic if topic.startswith("/") else "/" + topic
-
-
 def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
                checkpoint: str | Path | None = None, init: str | Path | None = None,
                joint_states_topic: str | None = None, wrench_topic: str | None = None,
@@ -113,8 +108,8 @@ def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
     """
     if not bags:
         raise ValueError("learn needs at least one bag")
-    js_topic = _absolute(joint_states_topic or config["topics.joint_states"])
-    wr_topic = (_absolute(wrench_topic or config["topics.wrench"]) if config["robot.output"] == "wrench"
+    js_topic = absolute_topic(joint_states_topic or config["topics.joint_states"])
+    wr_topic = (absolute_topic(wrench_topic or config["topics.wrench"]) if config["robot.output"] == "wrench"
                 else None)
     est = OnlineEstimator(config)
     est.learning_enabled = True
@@ -131,8 +126,7 @@ def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
         first_ns: int | None = None
         last_ns: int | None = None
         n_msgs = 0
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", BagRecoveryWarning)
+        with recovery_notes() as notes:
             info = topic_info(bag)
             total = sum(info[t].count for t in topics if t in info)
             for msg in read_messages(bag, joint_states_topic=js_topic, wrench_topic=wr_topic):
@@ -150,11 +144,8 @@ def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
                                               else (last_ns - first_ns) * 1e-9)
                     progress(LearnProgress(index, len(bags), n_msgs, total, report.samples, now - start,
                                            covered))
-        if any(issubclass(w.category, BagRecoveryWarning) for w in caught):
+        if notes:
             report.recovered.append(str(bag))
-        for w in caught:  # pass on what was not ours to swallow
-            if not issubclass(w.category, BagRecoveryWarning):
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         report.messages += n_msgs
         if first_ns is not None and last_ns is not None:
             report.log_s += (last_ns - first_ns) * 1e-9
