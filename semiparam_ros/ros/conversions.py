@@ -361,16 +361,28 @@ _MIN_BYTES_PER_NAME = 8
 _MAX_FIXED_BYTES = 65536
 
 
+def _names_header(raw: bytes) -> tuple[int, int]:
+    """Return ``(number of names, offset of the first name)`` of a little-endian CDR JointState.
+
+    Skips the stamp and the frame id without decoding the names.
+
+    Raises:
+        struct.error, UnicodeDecodeError, _NotFastPathError: Bytes the fast reader does not expect.
+    """
+    _, pos = _cdr_string(raw, _PAYLOAD_START + 8)  # frame_id (not used)
+    pos = _align(pos, 4)
+    (n_names,) = _U32.unpack_from(raw, pos)
+    return int(n_names), pos + 4
+
+
 def _name_count(raw: bytes) -> int | None:
     """Return the number of names of a little-endian CDR JointState without decoding them (None: unknown)."""
     try:
-        if raw[:2] != _CDR_LE:
-            return None
-        _, pos = _cdr_string(raw, _PAYLOAD_START + 8)
-        (n_names,) = _U32.unpack_from(raw, _align(pos, 4))
-        return int(n_names)
+        return _names_header(raw)[0] if raw[:2] == _CDR_LE else None
     except (struct.error, UnicodeDecodeError, _NotFastPathError):
         return None
+
+
 #: Frame + names section (bytes from the end of the stamp), its names and end offset, of the last JointState
 #: read: a robot sends the same names every time, so one byte comparison replaces decoding them.
 _last_names: tuple[bytes, tuple[str, ...], int] = (b"", (), 0)
@@ -411,10 +423,7 @@ def joint_state_from_cdr(raw: bytes, max_names: int | None = None) -> JointState
         start = _PAYLOAD_START + 8
         key, names, pos = _last_names
         if not key or not raw.startswith(key, start):  # frame and names as in the previous message?
-            _, pos = _cdr_string(raw, start)  # frame_id (not used)
-            pos = _align(pos, 4)
-            (n_names,) = _U32.unpack_from(raw, pos)
-            pos += 4
+            n_names, pos = _names_header(raw)
             if 4 * n_names > len(raw) - pos:
                 raise _NotFastPathError
             decoded = []
