@@ -35,19 +35,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``export_urdf``; returns the exit status (0 done, 2 invalid input, 1 an I/O failure)."""
     args = build_parser().parse_args(argv)
     from semiparam_ros.atomic import atomic_write_text
-    from semiparam_ros.core.identification import excitation_report, export_urdf
+    from semiparam_ros.core.identification import export_urdf
     from semiparam_ros.core.serving import load_model
 
     try:
         model = load_model(args.checkpoint)
         estimate = model.consistent()
-        est = model.estimator
-        rls = est.model.parametric.rls if hasattr(est.model, "parametric") else est.model.rls
-        print(excitation_report(rls.R, est.column_scale, est.parameter_names).text())
+        print(model.excitation().text())
         for i, body in enumerate(estimate.body_names):
             mass, com, _ = estimate.link(i)
             print(f"  {body}: {mass:.4g} kg, centre of mass {com.round(4).tolist()} m")
-        atomic_write_text(args.out, export_urdf(est.regressor, estimate))
+        atomic_write_text(args.out, export_urdf(model.estimator.regressor, estimate))
     except (ValueError, OSError) as err:
         return error_exit("export_urdf", err)
     print(f"wrote {args.out} (projection solved in {1e3 * estimate.solve_s:.0f} ms)")

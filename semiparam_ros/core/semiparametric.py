@@ -271,7 +271,7 @@ class ParametricModel(_Model):
         y0 = self._prior_output(Phi)
         return (yp if y0 is None else yp + y0), var
 
-    def predict_many(self, X: Any) -> Prediction:
+    def predict_many(self, X: Any, rigid: np.ndarray | None = None) -> Prediction:
         """Predict N inputs at once: ``Φ(x)(π₀ + δ̂)`` and the relative variance, arrays of shape (N, t).
 
         One regressor evaluation per row, then one matrix product and one triangular solve for all
@@ -279,6 +279,8 @@ class ParametricModel(_Model):
 
         Args:
             X: (N, n_inputs) inputs ``[q, q̇, q̈]``.
+            rigid: Parameters to predict with instead of ``π₀ + δ̂`` (this learner's units, e.g. a
+                physically consistent projection); the variance is the learner's either way.
 
         Returns:
             The prediction (``residual`` zero), ``variance`` = ``diag(Φ A⁻¹ Φᵀ)`` per row.
@@ -289,6 +291,8 @@ class ParametricModel(_Model):
         X2 = check_finite_array("X", X, (None, None))
         Phi = self._phi_rows(X2)
         yp, var = self._predict_phi_rows(Phi)
+        if rigid is not None:
+            yp = Phi @ check_finite_array("rigid", rigid, (self.n_params,))
         return Prediction(yp, np.zeros_like(yp), yp.copy(), var)
 
     def _phi_rows(self, X2: np.ndarray) -> np.ndarray:

@@ -49,7 +49,7 @@ import numpy as np
 from semiparam_ros.core.checkpoint import load_npz
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import Model, OnlineEstimator, build_regressor
-from semiparam_ros.core.identification import ConsistentEstimate
+from semiparam_ros.core.identification import ConsistentEstimate, ExcitationReport
 from semiparam_ros.core.semiparametric import ParametricModel, Prediction
 from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.uncertainty import predict_with_variance
@@ -145,9 +145,7 @@ class LearnedModel:
         if self._attached is not None:
             return self._attached
         model = self._model()
-        par = model if isinstance(model, ParametricModel) else getattr(model, "parametric", None)
-        if par is None:
-            raise ValueError("consistent parameters need a rigid-body part: this model is nonparametric only")
+        par = self._rigid_learner()
         key = (id(model), int(model.n_samples_seen))
         if self._consistent is None or self._consistent[0] != key:
             rls = par.rls
@@ -155,6 +153,29 @@ class LearnedModel:
                                              self.estimator.column_scale, rls.lam)
             self._consistent = (key, estimate)
         return self._consistent[1]
+
+    def excitation(self) -> ExcitationReport:
+        """Return what the data seen so far determine: the rigid-body information matrix's spectrum.
+
+        Raises:
+            ValueError: For a model without a rigid-body part (``NP``).
+        """
+        from semiparam_ros.core.identification import excitation_report
+
+        rls = self._rigid_learner().rls
+        return excitation_report(rls.R, self.estimator.column_scale, self.estimator.parameter_names)
+
+    def _rigid_learner(self) -> ParametricModel:
+        """Return the rigid-body learner of the served model.
+
+        Raises:
+            ValueError: For a model without one (``NP``).
+        """
+        model = self._model()
+        par = model if isinstance(model, ParametricModel) else getattr(model, "parametric", None)
+        if not isinstance(par, ParametricModel):
+            raise ValueError("this needs a rigid-body part: the model is nonparametric only")
+        return par
 
     def _model(self) -> Model:
         return self.estimator.model if self._frozen is None else self._frozen
@@ -245,11 +266,7 @@ class LearnedModel:
                                   np.asarray(pred.variance)[None])
             return model.predict_model_many(X, rigid)
         if isinstance(model, ParametricModel) and (X.shape[0] > 1 or rigid is not None):
-            pred = model.predict_many(X)
-            if rigid is not None:
-                Phi = model._phi_rows(X)
-                return Prediction(Phi @ rigid, pred.residual, Phi @ rigid, pred.variance)
-            return pred
+            return model.predict_many(X, rigid)
         preds = [predict_with_variance(model, x) for x in X]  # the other learners: one state at a time
         return Prediction(np.array([p.parametric for p in preds]), np.array([p.residual for p in preds]),
                           np.array([p.total for p in preds]), np.array([p.variance for p in preds]))

@@ -891,7 +891,7 @@ class EstimatorNode(Node):
             self._warn_throttled("legacy topic", "a subscriber reads predicted_joint_torques outside the "
                                  "node's namespace: deprecated, use ~/predicted_joint_torques", once=True)
             self._pub_legacy.publish(fill(stamp, result.prediction.total))
-        if self._pub_gravity.get_subscription_count() and self._estimator.parameters is not None:
+        if self._pub_gravity.get_subscription_count():  # the node runs SP: it always has a rigid body
             with self._model_lock:
                 gravity = self._serving.gravity(result.sample.q)
             self._pub_gravity.publish(fill(stamp, gravity))
