@@ -104,14 +104,17 @@ TARGETS = {"learned_fraction_min": {"1000": 0.999}, "node_p99_ms_max": {"1000": 
 
 
 def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, tmp: Path,
-        save_every_s: float = 0.0, code: Path | None = None, acceleration: str = "savgol") -> dict:
+        save_every_s: float = 0.0, code: Path | None = None, acceleration: str = "savgol",
+        max_delay_s: float | None = None, busy: bool = False) -> dict:
     """Run the node with ``executor`` and ``features``, replay the messages, measure; return the results.
 
     With ``save_every_s`` > 0 the client calls ``~/save`` (checkpoint in ``tmp``) that often during the
     playback, and the reply times are recorded. With ``code`` the node is imported from that checkout
     (``PYTHONPATH`` and working directory) instead of this one: a before/after comparison in one run.
     ``acceleration`` is the node's ``acceleration.method`` (``savgol``: centred, delayed by half its
-    window; ``kalman``: causal, no delay).
+    window; ``kalman``: causal, no delay). ``max_delay_s`` sets ``overload.max_delay`` (None: the
+    default; 0: learn every sample however late, the node before graceful overload). ``busy``: a
+    busy-looping process competes for the cores during the run (a saturated machine on purpose).
     """
     sys.path.insert(0, str(REPO / "test"))
     import rclpy
@@ -135,6 +138,8 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     cmd = [sys.executable, "-m", "semiparam_ros.ros.estimator_node", "--executor", executor, "--ros-args",
            "--params-file", str(CONFIG), "-p", f"nonparametric.n_features:={features}",
            "-p", "diagnostics.period:=0.5", "-p", f"acceleration.method:={acceleration}"]
+    if max_delay_s is not None:
+        cmd += ["-p", f"overload.max_delay:={max_delay_s}"]
     if save_every_s > 0:
         cmd += ["-p", f"checkpoint.path:={tmp / f'ckpt_{executor}_{features}.npz'}", "-p",
                 "checkpoint.load_on_start:=false"]
@@ -142,6 +147,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     node_proc = subprocess.Popen(cmd, env=node_env, stdout=log, stderr=subprocess.STDOUT,
                                  cwd=REPO if code is None else code)
     ps = psutil.Process(node_proc.pid)
+    burner = (subprocess.Popen([sys.executable, "-c", "while True: pass"]) if busy else None)
 
     context = Context()
     rclpy.init(context=context, domain_id=domain)
@@ -221,6 +227,9 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
             diag_during = [d for (t, d) in diagnostics if wall_before < t <= wall_after]
             preds = list(predictions)
     finally:
+        if burner is not None:
+            burner.kill()
+            burner.wait()
         node_proc.send_signal(signal.SIGINT)
         try:
             node_proc.wait(timeout=20)
@@ -247,6 +256,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     cpu_s = (cpu_after.user - cpu_before.user) + (cpu_after.system - cpu_before.system)
     wall_s = wall_after - wall_before
     learned = int(diag_after.get("samples_learned", "0")) - int(diag_before.get("samples_learned", "0"))
+    skipped = int(diag_after.get("learning_skipped", "0")) - int(diag_before.get("learning_skipped", "0"))
 
     def during(key: str) -> list[float]:
         out = []
@@ -266,7 +276,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     p99s = during("pipeline_latency_p99_ms")
     return {
         "config": {"hz": hz, "n_features": features, "executor": executor, "pairs_sent": n_pairs,
-                   "acceleration": acceleration,
+                   "acceleration": acceleration, "overload_max_delay_s": max_delay_s, "busy_core": busy,
                    "code": str(code) if code is not None else "this checkout",
                    "messages_sent": report.published},
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
@@ -277,6 +287,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
         "player_max_lag_ms": 1e3 * report.late_s,
         "samples_learned": learned,
         "predictions_received": len(preds),
+        "learning_skipped": skipped,
         "learned_fraction": learned / n_pairs if n_pairs else float("nan"),
         "learning_rate_hz": learned / report.wall_s if report.wall_s > 0 else float("nan"),
         "input_rate_hz_diag_median": float(np.median(during("input_rate_hz"))) if during("input_rate_hz")
@@ -330,9 +341,15 @@ def table(runs: list[dict]) -> str:
         ("D (random features)", lambda r: r["config"]["n_features"]),
         ("executor", lambda r: r["config"]["executor"]),
         ("acceleration estimator", lambda r: r["config"].get("acceleration", "savgol")),
+        ("overload.max_delay, ms (– = default)",
+         lambda r: "–" if r["config"].get("overload_max_delay_s") is None
+         else f"{1e3 * r['config']['overload_max_delay_s']:g}"),
+        ("a busy-looping process on the machine", lambda r: "yes" if r["config"].get("busy_core") else "no"),
         ("code", lambda r: r["config"].get("code", "this checkout")),
         ("pairs sent at 1 kHz", lambda r: r["config"]["pairs_sent"]),
         ("samples learned", lambda r: f"{r['samples_learned']} ({100 * r['learned_fraction']:.2f} %)"),
+        ("predicted without learning (late)", lambda r: r.get("learning_skipped", "–")),
+        ("predictions received", lambda r: f"{r['predictions_received']}"),
         ("node CPU (100 % = one core)", lambda r: f"{r['node_cpu_percent']:.0f} %"),
         ("  of which the estimator (median of periods)",
          lambda r: f"{r['learning_cpu_percent_median']:.0f} %"),
@@ -374,6 +391,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--compare-with", type=Path, default=None, metavar="DIR",
                         help="also run the node of another checkout (e.g. `git worktree add /tmp/base "
                              "main`), before each run of this one")
+    parser.add_argument("--max-delay", type=float, nargs="+", default=[None], metavar="S",
+                        help="the node's overload.max_delay [s]; each is run side by side (0: learn every "
+                             "sample however late; default: the node's default)")
+    parser.add_argument("--busy", action="store_true",
+                        help="a busy-looping process competes for the cores during every run")
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     seconds = args.seconds if args.seconds is not None else (3.0 if args.quick else 15.0)
@@ -390,12 +412,13 @@ def main(argv: list[str] | None = None) -> int:
             for executor in args.executors:  # the executors of one D back to back: same load
                 for acceleration in args.acceleration:
                     for code in ([args.compare_with.resolve()] if args.compare_with else []) + [None]:
-                        res = run(messages, n_pairs, args.hz, features, executor, Path(tmp), args.save_every,
-                                  code, acceleration)
-                        print(f"D = {features}, {executor}, {acceleration}, {res['config']['code']}: learned "
-                              f"{100 * res['learned_fraction']:.2f} %, CPU {res['node_cpu_percent']:.0f} %",
-                              flush=True)
-                        runs.append(res)
+                        for max_delay in args.max_delay:
+                            res = run(messages, n_pairs, args.hz, features, executor, Path(tmp),
+                                      args.save_every, code, acceleration, max_delay, args.busy)
+                            print(f"D = {features}, {executor}, {acceleration}, {res['config']['code']}, "
+                                  f"max_delay {max_delay}: learned {100 * res['learned_fraction']:.2f} %, "
+                                  f"CPU {res['node_cpu_percent']:.0f} %", flush=True)
+                            runs.append(res)
     print()
     print(table(runs))
     result = {"benchmark": "bench_node", "quick": bool(args.quick), "seconds": seconds, "hz": args.hz,

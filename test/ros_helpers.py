@@ -42,10 +42,17 @@ COLLECT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000, reliabili
                          durability=DurabilityPolicy.VOLATILE)
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: Parameters that make the node's input subscriptions reliable, so a replay loses nothing.
-RELIABLE_INPUTS = (
+#: Parameters that make a replay lose nothing: reliable input subscriptions, and every sample learned
+#: however late it is processed (a replay faster than the node learns is an overload the node otherwise
+#: answers by predicting late samples without learning them).
+LEARN_EVERY_SAMPLE = "overload.max_delay:=0.0"
+RELIABLE_JOINT_STATES = (
     "qos_overrides./joint_states.subscription.reliability:=reliable",
     "qos_overrides./joint_states.subscription.depth:=10000",
+    LEARN_EVERY_SAMPLE,
+)
+RELIABLE_INPUTS = (
+    *RELIABLE_JOINT_STATES,
     "qos_overrides./wrench.subscription.reliability:=reliable",
     "qos_overrides./wrench.subscription.depth:=10000",
 )

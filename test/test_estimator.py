@@ -550,6 +550,43 @@ def test_learning_disabled_predicts_without_changing_state(config, regressor):
     assert all(np.all(r.prediction.total == 0) for r in res)
 
 
+def test_skipped_learning_predicts_with_the_residual_held_and_leaves_the_learned_state(config, regressor):
+    """``step(skip_learning=True)``: what a node that falls behind does with a late sample.
+
+    Reference: a second estimator fed only the samples that were learned. The state is the same bit for
+    bit (a held prediction changes nothing); the rigid-body part of a held prediction is the full
+    model's; its residual is the one of the last full prediction, which at 100 Hz (a residual moving
+    10 ms between samples) is within 10 % of the residual's size of the full prediction.
+    """
+    samples = pipeline_samples(config, rich_stream().messages)
+    est = OnlineEstimator(config, regressor=regressor)
+    ref = OnlineEstimator(config, regressor=regressor)
+    for sample in samples[:300]:
+        est.step(sample)
+        ref.step(sample)
+    errors, sizes, last = [], [], None
+    for i, sample in enumerate(samples[300:]):
+        if i % 2 == 0:
+            last = est.step(sample).prediction
+            ref.step(sample)
+            continue
+        full = ref.model.copy().predict_one(sample.x, return_variance=True)
+        got = est.step(sample, skip_learning=True)
+        assert not got.learned and got.verdict is None
+        assert got.std is not None and np.all(np.isfinite(got.std))
+        np.testing.assert_allclose(got.prediction.parametric, full.parametric, rtol=1e-12, atol=1e-12)
+        # the model's residual, held (residual = total − rigid body: equal to the rounding of those sums)
+        held = got.prediction.residual - got.prediction.correction
+        scale = 1.0 + np.abs(got.prediction.total).max() + np.abs(last.total).max()
+        np.testing.assert_allclose(held, last.residual - last.correction, rtol=0, atol=1e-13 * scale)
+        errors.append(np.abs(got.prediction.total - full.total).max())
+        sizes.append(np.abs(full.residual).max())
+    assert est.n_learning_skipped == len(errors) > 100
+    assert est.n_samples_learned == ref.n_samples_learned
+    assert_same_state(snapshot(est), snapshot(ref))
+    assert np.mean(errors) < 0.1 * np.mean(sizes)
+
+
 # ----------------------------------------------------------------------------- 5. reset
 @pytest.mark.parametrize("loaded", [False, True], ids=["trained", "trained_and_loaded"])
 def test_reset_forgets_everything(config, regressor, tmp_path, loaded):
@@ -684,8 +721,12 @@ def test_absurd_finite_values_are_counted_not_raised(config, regressor):
     screened = OnlineEstimator(config, regressor=regressor)
     feed(screened, dirty)
     assert screened.drops["implausible_value"] == 1 and screened.drops["rejected_sample"] == 0
-    # without them, the learner's own check is the last line of defence
-    config = config.with_overrides({"limits.max_abs_velocity": 0.0})
+    # without them the glitch check drops it (an increment 1e200 times the running one) ...
+    unbounded = OnlineEstimator(config.with_overrides({"limits.max_abs_velocity": 0.0}), regressor=regressor)
+    feed(unbounded, dirty)
+    assert unbounded.drops["glitch"] == 1 and unbounded.drops["rejected_sample"] == 0
+    # ... and without both screens the learner's own check is the last line of defence
+    config = config.with_overrides({"limits.max_abs_velocity": 0.0, "limits.glitch_ratio": 0.0})
     est = OnlineEstimator(config, regressor=regressor)
     results = feed(est, dirty)  # must not raise
 

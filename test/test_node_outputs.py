@@ -13,6 +13,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from ros_helpers import (
     RELIABLE_INPUTS,
+    RELIABLE_JOINT_STATES,
     TOPICS,
     NodeProcess,
     TestClient,
@@ -118,7 +119,7 @@ def test_external_joint_torques_over_dds(ros_env, tmp_path):
     efforts = {m.stamp_ns: np.asarray(m.effort) for m in decoded}
     overrides = {"robot.output": "joint_torques", **OVERRIDES}
     offline_std = _offline_std(bag, overrides, decoded)
-    node = NodeProcess(ros_env, [*RELIABLE_INPUTS[:2], "robot.output:=joint_torques",
+    node = NodeProcess(ros_env, [*RELIABLE_JOINT_STATES, "robot.output:=joint_torques",
                                  "nonparametric.standardizer_warmup:=50", "nonparametric.n_features:=100"])
     client = TestClient(ros_env)
     try:

@@ -9,6 +9,7 @@ from geometry_msgs.msg import WrenchStamped
 from ros_helpers import (
     LATCHED_QOS,
     RELIABLE_INPUTS,
+    RELIABLE_JOINT_STATES,
     TOPICS,
     NodeProcess,
     TestClient,
@@ -132,7 +133,7 @@ def test_joint_torque_output(ros_env, tmp_path):
     overrides = {"robot.output": "joint_torques", "nonparametric.standardizer_warmup": 50}
     offline = offline_replay(bag, len(messages), overrides, read_messages(bag, wrench_topic=None))
     assert len(offline.order) > 250
-    node = NodeProcess(ros_env, [*RELIABLE_INPUTS[:2], "robot.output:=joint_torques",
+    node = NodeProcess(ros_env, [*RELIABLE_JOINT_STATES, "robot.output:=joint_torques",
                                  "nonparametric.standardizer_warmup:=50"])
     client = TestClient(ros_env)
     try:

@@ -163,6 +163,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("limits.max_abs_output", "double", 1e4,
                   "largest plausible |component| of the learned output: wrench force [N] and torque [N m], "
                   "or joint effort [N m]; 0 = no bound", min=0.0, max=1e12),
+    ParameterSpec("limits.glitch_ratio", "double", 50.0,
+                  "a joint state whose position or velocity increment on a learned joint exceeds this many "
+                  "times its running mean increment is a one-sample glitch, dropped as 'glitch' (a second "
+                  "such state in a row is a real change and accepted); clean logs stay below 7; 0 = off",
+                  min=0.0, max=1e12),
+    ParameterSpec("limits.glitch_time_constant", "double", 0.05,
+                  "memory of the running mean increment of the glitch check [s]", min=0.0, min_exclusive=True,
+                  max=1e4),
     # parametric stage
     ParameterSpec("parametric.lam", "double", 1e-2,
                   "ridge regularization of the rigid-body (base inertial parameter) stage; with "
@@ -318,6 +326,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   min=0.0, max=1e6),
     # run time
     ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)", read_only=False),
+    ParameterSpec("overload.max_delay", "double", 0.001,
+                  "a sample that waited longer than this in the node's input queue [s] is predicted at once "
+                  "(residual held from the last full prediction) and not learned, so predictions stay fresh "
+                  "when learning cannot keep up; counted as learning_skipped; 0 = learn every sample, "
+                  "however late", min=0.0, max=1e6, read_only=False),
     ParameterSpec("queue_size", "integer", 1000,
                   "bounded input queue of the node; the oldest message is dropped and counted beyond it",
                   min=1, max=10**6),

@@ -27,6 +27,7 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.dynamics import RigidBodyRegressor
 from semiparam_ros.core.gate import ContactGate, GateConfig, Verdict
 from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
+from semiparam_ros.core.payload import PayloadLearner
 from semiparam_ros.core.pipeline import SamplePipeline
 from semiparam_ros.core.rate import RATE_SAMPLES, RateMeter, measured_period_s, samples_in
 from semiparam_ros.core.semiparametric import (
@@ -240,6 +241,8 @@ def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
         max_abs_position=bound("limits.max_abs_position"),
         max_abs_velocity=bound("limits.max_abs_velocity"),
         max_abs_output=bound("limits.max_abs_output"),
+        glitch_ratio=config["limits.glitch_ratio"],
+        glitch_time_constant=config["limits.glitch_time_constant"],
     )
 
 
@@ -499,6 +502,10 @@ class OnlineEstimator:
         self.learning_enabled = bool(config["learning_enabled"])
         self._n_joints = len(config["robot.joints"])
         self.n_samples_learned = 0
+        #: Samples predicted without learning because the caller fell behind (``skip_learning``).
+        self.n_learning_skipped = 0
+        #: The payload learner since the last :meth:`tare_payload` (None before one).
+        self.payload: PayloadLearner | None = None
         self._rejected = 0
         self.noise = NoiseScale(self.model.n_outputs, config["uncertainty.noise_time_constant"])
         self.gate = ContactGate(_gate_config(config))
@@ -509,21 +516,25 @@ class OnlineEstimator:
         self._rate = RateMeter()  # the rule of offline replay's measured_period_s(stamps)
 
     # ------------------------------------------------------------------ streaming
-    def process_joint_state(self, msg: JointStateData) -> list[StepResult]:
+    def process_joint_state(self, msg: JointStateData, *, skip_learning: bool = False) -> list[StepResult]:
         """Feed a joint state; return the results of the samples it completed (often none or one).
 
         Never raises on bad data: the pipeline drops and counts bad messages, and a sample the learner
         rejects (:class:`~semiparam_ros.errors.RejectedSampleError`) is counted under ``rejected_sample``
         in :attr:`drops` (the learned state is unchanged). Any other exception is a programming error: it
         propagates and no drop is counted.
+
+        Args:
+            msg: The joint state.
+            skip_learning: Predict the completed samples cheaply without learning them (see :meth:`step`).
         """
-        return self._step_all(self.pipeline.add_joint_state(msg))
+        return self._step_all(self.pipeline.add_joint_state(msg), skip_learning)
 
-    def process_wrench(self, msg: WrenchData) -> list[StepResult]:
+    def process_wrench(self, msg: WrenchData, *, skip_learning: bool = False) -> list[StepResult]:
         """Feed an F/T reading; return the results of the samples it completed (never raises on bad data)."""
-        return self._step_all(self.pipeline.add_wrench(msg))
+        return self._step_all(self.pipeline.add_wrench(msg), skip_learning)
 
-    def _step_all(self, samples: list[Sample]) -> list[StepResult]:
+    def _step_all(self, samples: list[Sample], skip_learning: bool = False) -> list[StepResult]:
         # The pipeline drops NaN/inf and values beyond limits.*, but those bounds can be switched off (0)
         # or be loose: a finite but absurd value (e.g. a velocity of 1e200 rad/s) then poisons the q̈
         # window, and the learners refuse those samples with a RejectedSampleError (state untouched).
@@ -532,12 +543,12 @@ class OnlineEstimator:
         results: list[StepResult] = []
         for sample in samples:
             try:
-                results.append(self.step(sample))
+                results.append(self.step(sample, skip_learning=skip_learning))
             except RejectedSampleError:
                 self._rejected += 1
         return results
 
-    def step(self, sample: Sample) -> StepResult:
+    def step(self, sample: Sample, *, skip_learning: bool = False) -> StepResult:
         """Predict y for a sample, then learn it (unless learning is disabled or the gate refuses it).
 
         The sample is validated once (sizes; NaN, inf or beyond ±1e150); with the gate on, the model's
@@ -545,8 +556,14 @@ class OnlineEstimator:
         directly, so nothing is computed twice. With the gate off the step is the paper's
         ``predict_learn_one``, bit for bit.
 
+        With ``skip_learning`` (a node that fell behind its input) the sample is predicted by the model's
+        cheap ``predict_held`` (the consistent SP holds its residual from the last full prediction) and
+        not learned; the noise estimate skips it, the gate does not see it, and it is counted in
+        :attr:`n_learning_skipped`.
+
         Args:
             sample: A clean sample from the pipeline.
+            skip_learning: Predict cheaply and do not learn.
 
         Returns:
             The a-priori prediction and the time it took.
@@ -561,6 +578,13 @@ class OnlineEstimator:
         start = time.perf_counter()
         x, y = self._check_sample(sample)
         model = self.model
+        if skip_learning and self.learning_enabled:
+            prediction = model.predict_held(x)
+            assert prediction.variance is not None  # a held prediction carries it
+            std = self.noise.std(prediction.variance)
+            self.noise.skip(sample.stamp_ns)
+            self.n_learning_skipped += 1
+            return StepResult(sample, prediction, time.perf_counter() - start, False, std, None)
         # a priori, with the relative variance v = z A⁻¹ zᵀ of each output (the state is not changed)
         ahead = model._predict_ahead_valid(x)
         prediction = ahead.prediction
@@ -583,6 +607,8 @@ class OnlineEstimator:
                 self.n_samples_learned += 1
             std = self.noise.std(variance)
             error = y - prediction.total
+        if learned and self.payload is not None:
+            self.payload.update(sample.q, sample.dq, sample.ddq, y)
         if learned or verdict is None:
             # σ is the model's: a fast correction of the recent error (the consistent SP's) makes one-step
             # errors far smaller than those of a model that stops learning, e.g. through a contact
@@ -609,6 +635,37 @@ class OnlineEstimator:
             raise RejectedSampleError(f"{'x' if bad == 1 else 'y'} contains NaN, inf or entries larger than "
                                       f"{MAX_ABS_INPUT:g} in magnitude")
         return xy[: 3 * n], xy[3 * n :]
+
+    def tare_payload(self) -> None:
+        """Start counting a payload from now: the rigid-body model as it is becomes the reference.
+
+        From the next learned sample on, :attr:`payload` learns the change of the distal body's ten
+        inertial parameters that explains ``y − Φ_b π̂_b`` (π̂_b frozen now; see
+        :mod:`semiparam_ros.core.payload`). Tare before a pickup, with nothing carried.
+
+        Raises:
+            ValueError: For a learner without a rigid-body part (``NP``).
+        """
+        params = self.parameters
+        if params is None:
+            raise ValueError("a payload needs a rigid-body part: this learner is nonparametric only")
+        self.payload = PayloadLearner(self.regressor, params)
+
+    def apply_pending(self) -> bool:
+        """Apply the learners' deferred updates now (idle time; see :meth:`RecursiveRLS.apply_pending`).
+
+        A node calls this when no input waits, so that the next sample's prediction is only a triangular
+        solve: the longest uninterruptible piece of work per learned sample is then about half as long.
+
+        Returns:
+            Whether any update was pending.
+        """
+        return self.model.apply_pending()
+
+    @property
+    def has_pending(self) -> bool:
+        """Whether a learner holds a deferred update (see :meth:`apply_pending`)."""
+        return self.model.has_pending()
 
     def _apply_forgetting(self, beta: float) -> None:
         for rls in learners(self.model):
@@ -725,6 +782,10 @@ class OnlineEstimator:
         self.model.reset()
         self.pipeline.reset()
         self.n_samples_learned = 0
+        self.n_learning_skipped = 0
+        self.payload = None
+        #: Samples predicted without learning because the caller fell behind (``skip_learning``).
+        self.n_learning_skipped = 0
         self._rejected = 0
         self.noise.reset()
         self.gate.reset()
@@ -788,6 +849,8 @@ class OnlineEstimator:
         state = {key: np.array(value, copy=True) for key, value in self.model.state_dict("model.").items()}
         state.update(self.noise.state_dict("noise."))
         state.update(self.gate.state_dict("gate."))
+        if self.payload is not None:
+            state.update(self.payload.state_dict("payload."))
         state["meta.version"] = np.array(_CHECKPOINT_VERSION)
         state["meta.fingerprint"] = np.array(self._fingerprint())
         state["meta.n_samples_learned"] = np.array(self.n_samples_learned)
@@ -848,12 +911,15 @@ class OnlineEstimator:
         model = self.model.copy()
         noise = NoiseScale(self.model.n_outputs, self.noise.time_constant_s)
         gate = ContactGate(self.gate.config)
+        payload = None
         try:
             model.load_state_dict(state, "model.")
             if "noise.s2" in state:  # checkpoints written before they carried σ and the gate have neither
                 noise.load_state_dict(state, "noise.")
             if "gate.warm" in state:
                 gate.load_state_dict(state, "gate.")
+            if "payload.reference" in state:  # a tare was made
+                payload = PayloadLearner.from_state_dict(self.regressor, state, "payload.")
         except CheckpointError as err:
             raise CheckpointError(f"{path}: {err}") from err
         except (TypeError, KeyError, IndexError, OverflowError, ValueError) as err:
@@ -871,6 +937,7 @@ class OnlineEstimator:
         self.model = model
         self.noise = noise
         self.gate = gate
+        self.payload = payload
         self.n_samples_learned = n_learned
         if self.forgetting is not None:
             self._apply_forgetting(self.forgetting)

@@ -11,7 +11,14 @@ and returns the :class:`~semiparam_ros.core.messages.Sample` objects they comple
    ``max_abs_output`` N / N·m for the wrench or the learned efforts — e.g. a 1e10 rad/s velocity that
    would poison the q̈ window). Only the configured joints are checked and used: extra joints, in any
    order, are ignored, so a NaN effort of an unused joint (or any effort when learning a wrench) does
-   not drop a message.
+   not drop a message. Last, **glitches**: a joint state whose position or velocity increment (on a
+   configured joint) exceeds ``glitch_ratio`` times that signal's running mean increment (memory
+   ``glitch_time_constant`` s) is a one-sample outlier inside the bounds — a 99 rad/s velocity spike
+   would otherwise enter ``window`` q̈ estimates and show as a contact on as many outputs — and is
+   dropped; a second such state in a row is a real change (a start from rest, an impact) and accepted,
+   and nothing is checked across a dropout (an interval beyond three times the mean one).
+   The ratio is dimensionless and rate-independent (clean real and simulated logs stay below 7). Efforts
+   are not checked: a contact changes a torque abruptly, which no causal check tells from a glitch.
 2. **Acceleration.** Accepted joint velocities feed the estimator of
    :mod:`semiparam_ros.core.acceleration`, which decides each joint-state stamp once: q̈ (rad/s²) or
    none (warm-up). With the default Savitzky–Golay estimator the decision comes ``window // 2`` joint
@@ -55,6 +62,7 @@ __all__ = [
     "DROP_ACCELERATION_WARMUP",
     "DROP_BUFFER_OVERFLOW",
     "DROP_DUPLICATE_JOINT",
+    "DROP_GLITCH",
     "DROP_IMPLAUSIBLE_VALUE",
     "DROP_JOINT_STATE_BACKWARDS_STAMP",
     "DROP_JOINT_STATE_REPEATED_STAMP",
@@ -115,6 +123,9 @@ DROP_BUFFER_OVERFLOW = "buffer_overflow"
 """Pending wrench discarded because ``max_buffer`` wrenches were waiting (joint states stopped)."""
 DROP_WRENCH_IGNORED = "wrench_ignored"
 """Wrench received while learning joint torques (not used)."""
+DROP_GLITCH = "glitch"
+"""JointState whose position or velocity jumped ``glitch_ratio`` times beyond its running mean increment
+(a one-sample outlier inside the plausibility bounds; the next state is compared with the last accepted)."""
 
 DROP_REASONS = (
     DROP_JOINT_STATE_ZERO_STAMP,
@@ -134,12 +145,40 @@ DROP_REASONS = (
     DROP_ACCELERATION_WARMUP,
     DROP_BUFFER_OVERFLOW,
     DROP_WRENCH_IGNORED,
+    DROP_GLITCH,
 )
 """Every key of :attr:`SamplePipeline.drops`, in screening order."""
 
 _NAME_CACHE_SIZE = 16
 _NAME_CACHE_BYTES = 1 << 20  # the name cache holds at most about this much name text (bounded memory)
 _NO_BOUND = sys.float_info.max  # "no bound": still rejects inf (and NaN) in the one-pass check
+_GLITCH_WARMUP = 5  # accepted increments before the glitch check starts (the running mean settles)
+_GLITCH_FLOOR_Q = 1e-6  # rad: floor of the mean position increment (exactly still joints)
+_GLITCH_FLOOR_DQ = 1e-4  # rad/s: floor of the mean velocity increment
+_GLITCH_GAP = 3.0  # an interval this many times the mean one is a dropout: no check across it
+
+
+@njit(cache=True, nogil=True)
+def _glitch_step(x: np.ndarray, ref: np.ndarray, scale: np.ndarray, floor: np.ndarray, ratio: float,
+                 alpha: float, check: bool, clip: bool) -> bool:
+    """One glitch-check step on ``x = [q, q̇]`` against the last accepted ``ref``.
+
+    With ``check``: a glitch if any ``|x − ref| > ratio · max(scale, floor)`` (state untouched, True).
+    Otherwise the running mean increments ``scale += alpha (r − scale)`` (``r`` clipped to
+    ``ratio · max(scale, floor)`` once ``clip``) and ``ref = x``; returns False.
+    """
+    m = x.shape[0]
+    if check:
+        for i in range(m):
+            if abs(x[i] - ref[i]) > ratio * max(scale[i], floor[i]):
+                return True
+    for i in range(m):
+        r = abs(x[i] - ref[i])
+        if clip:
+            r = min(r, ratio * max(scale[i], floor[i]))
+        scale[i] += alpha * (r - scale[i])
+        ref[i] = x[i]
+    return False
 
 
 @njit(cache=True, nogil=True)
@@ -190,6 +229,9 @@ class SamplePipeline:
         max_abs_velocity: Largest plausible |q̇| of a configured joint (rad/s, > 0); ``None`` = no bound.
         max_abs_output: Largest plausible |component| of the wrench (N, N·m), or of a configured joint's
             effort when learning ``joint_torques`` (N·m); ``None`` = no bound.
+        glitch_ratio: Increment ratio beyond which a joint state is a glitch (> 0; ``None`` or 0 = no
+            glitch check).
+        glitch_time_constant: Memory of the running mean increments (s, > 0).
 
     Attributes:
         drops: Reason → count, every reason of :data:`DROP_REASONS` present (zeros included).
@@ -227,6 +269,8 @@ class SamplePipeline:
         max_abs_position: float | None = 100.0,
         max_abs_velocity: float | None = 100.0,
         max_abs_output: float | None = 1e4,
+        glitch_ratio: float | None = 50.0,
+        glitch_time_constant: float = 0.05,
     ) -> None:
         if isinstance(joints, str):
             raise ConfigurationError("joints must be a sequence of joint names, not a single string")
@@ -258,6 +302,12 @@ class SamplePipeline:
         self._max_dq = _bound("max_abs_velocity", max_abs_velocity)
         self._max_out = _bound("max_abs_output", max_abs_output)
         self._torques = output == "joint_torques"
+        self._glitch_ratio = 0.0 if not glitch_ratio else check_range("glitch_ratio", glitch_ratio, 0.0,
+                                                                      lo_inclusive=False)
+        self._glitch_tau_ns = 1e9 * check_range("glitch_time_constant (s)", glitch_time_constant, 0.0,
+                                                lo_inclusive=False)
+        n = len(joints)
+        self._glitch_floor = np.concatenate([np.full(n, _GLITCH_FLOOR_Q), np.full(n, _GLITCH_FLOOR_DQ)])
         frozen = np.zeros(3)
         frozen.flags.writeable = False
         _within(frozen, 1.0)  # compile/load both signatures (messages hold read-only arrays) up front
@@ -320,6 +370,37 @@ class SamplePipeline:
         self._undecided: deque[_JointEntry] = deque()
         self._decided_until: int | None = None
         self._wrenches: deque[WrenchData] = deque()
+        # glitch check: [q, q̇] of the last accepted joint state, running mean |increment|, counters
+        self._glitch_ref: np.ndarray | None = None
+        self._glitch_scale = np.zeros(2 * len(self.joints))
+        self._glitch_seen = 0
+        self._glitch_run = 0
+        self._glitch_dt = 0.0  # running mean interval between accepted joint states [ns]
+
+    def _is_glitch(self, stamp: int, q: np.ndarray, dq: np.ndarray) -> bool:
+        """Check a screened joint state against the running increments; update them if it is accepted."""
+        x = np.concatenate((q, dq))
+        ref = self._glitch_ref
+        if ref is None:
+            self._glitch_ref = x
+            return False
+        assert self._last_js_stamp is not None  # set with the reference
+        dt = stamp - self._last_js_stamp
+        mean_dt = self._glitch_dt
+        self._glitch_dt = float(dt) if mean_dt == 0.0 else mean_dt + 0.1 * (min(dt, 3.0 * mean_dt) - mean_dt)
+        if mean_dt and dt > _GLITCH_GAP * mean_dt:  # after a dropout the signals moved on: a new reference
+            self._glitch_ref = x
+            self._glitch_run = 0
+            return False
+        alpha = 1.0 - math.exp(-dt / self._glitch_tau_ns)
+        check = self._glitch_seen >= _GLITCH_WARMUP and self._glitch_run == 0
+        if _glitch_step(x, ref, self._glitch_scale, self._glitch_floor, self._glitch_ratio,
+                        1.0 if self._glitch_seen == 0 else alpha, check, self._glitch_seen >= _GLITCH_WARMUP):
+            self._glitch_run += 1
+            return True
+        self._glitch_run = 0
+        self._glitch_seen += 1
+        return False
 
     def _drop(self, reason: str) -> list[Sample]:
         self.drops[reason] += 1
@@ -399,6 +480,8 @@ class SamplePipeline:
             finite = np.isfinite(q).all() and np.isfinite(dq).all()
             finite = finite and (effort is None or np.isfinite(effort).all())
             return self._drop(DROP_NONFINITE_JOINT_STATE if not finite else DROP_IMPLAUSIBLE_VALUE)
+        if self._glitch_ratio and self._is_glitch(stamp, q, dq):
+            return self._drop(DROP_GLITCH)
 
         # accepted: from here on the message changes the state
         self._last_js_stamp = stamp

@@ -164,6 +164,24 @@ class RecursiveRLS:
             self._run(Z, U, Z.shape[0], self._no_pred, self._no_pred, self._no_query, self._no_pred,
                       self._no_var)
 
+    @property
+    def has_pending(self) -> bool:
+        """Whether a deferred update waits to be applied (by the next prediction or :meth:`apply_pending`)."""
+        return self._pending is not None
+
+    def apply_pending(self) -> bool:
+        """Run the rotations of a deferred update now (in idle time) instead of inside the next prediction.
+
+        The learned state is the same bit for bit either way; the next prediction is then one triangular
+        solve instead of the fused update and solve (its value may differ in the last bits).
+
+        Returns:
+            Whether an update was pending.
+        """
+        pending = self._pending is not None
+        self._flush()
+        return pending
+
     def set_forgetting(self, forgetting: float) -> None:
         """Change β from the next time step on, keeping the learned state.
 

@@ -152,6 +152,37 @@ class _Model:
         """
         self._learn_ahead_valid(context, check_finite_array("y", y, (self.n_outputs,)))
 
+    def predict_held(self, x: Any) -> Prediction:
+        """Predict x cheaply for a sample that will not be learned (a node that falls behind).
+
+        Here the full a-priori prediction with its relative variance (what :meth:`predict_ahead` gives);
+        the consistent semiparametric model holds its residual instead (O(p²) instead of O(D²)).
+
+        Raises:
+            RejectedSampleError: Bad x or regressor output.
+        """
+        return self._predict_ahead_valid(self._check_x(x).copy()).prediction
+
+    def _learners(self) -> tuple[RecursiveRLS, ...]:
+        """Return the recursive least-squares learners holding this model's state."""
+        rls: RecursiveRLS | None = getattr(self, "rls", None)
+        return () if rls is None else (rls,)
+
+    def has_pending(self) -> bool:
+        """Tell whether a learner holds a deferred update (applied by the next prediction or now)."""
+        return any(rls.has_pending for rls in self._learners())
+
+    def apply_pending(self) -> bool:
+        """Apply the learners' deferred updates now (see :meth:`RecursiveRLS.apply_pending`).
+
+        Returns:
+            Whether any update was pending.
+        """
+        applied = False
+        for rls in self._learners():
+            applied = rls.apply_pending() or applied
+        return applied
+
     def _check_x(self, x: Any) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -676,6 +707,9 @@ class _TwoStageModel(_Model):
     n_inputs: int
     n_outputs: int
     n_samples_seen: int
+
+    def _learners(self) -> tuple[RecursiveRLS, ...]:
+        return (self.parametric.rls, self.nonparametric.rls)
 
     @property
     def regressor(self) -> Regressor:

@@ -374,6 +374,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                                                  lo_inclusive=False)
         self.fast = RecursiveRLS(p, 1, lam_parametric, forgetting=self._fast_forgetting(sample_period_s))
         self.n_samples_seen = 0
+        self._held: tuple[np.ndarray, float] | None = None  # (g·r, its relative variance) last computed
 
     #: The fast rigid-body correction fades like the local tracker but over this many times its distances
     #: (it is a rigid-body correction, valid further from where it was learned than a local error).
@@ -398,18 +399,23 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.fast.set_forgetting(self._fast_forgetting(sample_period_s))
 
     # ------------------------------------------------------------------ prediction
-    def _model_valid(self, xv: np.ndarray, Phi: np.ndarray, rigid: np.ndarray | None = None
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    def _model_valid(self, xv: np.ndarray, Phi: np.ndarray, rigid: np.ndarray | None = None, *,
+                     held: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """``(ŷ_P, g·r, relative variance, φ or None)`` for a validated x and its regressor.
 
-        ``rigid``: other rigid-body parameters to predict with (see :meth:`predict_model`).
+        ``rigid``: other rigid-body parameters to predict with (see :meth:`predict_model`). ``held``: take
+        the residual ``g·r`` and its relative variance as last computed (see :meth:`predict_held`).
         """
         par_model, npm = self.parametric, self.nonparametric
         yp, var = par_model._predict_phi(Phi, True)
         assert var is not None  # asked for
         if rigid is not None:
             yp = Phi @ rigid
+        if held and self._held is not None:
+            r_held, v_held = self._held
+            return yp, r_held.copy(), var + v_held, None
         if not npm.standardizer.ready:
+            self._held = None
             return yp, np.zeros(self.n_outputs), var, None
         t = self.n_outputs
         phi = npm._features(xv)
@@ -420,12 +426,14 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         r = pk[:t] - self._expand(pk[t:]) @ delta
         nu = npm.rls.lam * float(v[0])
         r *= math.exp(-((nu / self.novelty_scale) ** 2))
+        if rigid is None:
+            self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
         return yp, r, var + float(v[0]), phi
 
-    def _predict_valid(self, xv: np.ndarray, Phi: np.ndarray) -> tuple[Prediction, np.ndarray,
-                                                                       np.ndarray | None, float]:
+    def _predict_valid(self, xv: np.ndarray, Phi: np.ndarray, *, held: bool = False
+                       ) -> tuple[Prediction, np.ndarray, np.ndarray | None, float]:
         """Return the prediction, ``model(x) + wΦδ_f`` (the local tracker's reference), φ and κ(x)."""
-        yp, r, var, phi = self._model_valid(xv, Phi)
+        yp, r, var, phi = self._model_valid(xv, Phi, held=held)
         model_total = yp + r
         if not self.use_tracker:
             return Prediction(yp, r, model_total, var, np.zeros(self.n_outputs)), model_total, phi, 0.0
@@ -472,6 +480,30 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         if not return_variance:
             pred = Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
         return pred
+
+    def _learners(self) -> tuple[RecursiveRLS, ...]:
+        return (self.parametric.rls, self.nonparametric.rls, self.fast)
+
+    def predict_held(self, x: Any) -> Prediction:
+        """Predict x as :meth:`predict_one` but with the residual held from the last full prediction.
+
+        The rigid-body part, the fast correction and the tracker are evaluated at x (O(p²)); the residual
+        ``g·r`` and its relative variance are those of the last :meth:`predict_one` or learned sample (the
+        O(D²) triangular solve of the random-feature learner is skipped). This is the prediction of a
+        node that falls behind: at 1 kHz the residual, a smooth function of the state, changes little in
+        the few ms it is held. Before any residual was computed (warm-up) it is the full prediction.
+
+        Args:
+            x: The input ``[q, q̇, q̈]`` (rad, rad/s, rad/s²).
+
+        Returns:
+            The prediction with its parts and relative variance.
+
+        Raises:
+            RejectedSampleError: Bad x or regressor output.
+        """
+        xv, _, Phi = self._check(x)
+        return self._predict_valid(xv, Phi, held=True)[0]
 
     def predict_model(self, x: Any, rigid: np.ndarray | None = None) -> Prediction:
         """Predict model(x) alone (rigid-body part + weighted residual; no fast correction).
@@ -599,6 +631,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         super().reset()
         self.fast.reset()
         self.tracker.reset()
+        self._held = None
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the learners' and the tracker's state as arrays."""
@@ -630,3 +663,4 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                                   f"{self.n_params}")
         super().load_state_dict(state, prefix)
         self.tracker, self.fast = tracker, fast
+        self._held = None

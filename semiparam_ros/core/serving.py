@@ -50,6 +50,7 @@ from semiparam_ros.core.checkpoint import load_npz
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import Model, OnlineEstimator, build_regressor
 from semiparam_ros.core.identification import ConsistentEstimate, ExcitationReport
+from semiparam_ros.core.payload import PayloadEstimate
 from semiparam_ros.core.semiparametric import ParametricModel, Prediction
 from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.uncertainty import predict_with_variance
@@ -153,6 +154,32 @@ class LearnedModel:
                                              self.estimator.column_scale, rls.lam)
             self._consistent = (key, estimate)
         return self._consistent[1]
+
+    def payload(self) -> PayloadEstimate:
+        """Return the payload the distal body carries: mass [kg], centre of mass [m], inertia [kg·m²].
+
+        Since the last tare (:meth:`OnlineEstimator.tare_payload`, the node's ``~/payload/tare``) when one
+        was made: the change of the distal body's parameters learned from the samples after it. Otherwise
+        beyond the URDF: the consistent estimate of the distal body minus its CAD values. Each with its
+        standard deviation; the centre of mass in the frame of the distal body (the child link of the last
+        configured joint), the inertia about the centre of mass (see :mod:`semiparam_ros.core.payload`).
+
+        Raises:
+            ValueError: For a model without a rigid-body part (``NP``).
+            ConfigurationError: If the consistent projection's solver fails.
+        """
+        from semiparam_ros.core.identification import full_column_rms
+        from semiparam_ros.core.payload import payload_beyond_urdf
+
+        est = self.estimator
+        if est.payload is not None:
+            return est.payload.estimate()
+        rls = self._rigid_learner().rls
+        consistent = self.consistent()
+        s2 = self._noise_s2()
+        noise = float(np.mean(s2)) if s2 is not None and np.all(np.isfinite(s2)) else float("nan")
+        return payload_beyond_urdf(est.regressor, consistent.full, rls.R, est.column_scale, rls.lam,
+                                   full_column_rms(est.regressor), noise, est.n_samples_learned)
 
     def excitation(self) -> ExcitationReport:
         """Return what the data seen so far determine: the rigid-body information matrix's spectrum.

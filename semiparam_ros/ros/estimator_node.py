@@ -313,6 +313,9 @@ class EstimatorNode(Node):
         self._model_lock = threading.Lock()
         self._queue: collections.deque[tuple[str, JointStateData | WrenchData, float]] = collections.deque()
         self._queue_size = int(cfg["queue_size"])
+        self._max_delay_s = float(cfg["overload.max_delay"])
+        self._fused = False  # whether the sample in hand found a deferred update (see _late)
+        self._fused_cost_s = 0.0  # measured cost of such a step [s]
         self._version = 0  # bumped whenever the learned state changes (learning, reset)
         self._published_version = -1
         self._ckpt_event = threading.Event()
@@ -424,6 +427,10 @@ class EstimatorNode(Node):
         # (timers work with every executor, guard conditions not with the EventsExecutor).
         self._catch_up = self.create_timer(_CATCH_UP_PERIOD_S, self._process_queued, clock=steady)
         self._catch_up.cancel()
+        # Idle work (overload.max_delay > 0): the rotations of the last learned sample run in a turn of
+        # their own once the input waiting in the executor was served, not inside the next prediction.
+        self._idle = self.create_timer(_CATCH_UP_PERIOD_S, self._on_idle, clock=steady)
+        self._idle.cancel()
         self._ckpt_thread = threading.Thread(target=self._checkpoint_loop, name="estimator-checkpoint",
                                              daemon=True)
         self._ckpt_thread.start()
@@ -734,6 +741,8 @@ class EstimatorNode(Node):
         if "checkpoint.period" in known:
             self._ckpt_period = float(known["checkpoint.period"])
             self._ckpt_event.set()
+        if "overload.max_delay" in known:
+            self._max_delay_s = float(known["overload.max_delay"])
 
     @_quiet_at_shutdown
     def _on_diagnostics_timer(self) -> None:
@@ -742,6 +751,7 @@ class EstimatorNode(Node):
             est = self._estimator
             drops = est.drops
             stats["samples_learned"] = est.n_samples_learned
+            stats["learning_skipped"] = est.n_learning_skipped
             stats["learning_enabled"] = est.learning_enabled
             stats["model_size"] = est.model_size
             for reason, count in est.not_learned.items():
@@ -813,25 +823,54 @@ class EstimatorNode(Node):
                 if self._desired_sub is not None:
                     self._serve_waiting_desired_state()  # a controller waits: it goes before learning
                 kind, data, t_recv = queue.popleft()
-                self._process(kind, data, t_recv)
+                self._process(kind, data, t_recv, skip_learning=self._late(t_recv))
             self._stats.add_learning_cpu(time.thread_time() - cpu, n)
         if queue:
             if self._catch_up.is_canceled():
                 self._catch_up.reset()
-        elif not self._catch_up.is_canceled():
-            self._catch_up.cancel()
+        else:
+            if not self._catch_up.is_canceled():
+                self._catch_up.cancel()
+            if self._max_delay_s > 0.0 and self._idle.is_canceled():
+                self._idle.reset()
+
+    @_quiet_at_shutdown
+    def _on_idle(self) -> None:
+        """Apply the learners' deferred update while no input waits (one executor turn after learning)."""
+        self._idle.cancel()
+        if not self._queue:
+            cpu = time.thread_time()
+            with self._model_lock:
+                self._estimator.apply_pending()
+            self._stats.add_learning_cpu(time.thread_time() - cpu, 0)
+
+    def _late(self, t_recv: float) -> bool:
+        """Whether the sample received at ``t_recv`` is predicted at once and not learned (overload).
+
+        Late: it waited longer than ``overload.max_delay``, or the learner still holds the deferred update
+        of the previous sample (no idle turn applied it: input comes faster than the learner works) and
+        a step that applies it as well (its cost measured over the recent such steps) would end beyond
+        the budget. So the longest piece of work a prediction waits for is one triangular solve or one
+        update, never both, and the learner takes the samples it has time for, spread in time.
+        """
+        budget = self._max_delay_s
+        if budget <= 0.0:
+            return False
+        age = time.perf_counter() - t_recv
+        self._fused = self._estimator.has_pending
+        return age > budget or (self._fused and age + self._fused_cost_s > budget)
 
     def _process(self, kind: str, data: JointStateData | WrenchData, t_recv: float, *,
-                 publish: bool = True) -> None:
+                 publish: bool = True, skip_learning: bool = False) -> None:
         est = self._estimator
         try:
             with self._model_lock:
-                if kind == "wrench":
-                    results = est.process_wrench(data)  # type: ignore[arg-type]
+                if isinstance(data, WrenchData):
+                    results = est.process_wrench(data, skip_learning=skip_learning)
                     if not self._frame_id:
-                        self._last_wrench_frame = data.frame_id  # type: ignore[union-attr]
+                        self._last_wrench_frame = data.frame_id
                 else:
-                    results = est.process_joint_state(data)  # type: ignore[arg-type]
+                    results = est.process_joint_state(data, skip_learning=skip_learning)
                 for r in results:
                     if r.learned:
                         self._version += 1
@@ -842,6 +881,10 @@ class EstimatorNode(Node):
             # rejects): this is a bug. Say so loudly and let it propagate out of spin (see main()).
             self.get_logger().fatal(f"programming error in the estimator on a {kind} message: {err!r}")
             raise
+        if self._fused and not skip_learning:
+            for r in results:  # the cost of a step that applies the previous update too (EW mean, ~20)
+                if r.learned:
+                    self._fused_cost_s += 0.05 * (r.latency_s - self._fused_cost_s)
         if drop_total != self._last_drop_total:
             self._stats.count_pipeline_drops(drop_total - self._last_drop_total)
             self._last_drop_total = drop_total
