@@ -6,8 +6,8 @@ scenario (the preset's payload, a point mass at ``payload_point`` of the end-eff
 message by message to the node's ``OnlineEstimator``. 0.2 s before the pickup the payload is tared
 (:meth:`OnlineEstimator.tare_payload`, what ``~/payload/tare`` does: the learner then detects the
 pickup itself) and ``--after`` s after the pickup ``load_model(checkpoint).payload()`` is compared with
-the truth (the change of the carrying body's parameters in the simulator). Also the estimate without a tare, beyond the
-URDF (the consistent projection's distal body minus the CAD values), at the same moment.
+the truth (the change of the carrying body's parameters in the simulator). Also the estimate without a
+tare, beyond the URDF (the consistent projection's distal body minus the CAD values), at that moment.
 
 Target: mass within 2 %, centre of mass within 5 mm, 10 s after the pickup. Prints a markdown table and
 writes ``bench/results/bench_payload.json``.
