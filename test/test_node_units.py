@@ -12,6 +12,7 @@ from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from semiparam_ros.core.config import PARAMETERS, EstimatorConfig, parameter_spec
 from semiparam_ros.core.messages import joint_state_from_msg
@@ -22,6 +23,7 @@ from semiparam_ros.ros.conversions import (
     joint_torques_msg,
     parameters_msg,
     parameters_names_from_msg,
+    payload_msgs,
     stamp_msg,
     wrench_from_cdr,
     wrench_from_msg,
@@ -95,12 +97,44 @@ def test_joint_torques_and_joint_state_conversion():
 
 
 def test_parameters_message_names_and_layout():
+    """Each value named by a label of its own (commas in names survive); a valid n × 1 × 1 × 1 layout."""
     names = ["m_r_upper_arm", "mcx_r_upper_arm + 0.3*m,x", "Izz"]
-    msg = parameters_msg(names, np.array([1.0, 2.0, 3.0]))
-    assert parameters_names_from_msg(msg) == ["m_r_upper_arm", "mcx_r_upper_arm + 0.3*m;x", "Izz"]
-    assert msg.layout.dim[0].size == 3 and list(msg.data) == [1.0, 2.0, 3.0]
+    msg = deserialize_message(serialize_message(parameters_msg(names, np.array([1.0, 2.0, 3.0]))),
+                              Float64MultiArray)
+    assert parameters_names_from_msg(msg) == names
+    dims = msg.layout.dim
+    expected = [("base_parameters", 3, 3)] + [(n, 1, 1) for n in names]
+    assert [(d.label, d.size, d.stride) for d in dims] == expected
+    assert dims[0].stride == int(np.prod([d.size for d in dims]))  # the strides of a valid layout
+    assert {d.label: v for d, v in zip(dims[1:], msg.data, strict=True)} == dict(zip(names, [1.0, 2.0, 3.0],
+                                                                                    strict=True))
+    # the comma-joined layout published before is still read
+    old = Float64MultiArray()
+    old.layout.dim = [MultiArrayDimension(label="a,b", size=2, stride=2)]
+    old.data = [1.0, 2.0]
+    assert parameters_names_from_msg(old) == ["a", "b"]
     with pytest.raises(ValueError):
         parameters_msg(names, np.zeros(2))
+
+
+def test_payload_messages_carry_the_estimate_and_its_std_in_the_distal_frame():
+    from semiparam_ros.core.dynamics import point_mass_parameters
+    from semiparam_ros.core.payload import payload_from_parameters
+
+    delta = point_mass_parameters(1.5, [0.01, -0.02, 0.1])
+    delta[4:] += [0.01, 0.0, 0.02, 0.0, 0.0, 0.03]  # plus an inertia of its own (Ixx, Iyy, Izz)
+    est = payload_from_parameters(delta, np.diag(np.full(10, 1e-6)), body="link7", n_samples=10,
+                                  reference="tare")
+    value, std = payload_msgs(est, 1_700_000_000_123_456_789)
+    for msg in (value, std):
+        assert msg.header.frame_id == "link7"
+        assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1_700_000_000, 123_456_789)
+    assert value.inertia.m == pytest.approx(1.5)
+    com = (value.inertia.com.x, value.inertia.com.y, value.inertia.com.z)
+    assert com == pytest.approx((0.01, -0.02, 0.1))
+    assert (value.inertia.ixx, value.inertia.iyy, value.inertia.izz) == pytest.approx((0.01, 0.02, 0.03))
+    assert std.inertia.m == pytest.approx(1e-3)  # the std of m is that of δ₀
+    assert std.inertia.com.z == pytest.approx(est.com_std[2])
 
 
 @pytest.mark.parametrize("spec", PARAMETERS, ids=lambda s: s.name)

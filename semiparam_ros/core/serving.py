@@ -104,6 +104,7 @@ class LearnedModel:
         self._consistent: tuple[tuple[int, int], ConsistentEstimate] | None = None
         self._attached: ConsistentEstimate | None = None
         self._solve = bool(solve)
+        self._weights: np.ndarray | None = None  # the projection's prior weights (cached: 64 regressor rows)
         #: Software versions that wrote the checkpoint (empty for a live estimator).
         self.versions: dict[str, Any] = {}
         regressor = estimator.regressor
@@ -155,7 +156,7 @@ class LearnedModel:
             self._consistent = (key, estimate)
         return self._consistent[1]
 
-    def payload(self) -> PayloadEstimate:
+    def payload(self, consistent: ConsistentEstimate | None = None) -> PayloadEstimate:
         """Return the payload the distal body carries: mass [kg], centre of mass [m], inertia [kg·m²].
 
         Since the last tare (:meth:`OnlineEstimator.tare_payload`, the node's ``~/payload/tare``) when one
@@ -163,6 +164,10 @@ class LearnedModel:
         beyond the URDF: the consistent estimate of the distal body minus its CAD values. Each with its
         standard deviation; the centre of mass in the frame of the distal body (the child link of the last
         configured joint), the inertia about the centre of mass (see :mod:`semiparam_ros.core.payload`).
+
+        Args:
+            consistent: The consistent estimate beyond which the URDF's is counted (default
+                :meth:`consistent`, solved here if none is attached).
 
         Raises:
             ValueError: For a model without a rigid-body part (``NP``).
@@ -175,11 +180,14 @@ class LearnedModel:
         if est.payload is not None:
             return est.payload.estimate()
         rls = self._rigid_learner().rls
-        consistent = self.consistent()
+        if consistent is None:
+            consistent = self.consistent()
         s2 = self._noise_s2()
         noise = float(np.mean(s2)) if s2 is not None and np.all(np.isfinite(s2)) else float("nan")
+        if self._weights is None:
+            self._weights = full_column_rms(est.regressor)
         return payload_beyond_urdf(est.regressor, consistent.full, rls.R, est.column_scale, rls.lam,
-                                   full_column_rms(est.regressor), noise, est.n_samples_learned)
+                                   self._weights, noise, est.n_samples_learned)
 
     def excitation(self) -> ExcitationReport:
         """Return what the data seen so far determine: the rigid-body information matrix's spectrum.

@@ -48,6 +48,7 @@ from semiparam_ros.core.messages import (
     stamp_to_ns,
     wrench_from_msg,
 )
+from semiparam_ros.core.payload import PayloadEstimate
 from semiparam_ros.errors import RejectedSampleError
 
 __all__ = [
@@ -57,6 +58,7 @@ __all__ = [
     "joint_torques_msg",
     "parameters_msg",
     "parameters_names_from_msg",
+    "payload_msgs",
     "stamp_msg",
     "wrench_from_cdr",
     "wrench_from_msg",
@@ -214,11 +216,17 @@ def feedforward_msgs(command: FeedForwardCommand, joints: Sequence[str]
 
 
 def parameters_msg(names: Sequence[str], values: np.ndarray) -> Float64MultiArray:
-    """Build the ``~/inertial_parameters`` message (names comma-joined in ``layout.dim[0].label``).
+    """Build the ``~/inertial_parameters`` message: the base parameters, each named by a label.
+
+    Layout: ``dim[0]`` is the parameter axis (label ``base_parameters``, size n, stride n); ``dim[1 + i]``
+    is a singleton dimension (size 1, stride 1) whose label is the name of ``data[i]``. The layout is a
+    valid n × 1 × … × 1 array, and ``{d.label: v for d, v in zip(msg.layout.dim[1:], msg.data)}`` reads
+    the named values (:func:`parameters_names_from_msg`).
 
     Args:
         names: Base-parameter names.
-        values: Their current estimates (kg, kg·m, kg·m² combinations as the names say).
+        values: Their current estimates (kg, kg·m, kg·m² combinations as the names say; friction N·m·s/rad
+            and N·m, offsets N·m).
 
     Returns:
         The message.
@@ -230,11 +238,18 @@ def parameters_msg(names: Sequence[str], values: np.ndarray) -> Float64MultiArra
     if vals.size != len(names):
         raise ValueError(f"{len(names)} parameter names but {vals.size} values")
     msg = Float64MultiArray()
-    dim = MultiArrayDimension()
-    dim.label = ",".join(str(n).replace(",", ";") for n in names)
-    dim.size = int(vals.size)
-    dim.stride = int(vals.size)
-    msg.layout.dim = [dim]
+    axis = MultiArrayDimension()
+    axis.label = "base_parameters"
+    axis.size = int(vals.size)
+    axis.stride = int(vals.size)
+    dims = [axis]
+    for name in names:
+        dim = MultiArrayDimension()
+        dim.label = str(name)
+        dim.size = 1
+        dim.stride = 1
+        dims.append(dim)
+    msg.layout.dim = dims
     msg.layout.data_offset = 0
     msg.data = vals.tolist()
     return msg
@@ -243,15 +258,48 @@ def parameters_msg(names: Sequence[str], values: np.ndarray) -> Float64MultiArra
 def parameters_names_from_msg(msg: Float64MultiArray) -> list[str]:
     """Recover the parameter names from an ``~/inertial_parameters`` message.
 
+    Reads the labelled layout of :func:`parameters_msg`, and the comma-joined names in ``dim[0].label`` of
+    messages published before it (deprecated: names containing commas could not be told apart).
+
     Args:
         msg: A message built by :func:`parameters_msg`.
 
     Returns:
         The names, in the order of ``msg.data``.
     """
-    if not msg.layout.dim or not msg.layout.dim[0].label:
+    dims = msg.layout.dim
+    if not dims or not dims[0].label:
         return []
-    return msg.layout.dim[0].label.split(",")
+    if dims[0].label == "base_parameters" and len(dims) == len(msg.data) + 1:
+        return [d.label for d in dims[1:]]
+    return dims[0].label.split(",")
+
+
+def payload_msgs(estimate: PayloadEstimate, stamp_ns: int) -> tuple[InertiaStamped, InertiaStamped]:
+    """Build ``~/payload`` and ``~/payload/std``: the payload and its standard deviations.
+
+    Args:
+        estimate: The payload estimate.
+        stamp_ns: Header stamp [ns].
+
+    Returns:
+        Two ``geometry_msgs/InertiaStamped`` with ``header.frame_id`` = the distal body (the frame of the
+        centre of mass): mass [kg], centre of mass [m], inertia about it [kg·m²]; the second holds each
+        field's standard deviation in the same place.
+    """
+    out = []
+    for mass, com, inertia in ((estimate.mass, estimate.com, estimate.inertia),
+                               (estimate.mass_std, estimate.com_std, estimate.inertia_std)):
+        msg = InertiaStamped()
+        msg.header.stamp = stamp_msg(stamp_ns)
+        msg.header.frame_id = estimate.body
+        msg.inertia.m = float(mass)
+        msg.inertia.com.x, msg.inertia.com.y, msg.inertia.com.z = (float(v) for v in com)
+        i_ = msg.inertia
+        i_.ixx, i_.ixy, i_.ixz = float(inertia[0, 0]), float(inertia[0, 1]), float(inertia[0, 2])
+        i_.iyy, i_.iyz, i_.izz = float(inertia[1, 1]), float(inertia[1, 2]), float(inertia[2, 2])
+        out.append(msg)
+    return out[0], out[1]
 
 
 #: CDR little-endian encapsulation (``CDR_LE``), what rmw_fastrtps and rmw_cyclonedds write on x86/ARM.

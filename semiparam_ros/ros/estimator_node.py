@@ -154,6 +154,7 @@ from semiparam_ros.ros.conversions import (
     joint_torques_msg,
     link_inertia_msgs,
     parameters_msg,
+    payload_msgs,
     wrench_from_cdr,
     wrench_from_msg,
     wrench_stamped_msg,
@@ -363,6 +364,10 @@ class EstimatorNode(Node):
             self._desired_sub = self.create_subscription(JointTrajectory, "~/desired_state",
                                                          self._on_desired_state, _DESIRED_QOS)
         self._pub_params = publisher(Float64MultiArray, "~/inertial_parameters", PARAMETERS_QOS)
+        # the payload the distal body carries (since ~/payload/tare, or beyond the URDF): latched
+        self._pub_payload = publisher(InertiaStamped, "~/payload", PARAMETERS_QOS)
+        self._pub_payload_std = publisher(InertiaStamped, "~/payload/std", PARAMETERS_QOS)
+        self._payload_key: tuple[int, int] | None = None  # (learned version, solutions) last published
         self._pub_diag = publisher(DiagnosticArray, "/diagnostics", 10)
 
         # Inputs: callbacks only convert and enqueue. Messages lost inside DDS (a best-effort history
@@ -398,6 +403,7 @@ class EstimatorNode(Node):
                                             daemon=True)
         self._srv_thread.start()
         self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(Trigger, "~/payload/tare", self._on_payload_tare)
         self.add_on_set_parameters_callback(make_parameter_validator(lambda: self.config))
         self.add_post_set_parameters_callback(self._on_parameters_set)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -725,6 +731,40 @@ class EstimatorNode(Node):
         response.success, response.message = True, "model reset"
         return response
 
+    def _on_payload_tare(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """Take the model as it is as the payload's reference; the next pickup is the payload."""
+        with self._model_lock:
+            self._estimator.tare_payload()
+            self._payload_key = None
+        self.get_logger().info("payload tared: a pickup from now on is published on ~/payload")
+        response.success, response.message = True, "payload tared"
+        return response
+
+    def _publish_payload(self) -> None:
+        """Publish the payload when learning or the consistent projection changed it (diagnostics timer).
+
+        Since a tare: the payload learner's estimate (once a pickup was detected). Without one: beyond the
+        URDF, from the worker's latest consistent solution (never solved here: cvxpy holds the GIL).
+        """
+        worker = self._projection
+        solved = worker.solved if worker is not None else 0
+        key = (self._version, solved)
+        if key == self._payload_key:
+            return
+        with self._model_lock:
+            learner = self._estimator.payload
+            if learner is not None:
+                estimate = learner.estimate() if learner.detected else None
+            elif worker is not None and worker.latest is not None:
+                estimate = self._serving.payload(worker.latest)
+            else:
+                estimate = None
+        self._payload_key = key
+        if estimate is not None:
+            value, std = payload_msgs(estimate, self.get_clock().now().nanoseconds)
+            self._pub_payload.publish(value)
+            self._pub_payload_std.publish(std)
+
     def _on_parameters_set(self, params: list[Parameter]) -> None:
         changes = {p.name: p.value for p in params}
         known = {k: v for k, v in changes.items() if k in self.config.values}
@@ -794,6 +834,7 @@ class EstimatorNode(Node):
                                stalled=bool(stats["queue_length"]) and not stats["processed_in_period"])
         self._pub_diag.publish(msg)
         self._publish_parameters(force=False)
+        self._publish_payload()
 
     def _publish_parameters(self, *, force: bool) -> None:
         with self._model_lock:
