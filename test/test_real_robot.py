@@ -246,6 +246,13 @@ def test_kuka_comparison_reports_every_reference():
     np.testing.assert_allclose([models[PERSISTENCE].components[j].rmse for j in cfg["robot.joints"]],
                                np.mean(direct, axis=0), rtol=1e-12)
     assert [c.id for c in comp.criteria][-1] == "P/P rigid/lwr_6_joint/regime"
+    # the training data's excitation is reported (checked against independent routes below)
+    exc = comp.excitation
+    assert exc is not None and exc["condition"] > 1 and 0.0 <= exc["test_fraction_outside"] <= 1.0
+    assert len(exc["least_excited"]) == 3
+    from semiparam_ros.eval.real_robot import comparison_markdown
+
+    assert "Excitation of the training data" in comparison_markdown(comp)
 
 
 def test_real_robots_command_reports_a_missing_data_folder(tmp_path, capsys):
@@ -272,3 +279,27 @@ def test_joint_torque_floor_is_its_own_parameter_and_the_wrench_floors_are_uncha
     tail = standardizer_min_scale(icub, with_outputs=True)[3 * n:]
     np.testing.assert_array_equal(tail, [icub["nonparametric.min_scale.force"]] * 3
                                   + [icub["nonparametric.min_scale.torque"]] * 3)
+
+
+def test_excitation_summary_against_independent_routes():
+    """The condition number of A in physical units (eigvalsh of C A C, not the SVD of R C) and the fraction
+    of test samples outside the excited range (one predict_one per sample, not the stacked predict_many),
+    for a rigid-body learner trained on a short prefix of KUKA log 1 and tested on log 3."""
+    from semiparam_ros.core.estimator import OnlineEstimator, build_regressor, column_scale
+    from semiparam_ros.eval.real_robot import excitation_summary
+
+    cfg = load_config(ROOT / "config" / "kuka_lwr4.yaml").with_overrides(
+        {"robot.urdf": str(KUKA / "kuka_lwr4_cogimon.urdf")})
+    train, _ = load_samples(KUKA / "measurements_1", cfg, limit=300)  # 1.5 s: poorly excited
+    test, _ = load_samples(KUKA / "measurements_3", cfg, limit=400)
+    model = OnlineEstimator(cfg, kind="P").model
+    for x, y in zip(train.X, train.Y, strict=True):
+        model.learn_one(x, y)
+    exc = excitation_summary(cfg, model, test)
+    C = np.diag(column_scale(cfg, build_regressor(cfg)))
+    R = model.rls.R
+    eig = np.linalg.eigvalsh(C @ R.T @ R @ C)
+    assert exc["condition"] == pytest.approx(eig[-1] / eig[0], rel=1e-6)
+    outside = [model.predict_one(x, return_variance=True).variance.max() > 1.0 for x in test.X]
+    assert exc["test_fraction_outside"] == pytest.approx(np.mean(outside), abs=1e-12)
+    assert 0.0 < exc["test_fraction_outside"]  # 1.5 s of one motion does not cover another

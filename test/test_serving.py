@@ -238,3 +238,23 @@ def test_learn_reports_a_truncated_bag(panda, tmp_path):
         _, report = learn_bags([cut], panda["config"])
     assert report.recovered == [str(cut)]
     assert 0 < report.learned < panda["report"].learned
+
+
+def test_excited_marks_the_states_the_training_data_cover(panda, tmp_path):
+    """The trained model covers its own recording's states; a fresh model (URDF prior only) covers none.
+
+    Reference: the rigid-body learner's relative variance by one ``predict_one`` per state.
+    """
+    model = load_model(panda["ckpt"])
+    rec = panda["rec"]
+    idx = np.arange(0, len(rec.q), 97)
+    inside = model.excited(rec.q[idx], rec.dq[idx], rec.ddq[idx])
+    par = model.estimator.model.parametric
+    reference = [par.predict_one(np.r_[rec.q[i], rec.dq[i], rec.ddq[i]], return_variance=True).variance.max()
+                 <= 1.0 for i in idx]
+    assert inside.tolist() == reference
+    assert inside.mean() > 0.95  # the states it learned from
+    assert bool(model.excited(rec.q[0], rec.dq[0], rec.ddq[0])) == reference[0]  # one state: a bool
+    OnlineEstimator(panda["config"]).save(tmp_path / "fresh.npz")
+    fresh = load_model(tmp_path / "fresh.npz")
+    assert not fresh.excited(rec.q[idx], rec.dq[idx], rec.ddq[idx]).any()

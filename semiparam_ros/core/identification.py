@@ -35,8 +35,8 @@ import numpy as np
 from semiparam_ros.core.dynamics import RigidBodyRegressor
 from semiparam_ros.errors import ConfigurationError
 
-__all__ = ["ConsistentEstimate", "ExcitationReport", "ProjectionWorker", "consistent_parameters",
-           "excitation_report", "export_urdf", "full_column_rms"]
+__all__ = ["OUTSIDE_EXCITED", "ConsistentEstimate", "ExcitationReport", "ProjectionWorker",
+           "consistent_parameters", "excitation_report", "export_urdf", "full_column_rms", "outside_excited"]
 
 #: Mass given to a link the reduced model merged into a body, in the exported URDF (kg): URDF parsers want a
 #: positive mass; 1e-9 kg changes no torque beyond 1e-8 N·m.
@@ -216,6 +216,29 @@ def excitation_report(R: np.ndarray, scale: np.ndarray, names: tuple[str, ...], 
         least.append((float(s[k] ** 2), [(names[j], float(v[j])) for j in top]))
     cond = float(eig[-1] / eig[0]) if eig[0] > 0 else float("inf")
     return ExcitationReport(eig, cond, least)
+
+
+#: Relative predictive variance of the rigid-body part above which a state is outside the excited range:
+#: there the model's own uncertainty exceeds the measurement noise (v = φ A⁻¹ φᵀ > 1, dimensionless).
+OUTSIDE_EXCITED = 1.0
+
+
+def outside_excited(variance: np.ndarray, threshold: float = OUTSIDE_EXCITED) -> np.ndarray:
+    """Tell which states lie outside the range the rigid-body learner's data excited.
+
+    Args:
+        variance: (N, t) relative predictive variances ``diag(Φ A⁻¹ Φᵀ)`` of the rigid-body part (the
+            ``variance`` of :meth:`ParametricModel.predict_many`), dimensionless.
+        threshold: The bound (default :data:`OUTSIDE_EXCITED`: the model's uncertainty equals the noise).
+
+    Returns:
+        (N,) bool: some output's variance beyond the bound.
+
+    Example:
+        >>> outside_excited(np.array([[0.01, 0.2], [0.5, 3.0]])).tolist()
+        [False, True]
+    """
+    return np.asarray(np.max(np.asarray(variance), axis=-1) > threshold)
 
 
 def export_urdf(regressor: RigidBodyRegressor, estimate: ConsistentEstimate) -> str:

@@ -200,6 +200,33 @@ class LearnedModel:
         rls = self._rigid_learner().rls
         return excitation_report(rls.R, self.estimator.column_scale, self.estimator.parameter_names)
 
+    def excited(self, q: Any, dq: Any, ddq: Any) -> np.ndarray:
+        """Tell whether the data seen so far determine the rigid-body part at these states.
+
+        False where the rigid-body learner's relative predictive variance ``φ A⁻¹ φᵀ`` exceeds
+        :data:`~semiparam_ros.core.identification.OUTSIDE_EXCITED` on some output: a frozen model used
+        there extrapolates (the CAD values carry it, or nothing does).
+
+        Args:
+            q: Positions (n,) or (N, n) [rad].
+            dq: Velocities [rad/s], same shape.
+            ddq: Accelerations [rad/s²], same shape.
+
+        Returns:
+            A bool, or (N,) bools.
+
+        Raises:
+            RejectedSampleError: Wrong shapes or non-finite values.
+            ValueError: For a model without a rigid-body part (``NP``).
+        """
+        from semiparam_ros.core.identification import outside_excited
+
+        X, single = self._states(q, dq, ddq)
+        variance = self._rigid_learner().predict_many(X).variance
+        assert variance is not None  # predict_many returns it
+        inside = ~outside_excited(variance)
+        return inside[0] if single else inside
+
     def _rigid_learner(self) -> ParametricModel:
         """Return the rigid-body learner of the served model.
 

@@ -153,6 +153,7 @@ class RealRobotComparison:
     criteria: tuple[Criterion, ...]
     injected: InjectedTorque | None
     horizons: HorizonReport | None = None
+    excitation: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form."""
@@ -163,6 +164,7 @@ class RealRobotComparison:
             "criteria": [c.__dict__ for c in self.criteria],
             "injected": None if self.injected is None else dict(self.injected.__dict__),
             "horizons": None if self.horizons is None else self.horizons.to_json(),
+            "excitation": self.excitation,
         }
 
 
@@ -325,7 +327,36 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
         horizon = evaluate_horizons(chosen, train, test, horizons=horizons, fixed=(CAD, BATCH),
                                     components=joints)
     std = dict(zip(joints, (float(s) for s in test.Y.std(axis=0)), strict=True))
-    return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected, horizon)
+    return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected, horizon,
+                               excitation_summary(config, models["SP"], test))
+
+
+def excitation_summary(config: EstimatorConfig, model: Any, test: SampleArrays) -> dict[str, Any]:
+    """Return what the training data determined of the rigid-body part, and how much of the test lies outside.
+
+    Args:
+        config: The configuration the model was built with.
+        model: A trained learner with a rigid-body part (``parametric`` stage, or a P learner).
+        test: The test stream.
+
+    Returns:
+        ``condition`` (information matrix, physical units), ``least_excited`` (eigenvalue and the base
+        parameters each of the three weakest directions weighs most) and ``test_fraction_outside``: the
+        fraction of test samples where the rigid-body part's relative predictive variance exceeds
+        :data:`~semiparam_ros.core.identification.OUTSIDE_EXCITED` (a frozen model extrapolates there).
+    """
+    from semiparam_ros.core.estimator import build_regressor, column_scale
+    from semiparam_ros.core.identification import excitation_report, outside_excited
+
+    par = getattr(model, "parametric", model)
+    regressor = build_regressor(config)
+    report = excitation_report(par.rls.R, column_scale(config, regressor),
+                               tuple(regressor.base_parameter_names))
+    variance = par.predict_many(test.X).variance
+    return {"condition": report.condition,
+            "least_excited": [{"eigenvalue": value, "weights": dict(names)}
+                              for value, names in report.least_excited],
+            "test_fraction_outside": float(outside_excited(variance).mean())}
 
 
 def evaluate_logs(config: EstimatorConfig, train_path: str | Path, test_path: str | Path, *,
@@ -402,6 +433,16 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
         )
     if comparison.horizons is not None:
         text += "\nBy the age of the model [N·m]. " + horizon_markdown(comparison.horizons)
+    exc = comparison.excitation
+    if exc is not None:
+        weakest = exc["least_excited"][0]
+        names = ", ".join(f"{n} ({w:+.2f})" for n, w in weakest["weights"].items())
+        text += (f"\nExcitation of the training data: information condition number {exc['condition']:.3g}; "
+                 f"least excited: {names}.\n")
+        if exc["test_fraction_outside"] > 0:
+            text += (f"\n**Warning**: {100 * exc['test_fraction_outside']:.1f} % of the test samples lie "
+                     "outside the range the training data excited (the rigid-body part's own uncertainty "
+                     "exceeds the noise there): a frozen model extrapolates on them.\n")
     return text
 
 

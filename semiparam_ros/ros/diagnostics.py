@@ -13,6 +13,10 @@ key                             meaning
 ==============================  =================================================================
 samples_learned                 samples the learner has been updated with (survives warm starts)
 samples_predicted               samples predicted since start
+learning_skipped                late samples predicted at once without learning (overload.max_delay)
+excitation.condition            condition number of the rigid-body information matrix in physical units
+excitation.weakest_eigenvalue   its smallest eigenvalue; ``excitation.weakest_direction`` the base
+                                parameters that direction weighs most (what the data do not determine)
 learning_enabled                ``true`` / ``false``
 input_rate_hz                   paired samples per second over the last period
 joint_states_rate_hz            JointState messages received per second
@@ -26,6 +30,8 @@ processed_in_period             queued messages run through the estimator in the
 acceleration_delay_ms           inherent lag of the acceleration estimate (centred window)
 queue_length / queue_size       input queue occupancy and bound
 queue_drops                     messages dropped because the queue was full (oldest first), since start
+drops.glitch                    joint states whose q or q̇ jumped beyond limits.glitch_ratio × the running
+                                increment (one-sample glitches inside the plausibility bounds)
 drops.<reason>                  input messages dropped by the pipeline or the node, by reason; the
                                 pipeline's reasons count since start or the last ~/reset (which
                                 restarts the pipeline), the node's own (queue_full, ...) since start

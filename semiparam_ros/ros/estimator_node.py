@@ -141,7 +141,7 @@ from semiparam_ros.core.dynamics import TOPIC_SCHEME
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult, build_regressor, rmse_window_samples
 from semiparam_ros.core.feedforward import FeedForward
 from semiparam_ros.core.gate import Verdict
-from semiparam_ros.core.identification import ProjectionWorker, export_urdf
+from semiparam_ros.core.identification import ProjectionWorker, excitation_report, export_urdf
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
@@ -368,6 +368,7 @@ class EstimatorNode(Node):
         self._pub_payload = publisher(InertiaStamped, "~/payload", PARAMETERS_QOS)
         self._pub_payload_std = publisher(InertiaStamped, "~/payload/std", PARAMETERS_QOS)
         self._payload_key: tuple[int, int] | None = None  # (learned version, solutions) last published
+        self._excitation: tuple[float, int, dict[str, object]] | None = None  # (time, version, stats)
         self._pub_diag = publisher(DiagnosticArray, "/diagnostics", 10)
 
         # Inputs: callbacks only convert and enqueue. Messages lost inside DDS (a best-effort history
@@ -800,6 +801,7 @@ class EstimatorNode(Node):
             stats["gate_in_excursion"] = est.gate.in_excursion
             stats["gate_novel_samples"] = est.gate.counts[Verdict.NOVEL]
             stats["forgetting"] = est.forgetting if est.forgetting is not None else -1.0
+        stats.update(self._excitation_stats())
         stats["queue_length"] = len(self._queue)
         stats["queue_size"] = self._queue_size
         stats["acceleration_delay_ms"] = 1e3 * float(getattr(est.pipeline, "acceleration_delay_s", 0.0))
@@ -835,6 +837,26 @@ class EstimatorNode(Node):
         self._pub_diag.publish(msg)
         self._publish_parameters(force=False)
         self._publish_payload()
+
+    def _excitation_stats(self) -> dict[str, object]:
+        """Return what the data determine (:func:`excitation_report`), recomputed at most every 10 s."""
+        now = time.monotonic()
+        last = self._excitation
+        if last is None or (now - last[0] >= 10.0 and last[1] != self._version):
+            with self._model_lock:
+                par = getattr(self._estimator.model, "parametric", None)  # SP: always a rigid part
+                if par is None:
+                    return {}
+                R, version = par.rls.R.copy(), self._version
+            report = excitation_report(R, self._estimator.column_scale, self._estimator.parameter_names,
+                                       n_directions=1)
+            value, names = report.least_excited[0]
+            last = (now, version, {
+                "excitation.condition": report.condition,
+                "excitation.weakest_eigenvalue": value,
+                "excitation.weakest_direction": ", ".join(f"{n} ({w:+.2f})" for n, w in names)})
+            self._excitation = last
+        return last[2]
 
     def _publish_parameters(self, *, force: bool) -> None:
         with self._model_lock:
