@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_helpers import REPO, NodeProcess, TestClient, diagnostic_values, make_ros_env
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -285,3 +285,56 @@ def test_feedforward_uses_the_consistent_projection_solved_in_a_worker(ros_env, 
         scale = 1 + np.abs(expected).max()
         np.testing.assert_allclose(msg.effort, expected, rtol=0, atol=1e-6 * scale)
         assert np.abs(np.asarray(msg.effort) - unconstrained).max() > 1e-6 * scale  # not the other one
+
+
+def test_payload_tare_and_pickup_over_dds(ros_env, checkpoint):
+    """``~/payload/tare``, then a pickup of the simulated Panda's preset payload: ``~/payload`` (latched)
+    gives its mass and centre of mass in the distal link's frame, ``~/payload/std`` their σ; the truth is
+    the simulator's change of the carrying body's parameters. ``~/inertial_parameters`` names its values."""
+    from geometry_msgs.msg import InertiaStamped
+
+    from semiparam_ros.core.payload import payload_from_parameters
+    from semiparam_ros.ros.conversions import parameters_names_from_msg
+    from semiparam_ros.sim.arms import ARM_ROBOTS, arm_regressor
+
+    rec = simulate_arm(ArmScenarioConfig(name="panda_pickup", robot="panda", duration=10.0, rate=200.0,
+                                         seed=0, payload_mass=ARM_ROBOTS["panda"].payload_mass,
+                                         payload_time=2.0))
+    reg = arm_regressor("panda")
+    body = reg.body_index(reg.distal_body_name)
+    cols = slice(10 * body, 10 * body + 10)
+    truth = payload_from_parameters(rec.parameters_after[cols] - rec.parameters_before[cols],
+                                    np.zeros((10, 10)), body=reg.distal_body_name, n_samples=0, reference="t")
+    node = _node(ros_env, checkpoint, "overload.max_delay:=0.0",
+                 "qos_overrides./joint_states.subscription.reliability:=reliable",
+                 "qos_overrides./joint_states.subscription.depth:=10000")
+    client = TestClient(ros_env)
+    try:
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        payload = client.collect(InertiaStamped, "/estimator/payload", latched)
+        payload_std = client.collect(InertiaStamped, "/estimator/payload/std", latched)
+        params = client.collect(Float64MultiArray, "/estimator/inertial_parameters", latched)
+        _, js_pub = _controller(client, node)
+        assert client.trigger("/estimator/payload/tare").success
+        for k in range(len(rec.stamps)):
+            msg = JointState()
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(rec.stamps[k]), 10**9)
+            msg.name = list(rec.joint_names)
+            msg.position, msg.velocity = rec.q_measured[k].tolist(), rec.dq_measured[k].tolist()
+            msg.effort = rec.measured_torques[k].tolist()
+            js_pub.publish(msg)
+            time.sleep(0.001)
+        assert payload.wait_for(lambda m: bool(m) and abs(m[-1].inertia.m - truth.mass) < 0.05 * truth.mass,
+                                30.0), (payload.snapshot()[-1:], node.output())
+        got = payload.snapshot()[-1]
+        assert got.header.frame_id == truth.body
+        com = np.array([got.inertia.com.x, got.inertia.com.y, got.inertia.com.z])
+        assert np.linalg.norm(com - truth.com) < 0.01
+        assert payload_std.wait_for(lambda m: bool(m) and m[-1].inertia.m > 0, 10.0)
+        assert params.wait_for(lambda m: bool(m), 10.0)
+        names = parameters_names_from_msg(params.snapshot()[-1])
+        assert names == list(load_model(checkpoint).parameter_names)
+    finally:
+        client.close()
+        node.stop()
