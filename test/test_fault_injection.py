@@ -169,6 +169,7 @@ def test_every_fault_class_is_survived_counted_and_bounded(tmp_path, monkeypatch
         rss_before = proc.memory_info().rss
         inject("conversion_error", [big] * N_OVERSIZED)
         rss_growth_mb = (proc.memory_info().rss - rss_before) / 2**20
+        print(f"RSS growth after {N_OVERSIZED} oversized JointStates: {rss_growth_mb:.1f} MB")
         assert rss_growth_mb < 50.0, rss_growth_mb
 
         stream.stop.set()
