@@ -175,19 +175,21 @@ def link_inertia_msgs(estimate: ConsistentEstimate, stamp_ns: int) -> list[Inert
         Per body: ``header.frame_id`` = the link, ``m`` [kg], ``com`` [m] in the link frame, the inertia
         about the centre of mass in the link's axes [kg·m²] — what a URDF's ``<inertial>`` holds.
     """
-    out = []
-    for i, link in enumerate(estimate.body_names):
-        mass, com, inertia = estimate.link(i)
-        msg = InertiaStamped()
-        msg.header.stamp = stamp_msg(stamp_ns)
-        msg.header.frame_id = link
-        msg.inertia.m = float(mass)
-        msg.inertia.com.x, msg.inertia.com.y, msg.inertia.com.z = (float(v) for v in com)
-        i_ = msg.inertia
-        i_.ixx, i_.ixy, i_.ixz = float(inertia[0, 0]), float(inertia[0, 1]), float(inertia[0, 2])
-        i_.iyy, i_.iyz, i_.izz = float(inertia[1, 1]), float(inertia[1, 2]), float(inertia[2, 2])
-        out.append(msg)
-    return out
+    return [_inertia_stamped(link, stamp_ns, *estimate.link(i)) for i, link in enumerate(estimate.body_names)]
+
+
+def _inertia_stamped(frame_id: str, stamp_ns: int, mass: float, com: np.ndarray,
+                     inertia: np.ndarray) -> InertiaStamped:
+    """One ``InertiaStamped``: mass [kg], centre of mass [m] in ``frame_id``, inertia (3, 3) [kg·m²]."""
+    msg = InertiaStamped()
+    msg.header.stamp = stamp_msg(stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.inertia.m = float(mass)
+    msg.inertia.com.x, msg.inertia.com.y, msg.inertia.com.z = (float(v) for v in com)
+    i_ = msg.inertia
+    i_.ixx, i_.ixy, i_.ixz = float(inertia[0, 0]), float(inertia[0, 1]), float(inertia[0, 2])
+    i_.iyy, i_.iyz, i_.izz = float(inertia[1, 1]), float(inertia[1, 2]), float(inertia[2, 2])
+    return msg
 
 
 def feedforward_msgs(command: FeedForwardCommand, joints: Sequence[str]
@@ -287,19 +289,9 @@ def payload_msgs(estimate: PayloadEstimate, stamp_ns: int) -> tuple[InertiaStamp
         centre of mass): mass [kg], centre of mass [m], inertia about it [kg·m²]; the second holds each
         field's standard deviation in the same place.
     """
-    out = []
-    for mass, com, inertia in ((estimate.mass, estimate.com, estimate.inertia),
-                               (estimate.mass_std, estimate.com_std, estimate.inertia_std)):
-        msg = InertiaStamped()
-        msg.header.stamp = stamp_msg(stamp_ns)
-        msg.header.frame_id = estimate.body
-        msg.inertia.m = float(mass)
-        msg.inertia.com.x, msg.inertia.com.y, msg.inertia.com.z = (float(v) for v in com)
-        i_ = msg.inertia
-        i_.ixx, i_.ixy, i_.ixz = float(inertia[0, 0]), float(inertia[0, 1]), float(inertia[0, 2])
-        i_.iyy, i_.iyz, i_.izz = float(inertia[1, 1]), float(inertia[1, 2]), float(inertia[2, 2])
-        out.append(msg)
-    return out[0], out[1]
+    body = estimate.body
+    return (_inertia_stamped(body, stamp_ns, estimate.mass, estimate.com, estimate.inertia),
+            _inertia_stamped(body, stamp_ns, estimate.mass_std, estimate.com_std, estimate.inertia_std))
 
 
 #: CDR little-endian encapsulation (``CDR_LE``), what rmw_fastrtps and rmw_cyclonedds write on x86/ARM.
