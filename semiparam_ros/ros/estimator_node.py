@@ -75,7 +75,11 @@ appends it to a bounded deque (``queue_size``; when full the oldest entry is dro
 what else is already waiting on that subscription, and runs the estimator on the queue at once (predict,
 publish, then learn): no executor round trip lies between receipt and prediction. At most 50 messages are
 processed per callback so that inputs, services and timers get their turns; a backlog beyond that is
-worked off by a catch-up timer armed only while input is waiting. Why not a learner thread (or a
+worked off by a catch-up timer armed only while input is waiting. Overload: a sample that waited longer
+than ``overload.max_delay`` (1 ms) — or would wait behind the previous sample's deferred update beyond it
+— is predicted at once with the residual held from the last full prediction and not learned
+(``learning_skipped``), and the deferred update of a learned sample runs in an idle turn of its own, so
+predictions stay fresh whatever the learning load (docs/reliability.md). Why not a learner thread (or a
 ``MultiThreadedExecutor``): on CPython the executor thread and a learner thread serialise on the GIL, and
 every hand-over costs (measured in docs/design-notes.md).
 A second thread only writes checkpoints (periodically every ``checkpoint.period`` seconds of wall time,
