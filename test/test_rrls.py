@@ -95,6 +95,26 @@ def test_predict_update_returns_the_a_priori_prediction(k):
     assert rls.predict_update(z, u).shape == (t,)
 
 
+def test_apply_pending_gives_the_same_state_as_the_fused_prediction():
+    """A deferred update applied in idle time (``apply_pending``) leaves the factor bit for bit as the
+    fused update-and-predict does; the prediction after it equals the closed-form ridge to rounding."""
+    rng = np.random.default_rng(7)
+    b, t = 40, 3
+    fused, idle = RecursiveRLS(b, t, 0.5), RecursiveRLS(b, t, 0.5)
+    Zs, Us = rng.standard_normal((50, b)), rng.standard_normal((50, t))
+    for z, u in zip(Zs, Us, strict=True):
+        for rls in (fused, idle):
+            rls._defer_checked(RecursiveRLS._checked_step(z[None].copy(), u[None].copy()))
+        assert idle.has_pending and idle.apply_pending() and not idle.has_pending
+        assert not idle.apply_pending()  # nothing left
+        q = rng.standard_normal(b)
+        p_fused, p_idle = fused.predict(q), idle.predict(q)
+        np.testing.assert_allclose(p_idle, p_fused, rtol=1e-10, atol=1e-12)
+        assert np.array_equal(fused.R, idle.R) and np.array_equal(fused.d, idle.d)
+    ridge = np.linalg.solve(Zs.T @ Zs + 0.5 * np.eye(b), Zs.T @ Us)
+    np.testing.assert_allclose(idle.weights, ridge, rtol=1e-8, atol=1e-10)
+
+
 def test_update_steps_is_bitwise_equal_to_repeated_calls():
     rng = np.random.default_rng(3)
     b, t, k = 12, 2, 6
