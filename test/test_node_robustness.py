@@ -135,3 +135,17 @@ def test_oversized_joint_states_are_refused_cheaply_and_the_name_cache_is_bounde
                                                 np.zeros(len(names)), np.zeros(len(names))))
     assert pipeline._name_cache_bytes <= 1 << 20
     assert sum(sum(len(s) for s in key) for key in pipeline._name_cache) <= 1 << 20
+
+
+def test_a_diagnostics_timer_that_fell_behind_does_not_publish_an_empty_period(tmp_path, monkeypatch):
+    """Measured in the soak: a timer catching up fired twice at once, and every second period published
+    was a few µs long with no samples (NaN latencies, a spurious 'no input' warning)."""
+    with in_process_node(tmp_path, monkeypatch, **{"diagnostics.period": 0.2}) as node:
+        published = []
+        monkeypatch.setattr(node._pub_diag, "publish", published.append)
+        node._on_diagnostics_timer()
+        node._on_diagnostics_timer()  # the catch-up call: merged into the next period
+        assert len(published) == 1
+        time.sleep(0.12)
+        node._on_diagnostics_timer()  # more than half a period later: a period of its own
+        assert len(published) == 2

@@ -412,7 +412,9 @@ class EstimatorNode(Node):
         self.add_on_set_parameters_callback(make_parameter_validator(lambda: self.config))
         self.add_post_set_parameters_callback(self._on_parameters_set)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(float(cfg["diagnostics.period"]), self._on_diagnostics_timer, clock=steady)
+        self._diag_period = float(cfg["diagnostics.period"])
+        self._last_diag = -math.inf
+        self.create_timer(self._diag_period, self._on_diagnostics_timer, clock=steady)
         # The feed-forward is served from a copy of the model refreshed at a low rate (a model that changes
         # at every sample makes the torque it commands jitter: docs/feedforward.md).
         if self._feedforward is not None and cfg["parametric.consistent"]:
@@ -791,6 +793,13 @@ class EstimatorNode(Node):
 
     @_quiet_at_shutdown
     def _on_diagnostics_timer(self) -> None:
+        # a timer that fell behind (the executor was busy or descheduled) fires again at once: that call
+        # would close a period of a few µs with no samples (NaN latencies, a spurious "no input" WARN), so
+        # a period shorter than half the configured one goes on into the next
+        now = time.monotonic()
+        if now - self._last_diag < 0.5 * self._diag_period:
+            return
+        self._last_diag = now
         stats = self._stats.snapshot()
         with self._model_lock:
             est = self._estimator
