@@ -31,6 +31,7 @@ KEY_OF = {
     "yaml": "python3-yaml", "matplotlib": "python3-matplotlib", "tqdm": "python3-tqdm",
     "joblib": "python3-joblib", "rosbags": "python3-rosbags-pip", "pytest": "python3-pytest",
     "hypothesis": "python3-hypothesis", "sklearn": "python3-sklearn", "cvxpy": "python3-cvxpy-pip",
+    "psutil": "python3-psutil",
 }
 #: Import name → pip distribution, for libraries without a rosdep key.
 PIP_ONLY = {"threadpoolctl": "threadpoolctl", "zstandard": "zstandard", "lz4": "lz4",

@@ -440,9 +440,10 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
         text += (f"\nExcitation of the training data: information condition number {exc['condition']:.3g}; "
                  f"least excited: {names}.\n")
         if exc["test_fraction_outside"] > 0:
-            text += (f"\n**Warning**: {100 * exc['test_fraction_outside']:.1f} % of the test samples lie "
-                     "outside the range the training data excited (the rigid-body part's own uncertainty "
-                     "exceeds the noise there): a frozen model extrapolates on them.\n")
+            share = 100 * exc["test_fraction_outside"]
+            text += (f"\n**Warning**: {share:.1f} % of the test samples lie outside the excited range "
+                     "(rigid-body uncertainty > noise): ")
+            text += "a frozen model extrapolates there.\n"
     return text
 
 
