@@ -784,8 +784,6 @@ class OnlineEstimator:
         self.n_samples_learned = 0
         self.n_learning_skipped = 0
         self.payload = None
-        #: Samples predicted without learning because the caller fell behind (``skip_learning``).
-        self.n_learning_skipped = 0
         self._rejected = 0
         self.noise.reset()
         self.gate.reset()

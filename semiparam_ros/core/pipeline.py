@@ -387,7 +387,9 @@ class SamplePipeline:
         assert self._last_js_stamp is not None  # set with the reference
         dt = stamp - self._last_js_stamp
         mean_dt = self._glitch_dt
-        self._glitch_dt = float(dt) if mean_dt == 0.0 else mean_dt + 0.1 * (min(dt, 3.0 * mean_dt) - mean_dt)
+        # the running mean interval, each interval counted at most as a dropout's threshold
+        self._glitch_dt = (float(dt) if mean_dt == 0.0
+                           else mean_dt + 0.1 * (min(dt, _GLITCH_GAP * mean_dt) - mean_dt))
         if mean_dt and dt > _GLITCH_GAP * mean_dt:  # after a dropout the signals moved on: a new reference
             self._glitch_ref = x
             self._glitch_run = 0

@@ -163,10 +163,9 @@ class _Model:
         """
         return self._predict_ahead_valid(self._check_x(x).copy()).prediction
 
-    def _learners(self) -> tuple[RecursiveRLS, ...]:
+    def _learners(self) -> tuple[RecursiveRLS, ...]:  # pragma: no cover - abstract
         """Return the recursive least-squares learners holding this model's state."""
-        rls: RecursiveRLS | None = getattr(self, "rls", None)
-        return () if rls is None else (rls,)
+        raise NotImplementedError
 
     def has_pending(self) -> bool:
         """Tell whether a learner holds a deferred update (applied by the next prediction or now)."""
@@ -384,6 +383,9 @@ class ParametricModel(_Model):
         yv = None if y is None else check_finite_array("y", y, (self.n_outputs,))
         return xv, yv
 
+    def _learners(self) -> tuple[RecursiveRLS, ...]:
+        return (self.rls,)
+
     def _check_x(self, x: Any) -> np.ndarray:
         return check_finite_array("x", x, (None,))
 
@@ -562,6 +564,9 @@ class NonparametricModel(_Model):
             return self.rls._predict_update_valid(phi, target.reshape(1, -1))[0]
         self.rls._update_valid(phi, target.reshape(1, -1))
         return np.zeros(0)
+
+    def _learners(self) -> tuple[RecursiveRLS, ...]:
+        return (self.rls,)
 
     def _check_x(self, x: Any) -> np.ndarray:
         return check_finite_array("x", x, (self.n_inputs,))

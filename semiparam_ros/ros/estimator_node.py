@@ -145,7 +145,7 @@ from semiparam_ros.core.dynamics import TOPIC_SCHEME
 from semiparam_ros.core.estimator import OnlineEstimator, StepResult, build_regressor, rmse_window_samples
 from semiparam_ros.core.feedforward import FeedForward
 from semiparam_ros.core.gate import Verdict
-from semiparam_ros.core.identification import ProjectionWorker, excitation_report, export_urdf
+from semiparam_ros.core.identification import ProjectionWorker, export_urdf
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
@@ -319,8 +319,7 @@ class EstimatorNode(Node):
         self._queue: collections.deque[tuple[str, JointStateData | WrenchData, float]] = collections.deque()
         self._queue_size = int(cfg["queue_size"])
         self._max_delay_s = float(cfg["overload.max_delay"])
-        self._fused = False  # whether the sample in hand found a deferred update (see _late)
-        self._fused_cost_s = 0.0  # measured cost of such a step [s]
+        self._fused_cost_s = 0.0  # measured cost of a step that also applies a deferred update [s]
         self._version = 0  # bumped whenever the learned state changes (learning, reset)
         self._published_version = -1
         self._ckpt_event = threading.Event()
@@ -856,13 +855,8 @@ class EstimatorNode(Node):
         now = time.monotonic()
         last = self._excitation
         if last is None or (now - last[0] >= 10.0 and last[1] != self._version):
-            with self._model_lock:
-                par = getattr(self._estimator.model, "parametric", None)  # SP: always a rigid part
-                if par is None:
-                    return {}
-                R, version = par.rls.R.copy(), self._version
-            report = excitation_report(R, self._estimator.column_scale, self._estimator.parameter_names,
-                                       n_directions=1)
+            with self._model_lock:  # an SVD of the p × p factor: well under a ms for a 7-joint arm
+                report, version = self._serving.excitation(), self._version
             value, names = report.least_excited[0]
             last = (now, version, {
                 "excitation.condition": report.condition,
@@ -933,14 +927,14 @@ class EstimatorNode(Node):
         if budget <= 0.0:
             return False
         age = time.perf_counter() - t_recv
-        self._fused = self._estimator.has_pending
-        return age > budget or (self._fused and age + self._fused_cost_s > budget)
+        return age > budget or (self._estimator.has_pending and age + self._fused_cost_s > budget)
 
     def _process(self, kind: str, data: JointStateData | WrenchData, t_recv: float, *,
                  publish: bool = True, skip_learning: bool = False) -> None:
         est = self._estimator
         try:
             with self._model_lock:
+                fused = not skip_learning and est.has_pending  # this step applies the previous update too
                 if isinstance(data, WrenchData):
                     results = est.process_wrench(data, skip_learning=skip_learning)
                     if not self._frame_id:
@@ -957,7 +951,7 @@ class EstimatorNode(Node):
             # rejects): this is a bug. Say so loudly and let it propagate out of spin (see main()).
             self.get_logger().fatal(f"programming error in the estimator on a {kind} message: {err!r}")
             raise
-        if self._fused and not skip_learning:
+        if fused:
             for r in results:  # the cost of a step that applies the previous update too (EW mean, ~20)
                 if r.learned:
                     self._fused_cost_s += 0.05 * (r.latency_s - self._fused_cost_s)
