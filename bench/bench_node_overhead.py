@@ -81,8 +81,9 @@ def measure(features: int, seconds: float, repeats: int) -> dict[str, list[float
                             (est.process_joint_state if kind == "joint_states" else est.process_wrench)(item)
                     else:
                         t0 = time.thread_time()
+                        intake = node.inputs.intake
                         for kind, raw in messages:
-                            node._intake(kind, raw if raw_input else deserialize_message(raw, types[kind]))
+                            intake(kind, raw if raw_input else deserialize_message(raw, types[kind]))
                             node._process_queued()
                     out[mode].append(1e6 * (time.thread_time() - t0) / n_pairs)
                 finally:

@@ -36,7 +36,7 @@ def test_launch_file_structure_and_installation():
     setup = (REPO / "setup.py").read_text()
     assert '"estimator = semiparam_ros.ros.estimator_node:main"' in setup
     assert '("share/" + package_name + "/launch", glob("launch/*.launch.py"))' in setup
-    from semiparam_ros.ros.estimator_node import EXECUTORS
+    from semiparam_ros.ros.run import EXECUTORS
 
     assert "events" in EXECUTORS and "single_threaded" in EXECUTORS
     # every LaunchConfiguration used is declared

@@ -27,7 +27,8 @@ def test_backlog_beyond_a_batch_is_learned_by_the_catch_up_timer(ros_env, tmp_pa
     from sensor_msgs.msg import JointState
 
     from semiparam_ros.ros import estimator_node
-    from semiparam_ros.ros.estimator_node import EXECUTORS, EstimatorNode
+    from semiparam_ros.ros.estimator_node import EstimatorNode
+    from semiparam_ros.ros.run import EXECUTORS
 
     bag = source_bag(tmp_path_factory.mktemp("bags"))
     messages = load_raw(bag, TOPICS, limit=N_MESSAGES)
@@ -41,14 +42,14 @@ def test_backlog_beyond_a_batch_is_learned_by_the_catch_up_timer(ros_env, tmp_pa
         for m in messages:  # queue everything, as the callbacks do before they run the estimator
             kind, msg_type = ("joint_states", JointState) if m.topic == "/joint_states" else ("wrench",
                                                                                              WrenchStamped)
-            node._intake(kind, deserialize_message(m.data, msg_type))
-        assert len(node._queue) == N_MESSAGES
+            node.inputs.intake(kind, deserialize_message(m.data, msg_type))
+        assert len(node.loop.queue) == N_MESSAGES
         node._process_queued()  # what a subscription callback does: one batch, then arm the timer
-        assert len(node._queue) == N_MESSAGES - estimator_node._BATCH
+        assert len(node.loop.queue) == N_MESSAGES - estimator_node._BATCH
         assert not node._catch_up.is_canceled()
         executor = EXECUTORS[executor_name](context=context)
         executor.add_node(node)
-        assert wait_until(lambda: (executor.spin_once(timeout_sec=0.05), not node._queue)[1], 30.0)
+        assert wait_until(lambda: (executor.spin_once(timeout_sec=0.05), not node.loop.queue)[1], 30.0)
         assert wait_until(lambda: (executor.spin_once(timeout_sec=0.05), node._catch_up.is_canceled())[1],
                           5.0)  # disarmed once the queue is empty
         # the same samples learned as when the core is fed the messages directly
@@ -79,13 +80,13 @@ def test_a_late_backlog_is_predicted_at_once_and_not_learned(ros_env, tmp_path_f
     rclpy.init(args=["--ros-args", "--params-file", str(CONFIG)], context=context)
     try:
         node = EstimatorNode(context=context)
-        assert node._max_delay_s == 0.001  # the default
+        assert node.loop.max_delay_s == 0.001  # the default
         decoded = [(("joint_states", JointState) if m.topic == "/joint_states" else ("wrench", WrenchStamped),
                     m.data) for m in messages]
         for (kind, msg_type), data in decoded:
-            node._intake(kind, deserialize_message(data, msg_type))
+            node.inputs.intake(kind, deserialize_message(data, msg_type))
         time.sleep(0.01)  # every queued message is now older than the 1 ms budget
-        while node._queue:
+        while node.loop.queue:
             node._process_queued()
         est = node.estimator
         samples = offline.estimator.n_samples_learned

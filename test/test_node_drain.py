@@ -12,7 +12,7 @@ from rclpy.serialization import deserialize_message
 from ros_helpers import in_process_node
 from sensor_msgs.msg import JointState
 
-from semiparam_ros.ros.estimator_node import _MAX_DRAIN
+from semiparam_ros.ros.inputs import MAX_DRAIN as _MAX_DRAIN
 
 pytestmark = pytest.mark.ros
 
@@ -48,7 +48,7 @@ def test_take_message_returns_message_and_info_then_none(node_and_publisher):
     node, pub = node_and_publisher
     _wait_matched(pub)
     _publish(pub, 1)
-    sub = node._subscriptions_by_kind["joint_states"]
+    sub = node.inputs.subscriptions["joint_states"]
     deadline, taken = time.monotonic() + 5.0, None
     while taken is None and time.monotonic() < deadline:
         with sub.handle:
@@ -67,10 +67,10 @@ def test_drain_takes_every_queued_message_in_order(node_and_publisher):
     n = _MAX_DRAIN + 10
     _publish(pub, n)
     time.sleep(0.5)  # let DDS deliver into the subscription's history (depth 100 > n)
-    node._drain("joint_states")
-    assert len(node._queue) == _MAX_DRAIN  # bounded per callback
-    node._drain("joint_states")
-    stamps = [item.stamp_ns for _, item, _ in node._queue]
+    node.inputs.drain("joint_states")
+    assert len(node.loop.queue) == _MAX_DRAIN  # bounded per callback
+    node.inputs.drain("joint_states")
+    stamps = [item.stamp_ns for _, item, _ in node.loop.queue]
     assert stamps == [1_000_000_000 + k for k in range(n)]
 
 
@@ -93,10 +93,10 @@ def test_drain_alternates_the_two_subscriptions(node_and_publisher):
             w.header.stamp.sec, w.header.stamp.nanosec = 2, k
             wpub.publish(w)
         time.sleep(0.5)
-        node._drain("joint_states")
-        kinds = [kind for kind, _, _ in node._queue]
+        node.inputs.drain("joint_states")
+        kinds = [kind for kind, _, _ in node.loop.queue]
         assert kinds == ["wrench", "joint_states"] * n_w + ["joint_states"] * (n_js - n_w)
-        assert [item.stamp_ns for kind, item, _ in node._queue if kind == "wrench"] == [
+        assert [item.stamp_ns for kind, item, _ in node.loop.queue if kind == "wrench"] == [
             2_000_000_000 + k for k in range(n_w)]
     finally:
         source.destroy_node()

@@ -11,7 +11,7 @@ from ros_helpers import in_process_node, source_bag
 from semiparam_ros.core.messages import JointStateData
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.io.bags import read_messages
-from semiparam_ros.ros.estimator_node import EXECUTORS
+from semiparam_ros.ros.run import EXECUTORS
 
 pytestmark = pytest.mark.ros
 
@@ -51,7 +51,7 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
         with pytest.raises(IndexError, match="injected bug"):
             for _ in range(100):
                 msg = next(messages)
-                node._enqueue(_kind(msg), msg)
+                node.loop.enqueue(_kind(msg), msg)
                 node._catch_up.reset()
                 executor.spin_once(timeout_sec=1.0)
     finally:
@@ -77,7 +77,8 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
 
 def test_throttled_warning_is_logged_once_per_period_and_built_only_then(node, monkeypatch):
     """The node's own throttle: per key at most one warning every _LOG_THROTTLE_S, the text built lazily."""
-    from semiparam_ros.ros import estimator_node
+    from semiparam_ros.ros import inputs
+    from semiparam_ros.ros.inputs import ThrottledWarnings
 
     logged, built = [], []
 
@@ -86,20 +87,20 @@ def test_throttled_warning_is_logged_once_per_period_and_built_only_then(node, m
             logged.append(text)
 
     now = [1000.0]
-    monkeypatch.setattr(node, "get_logger", lambda: Logger())
-    monkeypatch.setattr(estimator_node.time, "monotonic", lambda: now[0])
+    monkeypatch.setattr(inputs.time, "monotonic", lambda: now[0])
+    warn = ThrottledWarnings(Logger(), 5.0)
 
     def text():
         built.append(1)
         return "lazy"
 
     for _ in range(5):
-        node._warn_throttled("a", text)
-        node._warn_throttled("b", "eager")
+        warn("a", text)
+        warn("b", "eager")
     assert logged == ["lazy", "eager"] and len(built) == 1
-    now[0] += estimator_node._LOG_THROTTLE_S - 1e-3
-    node._warn_throttled("a", text)
+    now[0] += 5.0 - 1e-3
+    warn("a", text)
     assert logged == ["lazy", "eager"] and len(built) == 1  # still within the period
     now[0] += 2e-3
-    node._warn_throttled("a", text)
+    warn("a", text)
     assert logged == ["lazy", "eager", "lazy"] and len(built) == 2

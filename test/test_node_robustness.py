@@ -48,7 +48,7 @@ def test_invalid_nanosec_is_refused_by_both_decoders():
 
 def test_a_middleware_lost_count_glitch_is_not_added(tmp_path, monkeypatch):
     with in_process_node(tmp_path, monkeypatch) as node:
-        count = node._message_lost_counter("joint_states")
+        count = node.inputs.lost_counter("joint_states")
         count(SimpleNamespace(total_count=5, total_count_change=5))
         count(SimpleNamespace(total_count=5 + 2**31, total_count_change=2**31))  # a wrapped counter
         count(SimpleNamespace(total_count=5 + 2**31 + 2, total_count_change=2))
@@ -142,7 +142,7 @@ def test_a_diagnostics_timer_that_fell_behind_does_not_publish_an_empty_period(t
     was a few µs long with no samples (NaN latencies, a spurious 'no input' warning)."""
     with in_process_node(tmp_path, monkeypatch, **{"diagnostics.period": 0.2}) as node:
         published = []
-        monkeypatch.setattr(node._pub_diag, "publish", published.append)
+        monkeypatch.setattr(node.outputs.diagnostics, "publish", published.append)
         node._on_diagnostics_timer()
         node._on_diagnostics_timer()  # the catch-up call: merged into the next period
         assert len(published) == 1

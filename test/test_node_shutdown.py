@@ -44,9 +44,9 @@ def test_queued_messages_are_learned_before_the_final_checkpoint(ros_env, tmp_pa
         # queue the messages as the callbacks do (without running the estimator, which they do next)
         for m in messages:
             if m.topic == "/joint_states":
-                node._intake("joint_states", deserialize_message(m.data, JointState))
+                node.inputs.intake("joint_states", deserialize_message(m.data, JointState))
             else:
-                node._intake("wrench", deserialize_message(m.data, WrenchStamped))
+                node.inputs.intake("wrench", deserialize_message(m.data, WrenchStamped))
         assert node.estimator.n_samples_learned == 0
         node.shutdown()  # what main() does after Ctrl-C: learn the queue, then the final checkpoint
         assert node.estimator.n_samples_learned == len(offline.order)

@@ -667,6 +667,21 @@ class OnlineEstimator:
         """Whether a learner holds a deferred update (see :meth:`apply_pending`)."""
         return self.model.has_pending()
 
+    def rigid_body_state(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """Copy what the consistent projection needs of the rigid-body learner.
+
+        Returns:
+            ``(θ, R, λ)``: the parametric learner's coefficients (scaled columns), a copy of its upper
+            triangular factor and its regularization.
+
+        Raises:
+            ConfigurationError: The model has no rigid-body part (``NP``).
+        """
+        par = getattr(self.model, "parametric", None)
+        if par is None:
+            raise ConfigurationError("the model has no rigid-body part to project")
+        return par.parameters.copy(), par.rls.R.copy(), par.rls.lam
+
     def _apply_forgetting(self, beta: float) -> None:
         for rls in learners(self.model):
             rls.set_forgetting(beta)
@@ -798,7 +813,7 @@ class OnlineEstimator:
         if self.kind == "SP" and self.config["semiparametric.combination"] != "cascade":
             # only when not the default, so that checkpoints written before the option existed still load
             structure["semiparametric.combination"] = self.config["semiparametric.combination"]
-        # issue 12's options, likewise only when they differ from what earlier checkpoints were written
+        # identification options, likewise only when they differ from what earlier checkpoints were written
         # with (zero prior, raw columns); friction/offsets/armature show in the base-parameter names
         if self.kind != "NP":
             if self.config["parametric.prior"] != "zero":

@@ -146,6 +146,12 @@ class FeedForward:
                                        **{f"drops.{r}": 0 for r in DROP_REASONS}}
         self.last_error: str | None = None
 
+    def fallback_message(self, reason: str | None) -> str:
+        """Say why a command fell back to the rigid-body part (``FeedForwardCommand.reason``)."""
+        why = ("the model is not ready (residual warm-up)" if reason == "not_ready"
+               else f"its std exceeds feedforward.max_std = {self.max_std:g} N·m")
+        return "feed-forward falls back to the rigid-body part: " + why
+
     def _drop(self, reason: str, message: str) -> None:
         self.counts[f"drops.{reason}"] += 1
         self.last_error = message

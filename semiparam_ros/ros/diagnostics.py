@@ -74,6 +74,9 @@ from collections.abc import Mapping
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from semiparam_ros.core.gate import Verdict
+from semiparam_ros.core.learning_loop import LearningLoop
+
 __all__ = ["NodeStatistics", "diagnostic_array"]
 
 #: Pipeline latencies kept per diagnostics period for the percentile (a ring: memory is bounded).
@@ -340,3 +343,40 @@ def diagnostic_array(
     msg.header.stamp = stamp
     msg.status = [status]
     return msg
+
+
+def estimator_statistics(node_stats: dict[str, object], loop: LearningLoop) -> dict[str, object]:
+    """Add the learner's counters and the queue to a :meth:`NodeStatistics.snapshot` (one period).
+
+    Args:
+        node_stats: The node's period statistics (modified and returned).
+        loop: The learning loop (its estimator is read under its lock).
+
+    Returns:
+        ``node_stats`` with ``samples_learned``, ``learning_skipped``, ``not_learned.*``, ``gate_*``,
+        ``forgetting``, ``queue_*``, ``acceleration_delay_ms``, ``drops.*`` (the pipeline's added to the
+        node's) and ``drops_total``.
+    """
+    stats = node_stats
+    with loop.lock:
+        est = loop.estimator
+        drops = est.drops
+        stats["samples_learned"] = est.n_samples_learned
+        stats["learning_skipped"] = est.n_learning_skipped
+        stats["learning_enabled"] = est.learning_enabled
+        stats["model_size"] = est.model_size
+        for reason, count in est.not_learned.items():
+            stats[f"not_learned.{reason}"] = count
+        stats["gate_enabled"] = est.gate_enabled
+        stats["gate_in_excursion"] = est.gate.in_excursion
+        stats["gate_novel_samples"] = est.gate.counts[Verdict.NOVEL]
+        stats["forgetting"] = est.forgetting if est.forgetting is not None else -1.0
+    stats["queue_length"] = len(loop.queue)
+    stats["queue_size"] = loop.queue_size
+    stats["acceleration_delay_ms"] = 1e3 * float(getattr(est.pipeline, "acceleration_delay_s", 0.0))
+    for reason, count in drops.items():
+        key = f"drops.{reason}"
+        stats[key] = int(stats.get(key, 0)) + count  # type: ignore[call-overload]
+    stats["drops_total"] = int(stats["queue_drops"]) + sum(  # type: ignore[call-overload]
+        v for k, v in stats.items() if k.startswith("drops.") and isinstance(v, int))
+    return stats
