@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Contact evaluation (issue 13, item 6): simulate contacts-then-pickup logs (iCub F/T sensor, seeds 0..3;
-# Panda joint torques at 100 Hz, seed 0), run `evaluate --contacts` on each with the shipped
+# Panda joint torques at 100 Hz, seed 0), run `evaluate contacts` on each with the shipped
 # configuration (gate on and off in one run), and fill docs/templates/contacts.md.in with the numbers
 # (semiparam_ros/eval/contacts_page.py).
 #
@@ -32,16 +32,16 @@ for s in $seeds; do
   "$py" -m semiparam_ros.cli.simulate --out "$tmp/icub$s" --scenario contacts --seed "$s" --quiet
   plot=()
   if [ "$first" = 1 ]; then plot=(--plot "$out/figures/contacts.png"); first=0; fi
-  "$py" -m semiparam_ros.cli.evaluate --contacts "$tmp/icub$s/icub_contacts" --no-progress \
+  "$py" -m semiparam_ros.cli.evaluate contacts "$tmp/icub$s/icub_contacts" --no-progress \
     --json "$out/figures/contacts_icub_seed$s.json" "${plot[@]}"
 done
 "$py" -m semiparam_ros.cli.simulate --out "$tmp/panda" --robot panda --rate 100 --scenario contacts --quiet
-"$py" -m semiparam_ros.cli.evaluate --contacts "$tmp/panda/panda_contacts_100hz" --config config/panda.yaml \
+"$py" -m semiparam_ros.cli.evaluate contacts "$tmp/panda/panda_contacts_100hz" --config config/panda.yaml \
   --no-progress --json "$out/figures/contacts_panda.json" --plot "$out/figures/contacts_panda.png"
 "$py" - "$out/figures" "$out/contacts.md" docs/templates/contacts.md.in <<'PY'
 import sys
 
-from semiparam_ros.eval.contacts_page import write_contacts
+from docs.tools.contacts_page import write_contacts
 
 write_contacts(sys.argv[1], sys.argv[2], sys.argv[3])
 PY

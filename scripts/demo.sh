@@ -16,7 +16,7 @@ if ! grep -q lead_in_s "$gen/icub_xy/scenario.yaml" 2>/dev/null \
   .venv/bin/simulate --preset paper --out "$gen" --scenario xy --scenario xz --overwrite --quiet
 fi
 echo "== paper protocol: train P, NP, SP on XY, test-then-train on 10 parts of XZ (about 1 min)"
-.venv/bin/evaluate --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
+.venv/bin/evaluate paper --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
   --models P NP SP --splits 10 --split-size 1000 --window 3.0 \
   --json results/paper.json --plot results/paper_fig3.png --markdown results/paper.md "$@"
 echo "wrote results/paper.json, results/paper_fig3.png, results/paper.md"

@@ -39,7 +39,7 @@ from semiparam_ros.cli.evaluate import parse_overrides
 from semiparam_ros.cli.simulate import main as simulate
 from semiparam_ros.eval.parallel import run_jobs
 from semiparam_ros.eval.replay import evaluate_bags
-from semiparam_ros.eval.replicates import replicate_summary, replicates_markdown
+from docs.tools.replicates import replicate_summary, replicates_markdown
 from semiparam_ros.eval.report import protocol_report, write_json
 from semiparam_ros.eval.run import load_evaluation_config
 

@@ -9,7 +9,7 @@
 # Steps: (1) generate the paper-preset bags (XY and XZ circles, wrench at 10 Hz, 10 000 samples each)
 # with the simulator if bags/generated/ does not hold them yet; (2) `evaluate` on them: P, NP, SP (the
 # paper's cascade) and SPJ (the joint semiparametric fit, core/semiparametric_joint.py) from zero, trained
-# on all of XY, test-then-train on 10 sequential parts of XZ; (3) `evaluate --payload` on the committed
+# on all of XY, test-then-train on 10 sequential parts of XZ; (3) `evaluate payload` on the committed
 # payload bag: SP and SPJ with and without forgetting around the pickup; (4) the results page, the words of
 # docs/templates/results.md.in filled with the numbers of the JSON reports (semiparam_ros/eval/pages.py).
 # Hyperparameter selection on the training bag goes through `tune` (semiparam_ros/eval/selection.py), whose
@@ -56,20 +56,20 @@ echo "   the values used; NP and SPJ, scored on the same runs, get their own sel
   --jobs "$jobs" --json "$figs/select_xy.json" --no-progress > /dev/null
 
 echo "== the protocol within XY at the values used: P, NP, SP, SPJ (cascade vs joint in distribution)"
-"$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xy" --config "$config" "${tuned[@]}" \
+"$bin/evaluate" paper --train "$gen/icub_xy" --test "$gen/icub_xy" --config "$config" "${tuned[@]}" \
   --models P NP SP SPJ --train-limit 5000 --test-skip 5000 --splits 5 --split-size 1000 --window 3.0 \
   --json "$figs/within_xy.json" --no-progress > /dev/null
 
 # 10 sequential parts of exactly 1000 samples (the simulator starts the joint states 0.2 s before the
 # first wrench, so all 10 000 wrenches become samples)
 echo "== paper protocol: train on XY, test-then-train on 10 sequential parts of XZ"
-"$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
+"$bin/evaluate" paper --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
   --models P NP SP SPJ --splits 10 --split-size 1000 --window 3.0 \
   --json "$figs/paper.json" --plot "$figs/paper_fig3.png" --plot-truth "$figs/paper_fig3_noise_free.png"
 
 echo "== each learner with the values selected for it on the within-XY runs (same protocol, same parts)"
 while read -r kind lnp sigma; do
-  "$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
+  "$bin/evaluate" paper --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
     --set nonparametric.lam="$lnp" --set nonparametric.sigma="$sigma" --models "$kind" \
     --splits 10 --split-size 1000 --window 3.0 --json "$figs/own_$kind.json" --no-progress > /dev/null
 done < <("$bin/python" -c '
@@ -80,17 +80,17 @@ for kind, sel in doc["selections"].items():
 ' "$figs/select_xy.json")
 
 echo "== diagnostic: SP with its rigid-body stage frozen after training (isolates the drift of that stage)"
-"$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
+"$bin/evaluate" paper --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
   --splits 10 --split-size 1000 --window 3.0 --models NP SP SPfrozenP --json "$figs/diagnostic_frozen_p.json" --no-progress \
   > /dev/null
 
 echo "== sensitivity (diagnostic, not a selection): λ_NP = 0.01, σ = 4, the values an earlier sweep picked on the test log"
-"$bin/evaluate" --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
+"$bin/evaluate" paper --train "$gen/icub_xy" --test "$gen/icub_xz" --config "$config" "${tuned[@]}" \
   --set nonparametric.lam=0.01 --set nonparametric.sigma=4.0 \
   --splits 10 --split-size 1000 --window 3.0 --json "$figs/sensitivity.json" --no-progress > /dev/null
 
 echo "== payload scenario: SP and SPJ with and without adaptation around the pickup"
-"$bin/evaluate" --payload bags/icub_payload --config "$config" "${tuned[@]}" --forgetting 0.995 \
+"$bin/evaluate" payload bags/icub_payload --config "$config" "${tuned[@]}" --forgetting 0.995 \
   --models SP SPJ --json "$figs/payload.json" --plot "$figs/payload.png"
 
 echo "== hold-out selection on the XY bag alone (tune), for comparison with the values used above"
@@ -101,7 +101,7 @@ echo "== hold-out selection on the XY bag alone (tune), for comparison with the 
 echo "== results page (words: docs/templates/results.md.in; numbers: the JSON reports above)"
 "$bin/python" -c '
 import sys
-from semiparam_ros.eval.pages import write_results
+from docs.tools.pages import write_results
 write_results(sys.argv[1], sys.argv[2], sys.argv[3], command=sys.argv[4])
 ' "$figs" "$out/results.md" docs/templates/results.md.in "bash scripts/reproduce.sh$([ "$out" = docs ] || echo " --out $out")"
 echo "wrote $out/results.md"

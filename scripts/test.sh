@@ -4,6 +4,6 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 bash scripts/setup.sh
-.venv/bin/ruff check semiparam_ros test bench launch
+.venv/bin/ruff check semiparam_ros test bench launch docs/tools
 .venv/bin/python -m mypy  # files and options: [mypy] in setup.cfg
 exec .venv/bin/python -m pytest "$@"

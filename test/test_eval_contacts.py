@@ -145,7 +145,7 @@ def test_a_bag_without_episodes_is_refused(tmp_path):
 def test_contacts_page_renders_the_reports_and_their_acceptance(contacts_log, tmp_path):
     from pathlib import Path
 
-    from semiparam_ros.eval.contacts_page import acceptance, write_contacts
+    from docs.tools.contacts_page import acceptance, write_contacts
 
     _, doc, _, _, _, _ = contacts_log
     (tmp_path / "figures").mkdir()

@@ -374,8 +374,8 @@ def test_test_skip_runs_the_protocol_within_one_bag() -> None:
 
 def _page_inputs(tmp_path: Path):
     """Toy reports of every kind the results page reads, written as JSON and read back."""
-    from semiparam_ros.eval.pages import load_inputs
-    from semiparam_ros.eval.replicates import replicate_summary
+    from docs.tools.pages import load_inputs
+    from docs.tools.replicates import replicate_summary
     from semiparam_ros.eval.report import adaptation_report
 
     def kinds():
@@ -399,7 +399,7 @@ def _page_inputs(tmp_path: Path):
 
 
 def test_results_page_fills_the_template_with_the_reports_numbers(tmp_path: Path) -> None:
-    from semiparam_ros.eval.pages import render_results, template_claims
+    from docs.tools.pages import render_results, template_claims
 
     inputs, paper, _ = _page_inputs(tmp_path)
     template = ("${paper_table}|${checks_table}|${restated_table}|${payload_table}|${fig3}|${payload_fig}|"
@@ -428,7 +428,7 @@ def test_results_page_fills_the_template_with_the_reports_numbers(tmp_path: Path
 def test_committed_results_page_is_the_template_filled_with_the_committed_reports(tmp_path: Path) -> None:
     """docs/results.md is exactly what the template and the committed JSON reports give: no number on the
     page is typed in by hand, and every worded finding of the template holds on the committed reports."""
-    from semiparam_ros.eval.pages import load_inputs, render_results, template_claims
+    from docs.tools.pages import load_inputs, render_results, template_claims
 
     inputs = load_inputs(ROOT / "docs" / "figures", ROOT / "docs" / "results.md")
     assert all(template_claims(inputs).values()), template_claims(inputs)
@@ -461,7 +461,7 @@ def test_figures_draw_spj_in_its_own_colour_and_name() -> None:
     assert _color("SPfrozenP", 0) not in COLORS.values()
     assert _label("SPJ") == "SP joint" and _label("SPJ no adaptation") == "SP joint no adaptation"
     assert _label("SP adaptive (β=0.995)") == "SP adaptive (β=0.995)"
-    assert _color("SP adaptive", 0) == "tab:blue"
+    assert _color("SP no adaptation", 0) == "tab:blue"
 
 
 def test_adaptation_figure_is_a_valid_png(tmp_path: Path) -> None:
@@ -530,7 +530,7 @@ def test_restated_sp_criterion_on_committed_bags(committed_protocol_report_4) ->
     the evaluation of each part of the criterion is checked against scipy's paired t-test on the parts."""
     from scipy import stats
 
-    from semiparam_ros.eval.report import restated_checks
+    from docs.tools.claims import restated_checks
 
     report = committed_protocol_report_4
     checks = {(c.model, c.group, c.segment): c for c in restated_checks(report)}
@@ -780,3 +780,27 @@ def test_progress_bar_only_on_a_terminal(capsys) -> None:
     train, test = toy_stream(50, 3), toy_stream(100, 4)
     run_protocol({"P": ToyRidge(3, 6)}, train, test, output=WRENCH, splits=2, progress=True)
     assert capsys.readouterr().err == ""
+
+
+def test_subcommands_and_the_deprecated_flag_form_give_the_same_report(tmp_path: Path, capsys) -> None:
+    """`evaluate paper …` and the flag form of earlier releases (rewritten, with a deprecation note) run the
+    same protocol: the same JSON apart from the timings; `evaluate payload` needs its bag."""
+    from semiparam_ros.cli.evaluate import _legacy, main
+
+    common = ["--train", str(BAGS / "icub_xy"), "--test", str(BAGS / "icub_xz"), "--train-limit", "300",
+              "--test-limit", "400", "--splits", "2", "--models", "P", "--no-progress",
+              "--set", "nonparametric.n_features=20"]
+    assert main(["paper", *common, "--json", str(tmp_path / "new.json")]) == 0
+    capsys.readouterr()
+    assert main([*common, "--json", str(tmp_path / "old.json")]) == 0
+    assert "deprecated flag form" in capsys.readouterr().err
+    new, old = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("new", "old"))
+    for doc in (new, old):  # timings differ run to run
+        for key in ("update_us", "update_us_stats", "train_s"):
+            doc.pop(key, None)
+    assert new == old and new["models"]["P"]["force_rmse"] > 0
+    assert _legacy(["--payload", "B", "--forgetting", "0.99"])[:2] == ["payload", "B"]
+    assert _legacy(["--config", "c.yaml", "--contacts", "B"]) == ["contacts", "B", "--config", "c.yaml"]
+    assert _legacy(["paper", "--train", "A"]) == ["paper", "--train", "A"]
+    with pytest.raises(SystemExit):
+        main(["payload"])  # the bag is required

@@ -38,7 +38,7 @@ PIP_ONLY = {"threadpoolctl": "threadpoolctl", "zstandard": "zstandard", "lz4": "
             "example_robot_data": "example-robot-data", "mcap": "mcap", "mcap_ros2": "mcap-ros2-support"}
 #: Keys needed without a Python import of ours: the launch file's packages; rclpy.lifecycle's messages.
 NOT_IMPORTED = {"launch", "launch_ros", "lifecycle_msgs"}
-LOCAL = {"semiparam_ros", "ros_helpers", "reference_rrls", "__future__"}
+LOCAL = {"semiparam_ros", "ros_helpers", "reference_rrls", "__future__", "docs"}  # docs: docs/tools
 
 
 def _imports(folder: str) -> set[str]:

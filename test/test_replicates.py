@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from semiparam_ros.eval.replicates import ReplicateSummary, replicate_summary, replicates_markdown
+from docs.tools.replicates import ReplicateSummary, replicate_summary, replicates_markdown
 from semiparam_ros.eval.report import ProtocolReport
 
 KINDS = ("P", "NP", "SP", "SPJ")

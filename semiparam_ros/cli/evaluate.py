@@ -1,8 +1,8 @@
-"""``evaluate``: replay bags through the estimator's core and reproduce the paper's experiment.
+"""``evaluate``: replay bags through the estimator's core; one subcommand per evaluation.
 
-Paper protocol (P, NP, SP from zero; train on all of --train; test-then-train on --splits parts of --test)::
+Paper protocol (P, NP, SP from zero; train on all of TRAIN; test-then-train on --splits parts of TEST)::
 
-    evaluate --train bags/generated/icub_xy --test bags/generated/icub_xz --split-size 1000 \
+    evaluate paper --train bags/generated/icub_xy --test bags/generated/icub_xz --split-size 1000 \
         --json results/report.json --plot results/fig3.png
 
 Add ``--models P NP SP SPJ SPC`` to compare the default (consistent) SP with the joint semiparametric fit
@@ -10,16 +10,17 @@ Add ``--models P NP SP SPJ SPC`` to compare the default (consistent) SP with the
 
 Payload scenario (one bag with a pickup; SP with and without forgetting)::
 
-    evaluate --payload bags/icub_payload --forgetting 0.995 --json results/payload.json \
+    evaluate payload bags/icub_payload --forgetting 0.995 --json results/payload.json \
         --plot results/payload.png
 
 Contact evaluation (a ``simulate --scenario contacts`` log: the node's estimator with the gate on and off;
 contact detection per episode, the error after the contacts vs before, payload adoption)::
 
-    evaluate --contacts bags/generated/icub_contacts --json results/contacts.json \
-        --plot results/contacts.png
+    evaluate contacts bags/generated/icub_contacts --json results/contacts.json --plot results/contacts.png
 
-Argument parsing only; the work is done by :mod:`semiparam_ros.eval`.
+The flag forms of earlier releases (``evaluate --train A --test B``, ``--payload BAG``, ``--contacts BAG``)
+still work, with a deprecation note. Argument parsing only; the work is done by
+:mod:`semiparam_ros.eval.run`.
 """
 
 from __future__ import annotations
@@ -81,104 +82,97 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--wrench-topic", help="WrenchStamped topic (default: /<topics.wrench>)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the argument parser of ``evaluate``."""
-    p = argparse.ArgumentParser(
-        prog="evaluate",
-        description="Replay bags through the estimator's pipeline and learners: the paper's protocol "
-        "(--train/--test) or the payload adaptation scenario (--payload).",
-    )
-    p.add_argument(
-        "--train",
-        type=Path,
-        help="training bag (paper: the XY circles); with --payload: "
-        "optional bag every learner is trained on first",
-    )
-    p.add_argument("--test", type=Path, help="test bag (paper: the XZ circles)")
-    p.add_argument("--payload", type=Path, help="bag with a payload pickup (adaptation scenario)")
-    p.add_argument("--contacts", type=Path,
-                   help="bag with contact episodes in its scenario.yaml (simulate --scenario contacts): the "
-                   "estimator with the contact gate on and off")
+_MODELS = ("P", "NP", "SP", "SPJ", "SPC", "SPfrozenP")
+_COMMANDS = ("paper", "payload", "contacts")
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
-    p.add_argument(
-        "--models",
-        nargs="+",
-        choices=("P", "NP", "SP", "SPJ", "SPC", "SPfrozenP"),
-        default=None,
-        help="learners (default: P NP SP; with --payload: SP); SP = semiparametric.combination as "
-        "configured (default 'consistent'); SPJ = the joint semiparametric fit "
-        "(semiparametric.combination=joint whatever the configuration says; needs equal "
-        "forgetting factors); SPC = the paper's cascade whatever the configuration says; SPfrozenP = "
-        "diagnostic cascade whose rigid-body stage stops learning after the training bag",
-    )
-    p.add_argument("--splits", type=int, default=10, help="number of sequential test parts (default 10)")
-    p.add_argument(
-        "--split-size",
-        type=int,
-        default=None,
-        help="samples per part (paper: 1000); omitted: the test bag in --splits equal parts",
-    )
-    p.add_argument("--window", type=float, default=3.0, help="sliding RMSE window [s] (default 3)")
-    p.add_argument(
-        "--first",
-        type=float,
-        default=3.0,
-        help="initial segment of each part reported separately [s] (default 3: *_first_3s)",
-    )
-    p.add_argument("--train-limit", type=int, default=None, help="use only the first N training samples")
-    p.add_argument("--test-limit", type=int, default=None, help="use only the first N test samples")
-    p.add_argument(
-        "--test-skip",
-        type=int,
-        default=0,
-        help="drop the first N test samples (with --train-limit N on the same bag: the protocol "
-        "within one bag, e.g. for hyperparameter selection on training data)",
-    )
-    p.add_argument(
-        "--pickup-time",
-        type=float,
-        default=None,
-        help="payload pickup [s from the bag's first joint state]; default from the bag's scenario.yaml",
-    )
-    p.add_argument(
-        "--forgetting",
-        type=float,
-        default=0.995,
-        help="forgetting factor per sample with adaptation on (default 0.995)",
-    )
-    p.add_argument(
-        "--forgetting-np",
-        type=float,
-        default=None,
-        help="forgetting factor of the residual stage with adaptation on (default: --forgetting)",
-    )
     p.add_argument("--json", type=Path, help="write the JSON report here")
     p.add_argument("--plot", type=Path, help="write the figure (PNG) here")
-    p.add_argument(
-        "--plot-truth",
-        type=Path,
-        help="also plot the errors against the noise-free wrench (simulated bags) here",
-    )
-    p.add_argument("--markdown", type=Path, help="write the markdown table here")
-    p.add_argument(
-        "--horizons", nargs="*", default=None, metavar="SECONDS",
-        help="paper protocol: also score each model by its age h (learned up to t - h, predicts t) beside "
-             "persistence held h and the CAD model; seconds, 0 = one step, 'frozen' (given without "
-             "values: 0 0.1 1 10 frozen)",
-    )
+    p.add_argument("--markdown", type=Path, help="write the markdown tables here")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (one is drawn only when stderr is a terminal anyway)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``evaluate`` (subcommands ``paper``, ``payload``, ``contacts``)."""
+    from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
+
+    parser = argparse.ArgumentParser(prog="evaluate", description="Replay bags through the estimator's "
+                                     "pipeline and learners.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{paper,payload,contacts}")
+    p = sub.add_parser("paper", help="the paper's protocol: train on one bag, test-then-train on parts of "
+                       "another")
+    p.add_argument("--train", type=Path, required=True, help="training bag (paper: the XY circles)")
+    p.add_argument("--test", type=Path, required=True, help="test bag (paper: the XZ circles)")
+    _add_common(p)
+    p.add_argument("--models", nargs="+", choices=_MODELS, default=None,
+                   help="learners (default: P NP SP); SP = semiparametric.combination as configured "
+                   "(default 'consistent'); SPJ = the joint semiparametric fit (needs equal forgetting "
+                   "factors); SPC = the paper's cascade; SPfrozenP = diagnostic cascade whose rigid-body "
+                   "stage stops learning after the training bag")
+    p.add_argument("--splits", type=int, default=DEFAULT_SPLITS,
+                   help="sequential test parts (default %(default)s)")
+    p.add_argument("--split-size", type=int, default=None,
+                   help="samples per part (paper: 1000); omitted: the test bag in --splits equal parts")
+    p.add_argument("--window", type=float, default=DEFAULT_WINDOW_S,
+                   help="sliding RMSE window [s] (default %(default)s)")
+    p.add_argument("--first", type=float, default=DEFAULT_FIRST_S,
+                   help="initial segment of each part reported separately [s] (default %(default)s)")
+    p.add_argument("--train-limit", type=int, default=None, help="use only the first N training samples")
+    p.add_argument("--test-limit", type=int, default=None, help="use only the first N test samples")
+    p.add_argument("--test-skip", type=int, default=0,
+                   help="drop the first N test samples (with --train-limit N on the same bag: the protocol "
+                   "within one bag, e.g. for hyperparameter selection on training data)")
+    p.add_argument("--plot-truth", type=Path,
+                   help="also plot the errors against the noise-free outputs (simulated bags) here")
+    p.add_argument("--horizons", nargs="*", default=None, metavar="SECONDS",
+                   help="also score each model by its age h (learned up to t - h, predicts t) beside "
+                   "persistence held h and the CAD model; seconds, 0 = one step, 'frozen' (given without "
+                   "values: 0 0.1 1 10 frozen)")
     p.add_argument("--horizon-plot", type=Path, help="write the error-by-age figure (PNG) here")
     p.add_argument("--per-sample", type=Path, metavar="FILE.csv",
-                   help="paper protocol: write every test sample (stamp, measured, each model's prediction "
-                        "and std per component) as CSV here")
+                   help="write every test sample (stamp, measured, each model's prediction and std per "
+                   "component) as CSV here")
     p.add_argument("--per-sample-plot", type=Path, metavar="FILE.png",
-                   help="paper protocol: measured vs each model's prediction over time, one panel per "
-                        "joint/axis")
-    p.add_argument(
-        "--no-progress",
-        action="store_true",
-        help="no progress bar (one is drawn only when stderr is a terminal anyway)",
-    )
-    return p
+                   help="measured vs each model's prediction over time, one panel per joint/axis")
+    p = sub.add_parser("payload", help="the payload scenario: each learner with and without forgetting")
+    p.add_argument("bag", type=Path, help="bag with a payload pickup")
+    p.add_argument("--train", type=Path, help="optional bag every learner is trained on first")
+    _add_common(p)
+    p.add_argument("--models", nargs="+", choices=_MODELS, default=None, help="learners (default: SP)")
+    p.add_argument("--window", type=float, default=DEFAULT_WINDOW_S,
+                   help="sliding RMSE window [s] (default %(default)s)")
+    p.add_argument("--pickup-time", type=float, default=None,
+                   help="payload pickup [s from the bag's first joint state]; default from its scenario.yaml")
+    p.add_argument("--forgetting", type=float, default=0.995,
+                   help="forgetting factor per sample with adaptation on (default %(default)s)")
+    p.add_argument("--forgetting-np", type=float, default=None,
+                   help="forgetting factor of the residual stage with adaptation on (default: --forgetting)")
+    p = sub.add_parser("contacts", help="contact detection on a log with contact episodes, gate on and off")
+    p.add_argument("bag", type=Path, help="bag whose scenario.yaml lists contact episodes")
+    _add_common(p)
+    return parser
+
+
+def _legacy(argv: list[str]) -> list[str]:
+    """Rewrite the flag form of earlier releases (``--train A --test B``, ``--payload X``, ``--contacts``)."""
+    if not argv or argv[0] in _COMMANDS or argv[0] in ("-h", "--help"):
+        return argv
+    for flag, command in (("--contacts", "contacts"), ("--payload", "payload")):
+        if flag in argv:
+            i = argv.index(flag)
+            if i + 1 >= len(argv):
+                break
+            rest = argv[:i] + argv[i + 2:]
+            new = [command, argv[i + 1], *rest]
+            break
+    else:
+        new = ["paper", *argv]
+    print(f"evaluate: deprecated flag form; use `evaluate {new[0]} …` (this call: "
+          f"evaluate {' '.join(new)})", file=sys.stderr)
+    return new
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -191,50 +185,40 @@ def main(argv: Sequence[str] | None = None) -> int:
         Exit status: 0 on success, 2 on invalid input, 1 if a file cannot be read or written.
     """
     parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.contacts is not None and (args.payload is not None or args.test is not None):
-        parser.error("--contacts is exclusive with --payload and --test")
-    if args.contacts is None and args.payload is None and (args.train is None or args.test is None):
-        parser.error("give --train and --test (paper protocol), --payload (adaptation scenario) or "
-                     "--contacts (contact evaluation)")
-    if args.payload is not None and args.test is not None:
-        parser.error("--payload and --test are exclusive")
-    if (args.per_sample or args.per_sample_plot) and args.test is None:
-        parser.error("--per-sample and --per-sample-plot go with the paper protocol (--train and --test)")
+    args = parser.parse_args(_legacy(list(sys.argv[1:] if argv is None else argv)))
     from semiparam_ros.eval.horizon import DEFAULT_HORIZONS  # heavy imports after argument checks
-    from semiparam_ros.eval.run import run_evaluate
+    from semiparam_ros.eval.options import ProtocolOptions
+    from semiparam_ros.eval.replay import Topics
+    from semiparam_ros.eval.run import (
+        ReportPaths,
+        evaluate_contacts,
+        evaluate_paper,
+        evaluate_payload,
+        load_evaluation_config,
+    )
 
     try:
-        text = run_evaluate(
-            train=args.train,
-            test=args.test,
-            payload=args.payload,
-            contacts=args.contacts,
-            config=args.config,
-            overrides=parse_overrides(args.overrides),
-            joint_states_topic=args.joint_states_topic,
-            wrench_topic=args.wrench_topic,
-            models=args.models,
-            splits=args.splits,
-            split_size=args.split_size,
-            window_s=args.window,
-            first_s=args.first,
-            train_limit=args.train_limit,
-            test_limit=args.test_limit,
-            test_skip=args.test_skip,
-            pickup_time_s=args.pickup_time,
-            forgetting=args.forgetting,
-            forgetting_nonparametric=args.forgetting_np,
-            json_path=args.json,
-            plot_path=args.plot,
-            plot_truth_path=args.plot_truth,
-            markdown_path=args.markdown,
-            horizons=None if args.horizons is None else (args.horizons or DEFAULT_HORIZONS),
-            horizon_plot_path=args.horizon_plot,
-            per_sample_path=args.per_sample,
-            per_sample_plot_path=args.per_sample_plot,
-            progress=not args.no_progress,
-        )
+        cfg = load_evaluation_config(args.config, parse_overrides(args.overrides))
+        topics = Topics.from_config(cfg, args.joint_states_topic, args.wrench_topic)
+        paths = ReportPaths(json=args.json, markdown=args.markdown, plot=args.plot)
+        progress = not args.no_progress
+        if args.command == "contacts":
+            text = evaluate_contacts(args.bag, cfg, topics=topics, paths=paths)
+        elif args.command == "payload":
+            text = evaluate_payload(args.bag, cfg, topics=topics, models=args.models,
+                                    forgetting=args.forgetting, forgetting_nonparametric=args.forgetting_np,
+                                    pickup_time_s=args.pickup_time, pretrain=args.train, window_s=args.window,
+                                    paths=paths, progress=progress)
+        else:
+            options = ProtocolOptions(splits=args.splits, split_size=args.split_size, window_s=args.window,
+                                      first_s=args.first, train_limit=args.train_limit,
+                                      test_limit=args.test_limit, test_skip=args.test_skip)
+            paths = ReportPaths(json=args.json, markdown=args.markdown, plot=args.plot,
+                                plot_truth=args.plot_truth, horizon_plot=args.horizon_plot,
+                                per_sample=args.per_sample, per_sample_plot=args.per_sample_plot)
+            horizons = None if args.horizons is None else (args.horizons or DEFAULT_HORIZONS)
+            text = evaluate_paper(args.train, args.test, cfg, topics=topics, models=args.models,
+                                  options=options, horizons=horizons, paths=paths, progress=progress)
     except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created
         return error_exit("evaluate", err)
     print(text, end="")

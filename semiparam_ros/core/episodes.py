@@ -1,6 +1,6 @@
 """Scoring contact detection per episode: recall, false alarms per minute, detection delay.
 
-Pure numerics for the evaluation of the external wrench (issue 13, item 6). A sample is *flagged* when
+Pure numerics for the evaluation of the external wrench. A sample is *flagged* when
 any component of the external estimate exceeds ``threshold`` predictive standard deviations
 (:func:`flag_samples`, the rule the contact gate applies). Against ground-truth episodes ``[start, end)``:
 

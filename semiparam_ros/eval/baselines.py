@@ -1,4 +1,4 @@
-"""Reference models the learners are compared with on recorded joint-torque logs (issue 12, item 6).
+"""Reference models the learners are compared with on recorded joint-torque logs.
 
 Each is an online model of the protocol's interface (``predict_one``, ``predict_learn_one``, ``copy``), so
 :func:`~semiparam_ros.eval.protocol.run_protocol` runs it like P, NP and SP:

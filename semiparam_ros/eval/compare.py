@@ -5,7 +5,7 @@ model), and both learners see the same samples, so the fair test of "A is better
 part, the difference of their RMSEs. Reported per group (force, torque) and segment (at regime, first
 seconds), against the measured outputs and, when the bag has it, against the noise-free ones:
 
-* ``ratio`` — mean RMSE of A over mean RMSE of B (the issue's criteria use this);
+* ``ratio`` — mean RMSE of A over mean RMSE of B (the paper's criteria use this);
 * ``diff_mean`` / ``diff_sem`` — mean of the per-part differences A − B and its standard error
   (``std(ddof=1)/√n``), in N or N·m;
 * ``wins`` — parts where A's RMSE is below B's;

@@ -28,6 +28,7 @@ import numpy as np
 from semiparam_ros.atomic import atomic_open
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.eval.contacts import ContactReport, ContactRun, GroundTruthEpisodes, external_truth
+from semiparam_ros.eval.options import Variant
 from semiparam_ros.eval.report import AdaptationReport, ProtocolReport
 
 __all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_contacts", "plot_protocol"]
@@ -36,28 +37,21 @@ __all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_contacts", "plot_protoco
 #: fit (not in the paper) purple.
 COLORS: dict[str, str] = {"P": "tab:green", "NP": "tab:red", "SP": "tab:blue", "SPJ": "tab:purple",
                           "SPC": "tab:cyan"}
-#: Legend names of model kinds that differ from the kind (a kind is also the prefix of adaptation names,
-#: e.g. ``"SPJ adaptive (β=0.995)"``).
+#: Legend names of learners that differ from the learner's kind (the rest of a variant's key is kept:
+#: ``"SPJ adaptive (β=0.995)"`` → ``"SP joint adaptive (β=0.995)"``).
 LABELS: dict[str, str] = {"SPJ": "SP joint", "SPC": "SP cascade (paper)"}
 _EXTRA = ("tab:orange", "tab:brown", "tab:gray", "tab:olive", "tab:cyan", "tab:pink")
 
 
-def _prefix(kind: str, names: Mapping[str, str]) -> str | None:
-    """Return the longest key of ``names`` that is ``kind`` or its first word (``None`` if none)."""
-    for key in sorted(names, key=len, reverse=True):
-        if kind == key or kind.startswith(key + " "):
-            return key
-    return None
-
-
 def _color(kind: str, index: int) -> str:
-    key = _prefix(kind, COLORS)
-    return COLORS[key] if key is not None else _EXTRA[index % len(_EXTRA)]
+    """Colour of a report key: its learner's (:class:`~semiparam_ros.eval.options.Variant`), else a spare."""
+    learner = Variant.parse(kind).kind
+    return COLORS[learner] if learner in COLORS else _EXTRA[index % len(_EXTRA)]
 
 
 def _label(kind: str) -> str:
-    key = _prefix(kind, LABELS)
-    return kind if key is None else LABELS[key] + kind[len(key):]
+    learner = Variant.parse(kind).kind
+    return LABELS[learner] + kind[len(learner):] if learner in LABELS else kind
 
 
 def _ylabel(report: ProtocolReport | AdaptationReport, group: str) -> str:
@@ -158,8 +152,8 @@ def plot_adaptation(report: AdaptationReport, path: str | Path, *, title: str | 
         for i, (kind, entry) in enumerate(models.items()):
             color = _color(kind, i)
             # colour = learner, line style = with (solid) or without (dashed) adaptation
-            style = ("--" if "no adaptation" in kind else "-" if "adaptive" in kind
-                     else styles[i % len(styles)])
+            adaptive = Variant.parse(kind).adaptive
+            style = styles[i % len(styles)] if adaptive is None else "-" if adaptive else "--"
             ax.plot(time_s, entry[group], color=color, ls=style, lw=1.3, label=_label(kind))
             pre = report.summary[kind][group].pre_rmse
             ax.axhline(tol * pre, color=color, ls=style, lw=0.7, alpha=0.6)

@@ -1,4 +1,4 @@
-"""P, NP and SP on a real arm's joint-torque logs, beside the references a robot user knows (issue 12).
+"""P, NP and SP on a real arm's joint-torque logs, beside the references a robot user knows.
 
 :func:`compare_on_logs` trains on one log and runs the project's protocol on another
 (:func:`~semiparam_ros.eval.protocol.run_protocol`: the test log in sequential parts, each from a copy of
@@ -19,7 +19,7 @@ external torque added to the measured torques over a window is seen in the resid
 (fully if frozen, partly if it keeps learning), but only at the window's first sample by persistence.
 
 The result is a typed :class:`RealRobotComparison` (the protocol's
-:class:`~semiparam_ros.eval.report.ProtocolReport` plus the issue's acceptance criteria as
+:class:`~semiparam_ros.eval.report.ProtocolReport` plus acceptance criteria as
 :class:`Criterion` records and the :class:`InjectedTorque` measurement); :func:`comparison_markdown`
 renders its tables. Units: N·m (errors, torques), s.
 """
@@ -141,7 +141,7 @@ class RealRobotComparison:
         report: The protocol report of every model (per joint RMSE at regime and nMSE).
         torque_std: Standard deviation of each joint's measured test torque [N·m].
         friction_joints: Joints the friction criterion is evaluated on.
-        criteria: The issue's acceptance criteria.
+        criteria: The acceptance criteria.
         injected: The external-torque measurement, or ``None`` if not run.
         horizons: Every model's error by the age of the model (:mod:`semiparam_ros.eval.horizon`), or
             ``None`` if not run.

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import build_model, build_pipeline, build_regressor, measured_period_s
 from semiparam_ros.eval.diagnostics import FrozenParametricSP
 from semiparam_ros.eval.metrics import OutputSpec
+from semiparam_ros.eval.options import DEFAULT_WINDOW_S, ProtocolOptions, Variant
 from semiparam_ros.eval.protocol import (
     AdaptationResult,
     ProtocolResult,
@@ -201,11 +202,10 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
 
 
 def evaluate_bags(train_path: str | Path, test_path: str | Path, config: EstimatorConfig, *,
-                  topics: Topics | None = None, kinds: Sequence[str] = KINDS, splits: int = 10,
-                  split_size: int | None = None, window_s: float = 3.0, first_s: float = 3.0,
-                  train_limit: int | None = None, test_limit: int | None = None, test_skip: int = 0,
-                  horizons: Sequence[float | str] | None = None,
-                  progress: bool = False) -> tuple[ProtocolResult, dict[str, Any]]:
+                  topics: Topics | None = None, kinds: Sequence[str] = KINDS,
+                  options: ProtocolOptions | None = None,
+                  horizons: Sequence[float | str] | None = None, progress: bool = False,
+                  **option_fields: Any) -> tuple[ProtocolResult, dict[str, Any]]:
     """Run the paper's protocol on two bags (and, if asked, the error by the age of the model).
 
     Args:
@@ -214,18 +214,15 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         config: Estimator configuration the learners and the pipeline are built from.
         topics: Topics to read; default from the configuration.
         kinds: Learners to compare.
-        splits: Number of sequential test parts.
-        split_size: Samples per part; ``None`` = equal parts.
-        window_s: Sliding window [s].
-        first_s: Initial segment reported separately [s].
-        train_limit: Use only the first samples of the training bag.
-        test_limit: Use only the first samples of the test bag (counted before ``test_skip``).
-        test_skip: Drop this many samples at the start of the test bag (e.g. to run the protocol within one
-            bag: ``train_limit = test_skip = n`` trains on its first n samples and tests on the rest).
+        options: Parts, windows and limits (:class:`~semiparam_ros.eval.options.ProtocolOptions`; the test
+            limit counts before the skip, so ``train_limit = test_skip = n`` on one bag trains on its first n
+            samples and tests on the rest).
         horizons: Ages of the model [s] (0 = one step, ``"frozen"``) for
             :func:`~semiparam_ros.eval.horizon.evaluate_horizons`, run on the trained learners, the CAD
             model and persistence over the whole test stream; ``None``: not run.
         progress: Show a progress bar (only when stderr is a terminal).
+        **option_fields: Fields of :class:`~semiparam_ros.eval.options.ProtocolOptions` given one by one
+            (``splits=…``), replacing those of ``options``.
 
     Returns:
         ``(result, info)`` where ``info`` records the bags, topics, limits and pipeline drops, and under
@@ -234,6 +231,8 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
     Raises:
         ValueError: On unreadable bags or a test bag too short for the split request.
     """
+    opts = replace(options or ProtocolOptions(), **option_fields)
+    train_limit, test_limit, test_skip = opts.train_limit, opts.test_limit, opts.test_skip
     topics = topics or Topics.from_config(config)
     train_data, train_drops = load_samples(train_path, config, topics, limit=train_limit)
     test_data, test_drops = load_samples(test_path, config, topics, limit=test_limit)
@@ -245,8 +244,9 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         test_data = test_data.slice(test_skip, len(test_data))
     models = build_models(config, kinds, n_train=len(train_data),
                           sample_period_s=measured_period_s(train_data.stamps_ns))
-    result = run_protocol(models, train_data, test_data, output=OutputSpec.from_config(config), splits=splits,
-                          split_size=split_size, window_s=window_s, first_s=first_s, progress=progress)
+    result = run_protocol(models, train_data, test_data, output=OutputSpec.from_config(config),
+                          splits=opts.splits, split_size=opts.split_size, window_s=opts.window_s,
+                          first_s=opts.first_s, progress=progress)
     info = {
         "train_bag": str(train_path), "test_bag": str(test_path),
         "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench,
@@ -364,7 +364,8 @@ def adaptation_configs(config: EstimatorConfig, forgetting: float,
 def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting: float,
                         forgetting_nonparametric: float | None = None, change_s: float | None = None,
                         pretrain_path: str | Path | None = None,
-                        topics: Topics | None = None, kinds: Sequence[str] = ("SP",), window_s: float = 3.0,
+                        topics: Topics | None = None, kinds: Sequence[str] = ("SP",),
+                        window_s: float = DEFAULT_WINDOW_S,
                         pre_s: float = 10.0, deadline_s: float = 10.0, tolerance: float = 1.5,
                         progress: bool = False) -> tuple[AdaptationResult, dict[str, Any]]:
     """Run the payload scenario: each learner with adaptation on (forgetting β) and off (β = 1).
@@ -386,7 +387,8 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
         progress: Show a tqdm progress bar.
 
     Returns:
-        ``(result, info)``; model names are ``"<kind> adaptive (β=...)"`` and ``"<kind> no adaptation"``.
+        ``(result, info)``; models are keyed by :attr:`~semiparam_ros.eval.options.Variant.label`
+        (``"<kind> adaptive (β=...)"``, ``"<kind> no adaptation"``).
 
     Raises:
         ValueError: On unreadable bags, a missing pickup time or an invalid β.
@@ -406,12 +408,12 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
     pretrain = load_samples(pretrain_path, config, topics)[0] if pretrain_path is not None else None
     configs = adaptation_configs(config, forgetting, forgetting_nonparametric)
     beta_np = forgetting if forgetting_nonparametric is None else forgetting_nonparametric
-    label = f"β={forgetting:g}" if beta_np == forgetting else f"β_P={forgetting:g}, β_NP={beta_np:g}"
     models: dict[str, Any] = {}
     period = measured_period_s((pretrain if pretrain is not None else stream).stamps_ns)
     for kind in kinds:
-        for key, name in (("on", f"{kind} adaptive ({label})"), ("off", f"{kind} no adaptation")):
-            models[name] = build_models(configs[key], [kind], sample_period_s=period)[kind]
+        for key, variant in (("on", Variant(kind, adaptive=True, beta=forgetting, beta_np=beta_np)),
+                             ("off", Variant(kind, adaptive=False))):
+            models[variant.label] = build_models(configs[key], [kind], sample_period_s=period)[kind]
     result = run_adaptation(models, stream, change_from_first, output=OutputSpec.from_config(config),
                             pretrain=pretrain, window_s=window_s,
                             pre_s=pre_s, deadline_s=deadline_s, tolerance=tolerance, progress=progress)

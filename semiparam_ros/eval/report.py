@@ -7,8 +7,8 @@
 times, the mean curves, the paper's criteria (:class:`Check`, named by identifiers) and the paired
 comparisons (:class:`~semiparam_ros.eval.compare.Comparison`). Nothing downstream recomputes or parses them.
 
-JSON (:meth:`ProtocolReport.to_json`; :meth:`ProtocolReport.from_json` reads it back) keeps the fields of
-issue 6::
+JSON (:meth:`ProtocolReport.to_json`; :meth:`ProtocolReport.from_json` reads it back) keeps these fields
+(stable across releases)::
 
     {"output": "wrench" | "joint_torques", "components": [...],
      "models": {"P": {"force_rmse": f, "torque_rmse": t, "force_rmse_first_3s": f0,
@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.atomic import atomic_write_text
-from semiparam_ros.eval.compare import DEFAULT_PAIRS, Comparison, PairStats, compare_pair
+from semiparam_ros.eval.compare import DEFAULT_PAIRS, Comparison, compare_pair
 from semiparam_ros.eval.metrics import OutputSpec, group_rmse
 from semiparam_ros.eval.protocol import AdaptationResult, ProtocolResult, Recovery
 
@@ -57,14 +57,12 @@ __all__ = [
     "GroupStats",
     "ModelStats",
     "ProtocolReport",
-    "RestatedCheck",
     "SegmentStats",
     "adaptation_report",
     "first_key",
     "paired_comparisons",
     "paper_checks",
     "protocol_report",
-    "restated_checks",
     "to_plain",
     "write_json",
 ]
@@ -526,7 +524,7 @@ def protocol_report(
 def paper_checks(
     models: Mapping[str, ModelStats], groups: Sequence[str] = ("force", "torque")
 ) -> list[Check]:
-    """Evaluate the issue's reproduction criteria.
+    """Evaluate the paper's reproduction criteria.
 
     At regime: SP and NP RMSE ≤ 0.5 × P's (force) and ≤ 0.4 × P's (torque), SP ≤ NP; over the first seconds
     SP < NP. The SP criteria are evaluated separately, with the same thresholds, for each semiparametric
@@ -596,60 +594,6 @@ def paired_comparisons(
                     if not xa or not xb:
                         continue
                     out.append(Comparison(a, b, group, segment, truth, "parts", compare_pair(xa, xb)))
-    return out
-
-
-@dataclass(frozen=True)
-class RestatedCheck:
-    """The restated SP ≤ NP criterion (issue 14, item 11) for one model, group and segment.
-
-    At regime: the model is not significantly worse than NP (paired t-test over the parts or seeds:
-    ``p ≥ alpha``, or its mean difference to NP is negative). Over the first seconds: the model is ahead
-    of NP (mean ratio < 1).
-
-    Attributes:
-        model: ``SP`` or ``SPJ``.
-        group: ``force`` or ``torque``.
-        segment: ``regime`` or ``first``.
-        level: What the pairs run over (``parts`` of one run, or ``seeds``).
-        stats: The paired statistics of the model against NP (measured outputs).
-        passed: Whether the criterion holds.
-    """
-
-    model: str
-    group: str
-    segment: str
-    level: str
-    stats: PairStats
-    passed: bool
-
-    @property
-    def id(self) -> str:
-        """Identifier ``model~NP/group/segment/level``."""
-        return f"{self.model}~NP/{self.group}/{self.segment}/{self.level}"
-
-
-def restated_checks(source: Any, alpha: float = 0.05) -> list[RestatedCheck]:
-    """Evaluate the restated SP ≤ NP criterion on a report's (or a replicate summary's) paired comparisons.
-
-    Args:
-        source: A :class:`ProtocolReport` (pairs over its test parts) or a
-            :class:`~semiparam_ros.eval.replicates.ReplicateSummary` (pairs over the seeds' means).
-        alpha: Significance level of the paired t-test.
-
-    Returns:
-        One check per semiparametric model, group and segment present (measured outputs).
-    """
-    out = []
-    for c in source.comparisons:
-        if c.b != "NP" or c.a not in CHECKED_SP_KINDS or c.truth or c.level not in ("parts", "seeds"):
-            continue
-        s = c.stats
-        if c.segment == "regime":
-            passed = s.p_t is None or s.p_t >= alpha or s.diff_mean < 0
-        else:
-            passed = s.ratio < 1.0
-        out.append(RestatedCheck(c.a, c.group, c.segment, c.level, s, bool(passed)))
     return out
 
 

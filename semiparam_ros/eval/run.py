@@ -8,7 +8,9 @@ returns the text printed on the terminal.
 from __future__ import annotations
 
 import sys
+import warnings
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +20,7 @@ from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.contacts import contact_report, run_contacts
 from semiparam_ros.eval.figures import plot_adaptation, plot_contacts, plot_protocol
 from semiparam_ros.eval.horizon import horizon_figure, horizon_markdown
+from semiparam_ros.eval.options import DEFAULT_WINDOW_S, ProtocolOptions
 from semiparam_ros.eval.per_sample import per_sample_figure, write_per_sample
 from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags, load_samples
 from semiparam_ros.eval.report import adaptation_report, protocol_report, write_json
@@ -32,7 +35,10 @@ from semiparam_ros.eval.tables import (
 )
 from semiparam_ros.io.bags import recovery_notes
 
-__all__ = ["default_config_path", "evaluation_text", "load_evaluation_config", "run_evaluate", "run_tune"]
+__all__ = [
+    "ReportPaths", "default_config_path", "evaluate_contacts", "evaluate_paper", "evaluate_payload",
+    "evaluation_text", "load_evaluation_config", "run_evaluate", "run_tune",
+]
 
 
 def default_config_path() -> Path | None:
@@ -97,72 +103,54 @@ def evaluation_text(report: Any) -> str:
     return text
 
 
-def run_evaluate(
-    *,
-    train: Path | None,
-    test: Path | None,
-    payload: Path | None,
-    config: Path | None,
-    contacts: Path | None = None,
-    overrides: Mapping[str, Any] | None = None,
-    joint_states_topic: str | None = None,
-    wrench_topic: str | None = None,
-    models: Sequence[str] | None = None,
-    splits: int = 10,
-    split_size: int | None = None,
-    window_s: float = 3.0,
-    first_s: float = 3.0,
-    train_limit: int | None = None,
-    test_limit: int | None = None,
-    test_skip: int = 0,
-    pickup_time_s: float | None = None,
-    forgetting: float = 0.995,
-    forgetting_nonparametric: float | None = None,
-    json_path: Path | None = None,
-    plot_path: Path | None = None,
-    plot_truth_path: Path | None = None,
-    markdown_path: Path | None = None,
-    horizons: Sequence[float | str] | None = None,
-    horizon_plot_path: Path | None = None,
-    per_sample_path: Path | None = None,
-    per_sample_plot_path: Path | None = None,
-    progress: bool = True,
-) -> str:
-    """Run an evaluation and write its outputs.
+@dataclass(frozen=True)
+class ReportPaths:
+    """Where an evaluation writes (each None: not written).
+
+    Attributes:
+        json: The JSON report.
+        markdown: The markdown tables (the text printed).
+        plot: The figure (PNG).
+        plot_truth: Paper protocol, simulated bags: the figure against the noise-free outputs.
+        horizon_plot: Paper protocol with horizons: the error by the age of the model.
+        per_sample: Paper protocol: every test sample's measured output, predictions and std (CSV).
+        per_sample_plot: Paper protocol: measured vs predicted over time, one panel per component.
+    """
+
+    json: Path | None = None
+    markdown: Path | None = None
+    plot: Path | None = None
+    plot_truth: Path | None = None
+    horizon_plot: Path | None = None
+    per_sample: Path | None = None
+    per_sample_plot: Path | None = None
+
+
+def _finish(report: Any, text: str, paths: ReportPaths) -> str:
+    if paths.json is not None:
+        write_json(report, paths.json)
+    if paths.markdown is not None:
+        atomic_write_text(paths.markdown, text)
+    return text
+
+
+def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: Topics | None = None,
+                   models: Sequence[str] | None = None, options: ProtocolOptions | None = None,
+                   horizons: Sequence[float | str] | None = None, paths: ReportPaths | None = None,
+                   progress: bool = True) -> str:
+    """Run the paper's protocol: learners from zero, trained on ``train``, test-then-train on ``test``.
 
     Args:
-        train: Training bag (paper protocol) or optional pre-training bag (payload scenario).
-        test: Test bag (paper protocol).
-        payload: Payload bag (adaptation scenario); exclusive with ``test``.
-        contacts: Bag with contact episodes (contact evaluation: the estimator with the gate on and off,
-            :mod:`semiparam_ros.eval.contacts`); exclusive with ``test`` and ``payload``.
-        config: Parameter file (``None``: the shipped one).
-        overrides: Parameter overrides.
-        joint_states_topic: JointState topic (default from the configuration).
-        wrench_topic: WrenchStamped topic (default from the configuration).
-        models: Learners (default P, NP, SP; SP for the payload scenario); ``SPJ`` is the joint
-            semiparametric fit whatever ``semiparametric.combination`` says (its criteria are checked
-            separately from SP's).
-        splits: Number of test parts.
-        split_size: Samples per part (``None``: equal parts).
-        window_s: Sliding window [s].
-        first_s: Initial segment reported separately [s].
-        train_limit: Use only the first training samples.
-        test_limit: Use only the first test samples.
-        test_skip: Drop this many samples at the start of the test bag.
-        pickup_time_s: Payload pickup time [s]; default from the bag's ``scenario.yaml``.
-        forgetting: β of the adaptive learners (parametric stage; residual stage too by default).
-        forgetting_nonparametric: β of the adaptive learners' residual stage (default: ``forgetting``).
-        json_path: JSON report destination.
-        plot_path: Figure destination.
-        plot_truth_path: Figure against the noise-free wrench (paper protocol, simulated bags).
-        markdown_path: Markdown table destination.
-        horizons: Paper protocol: also score every model by its age (seconds, 0 = one step, ``"frozen"``;
+        train: Training bag.
+        test: Test bag.
+        config: The configuration (:func:`load_evaluation_config`).
+        topics: Topics to read (default from the configuration).
+        models: Learners (default P, NP, SP; ``SPJ``: the joint fit whatever ``semiparametric.combination``
+            says; ``SPC``: the paper's cascade).
+        options: The protocol's parts, windows and limits (default :class:`ProtocolOptions`).
+        horizons: Also score every model by its age (seconds, 0 = one step, ``"frozen"``;
             :mod:`semiparam_ros.eval.horizon`), written under ``"horizons"`` in the JSON.
-        horizon_plot_path: Figure of the error by the age of the model (with ``horizons``).
-        per_sample_path: Paper protocol: every test sample's measured output and each model's prediction
-            and std, as CSV (:mod:`semiparam_ros.eval.per_sample`).
-        per_sample_plot_path: Paper protocol: measured vs predicted over time, one panel per component.
+        paths: Where to write the report, tables and figures (default: nowhere).
         progress: Show a progress bar (only when stderr is a terminal).
 
     Returns:
@@ -171,82 +159,136 @@ def run_evaluate(
     Raises:
         ValueError: On invalid arguments, configuration or bags.
     """
+    topics = topics or Topics.from_config(config)
+    paths = paths or ReportPaths()
+    with recovery_notes() as recovered:
+        result, info = evaluate_bags(train, test, config, topics=topics, kinds=models or KINDS,
+                                     options=options, horizons=horizons, progress=progress)
+    if recovered:  # a truncated or damaged bag was read as far as possible: the report says what was lost
+        info["recovered_bags"] = recovered
+    horizon = info.pop("horizons", None)
+    if horizon is not None:
+        info["horizons"] = horizon.to_json()
+    report = protocol_report(result, config=config.to_flat(), protocol=info)
+    text = evaluation_text(report)
+    for note in recovered:
+        text = f"WARNING: {note}\n\n" + text
+    title = f"{Path(train).name} → {Path(test).name}"
+    if horizon is not None:
+        text += "\n## By the age of the model\n\n" + horizon_markdown(horizon)
+        if paths.horizon_plot is not None:
+            horizon_figure(horizon, paths.horizon_plot, title=title)
+    if paths.plot is not None:
+        plot_protocol(report, paths.plot)
+    if paths.plot_truth is not None:
+        plot_protocol(report, paths.plot_truth, truth=True)
+    if paths.per_sample is not None:
+        write_per_sample(result, paths.per_sample, config["uncertainty.noise_time_constant"])
+    if paths.per_sample_plot is not None:
+        per_sample_figure(result, paths.per_sample_plot, title=title)
+    return _finish(report, text, paths)
+
+
+def evaluate_payload(bag: Path, config: EstimatorConfig, *, topics: Topics | None = None,
+                     models: Sequence[str] | None = None, forgetting: float = 0.995,
+                     forgetting_nonparametric: float | None = None, pickup_time_s: float | None = None,
+                     pretrain: Path | None = None, window_s: float = DEFAULT_WINDOW_S,
+                     paths: ReportPaths | None = None, progress: bool = True) -> str:
+    """Run the payload scenario: each learner with forgetting β and without, around the pickup.
+
+    Args:
+        bag: Bag with a payload pickup.
+        config: The configuration.
+        topics: Topics to read (default from the configuration).
+        models: Learners (default SP).
+        forgetting: β of the adaptive learners (parametric stage; residual stage too by default).
+        forgetting_nonparametric: β of the adaptive learners' residual stage (default: ``forgetting``).
+        pickup_time_s: Pickup time [s from the bag's first joint state]; default from its scenario.yaml.
+        pretrain: Optional bag every learner is trained on first.
+        window_s: Sliding window [s].
+        paths: Where to write (``plot``: the recovery figure).
+        progress: Show a progress bar.
+
+    Returns:
+        The text to print.
+
+    Raises:
+        ValueError: On invalid arguments, configuration or bags, or a missing pickup time.
+    """
+    result, info = evaluate_adaptation(bag, config, forgetting=forgetting,
+                                       forgetting_nonparametric=forgetting_nonparametric,
+                                       change_s=pickup_time_s, pretrain_path=pretrain, topics=topics,
+                                       kinds=models or ("SP",), window_s=window_s, progress=progress)
+    paths = paths or ReportPaths()
+    stride = max(1, len(result.time_s) // 2000)  # ≤ 2000 curve points in the JSON; summaries use all
+    report = adaptation_report(result, config=config.to_flat(), protocol=info, stride=stride)
+    if paths.plot is not None:
+        plot_adaptation(report, paths.plot)
+    return _finish(report, adaptation_table(report), paths)
+
+
+def evaluate_contacts(bag: Path, config: EstimatorConfig, *, topics: Topics | None = None,
+                      paths: ReportPaths | None = None) -> str:
+    """Run the node's estimator over a log with contact episodes, with the contact gate on and off.
+
+    Args:
+        bag: A log whose scenario.yaml lists its contact episodes (``simulate --scenario contacts``).
+        config: The configuration.
+        topics: Topics to read (default from the configuration).
+        paths: Where to write (``plot``: the episodes and the gate's verdicts).
+
+    Returns:
+        The text to print (:mod:`semiparam_ros.eval.contacts`).
+
+    Raises:
+        ValueError: On invalid configuration or bag, or a bag without contact episodes.
+    """
+    topics = topics or Topics.from_config(config)
+    paths = paths or ReportPaths()
+    truth, runs = run_contacts(bag, config, topics=topics)
+    report = contact_report(truth, runs, config, protocol={
+        "bag": str(bag), "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench})
+    if paths.plot is not None:
+        plot_contacts(report, truth, runs, paths.plot, bag=bag, config=config)
+    return _finish(report, contacts_table(report), paths)
+
+
+def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None, config: Path | None,
+                 contacts: Path | None = None, overrides: Mapping[str, Any] | None = None,
+                 joint_states_topic: str | None = None, wrench_topic: str | None = None,
+                 models: Sequence[str] | None = None, pickup_time_s: float | None = None,
+                 forgetting: float = 0.995, forgetting_nonparametric: float | None = None,
+                 horizons: Sequence[float | str] | None = None, progress: bool = True,
+                 **options_and_paths: Any) -> str:
+    """Run the evaluation chosen by which bag is given (deprecated).
+
+    Call :func:`evaluate_paper`, :func:`evaluate_payload` or :func:`evaluate_contacts` instead.
+
+    The remaining keywords are the fields of :class:`ProtocolOptions` (``splits``, ``window_s``, …) and of
+    :class:`ReportPaths` with a ``_path`` suffix (``json_path``, ``plot_path``, …).
+
+    Raises:
+        ValueError: On invalid arguments, configuration or bags.
+    """
+    warnings.warn("run_evaluate is deprecated: use evaluate_paper, evaluate_payload or evaluate_contacts",
+                  DeprecationWarning, stacklevel=2)
+    opts = {k: v for k, v in options_and_paths.items() if not k.endswith("_path")}
+    paths = ReportPaths(**{k[: -len("_path")]: v for k, v in options_and_paths.items()
+                           if k.endswith("_path")})
     cfg = load_evaluation_config(config, overrides)
     topics = Topics.from_config(cfg, joint_states_topic, wrench_topic)
     if contacts is not None:
-        truth, runs = run_contacts(contacts, cfg, topics=topics)
-        report_c = contact_report(truth, runs, cfg, protocol={
-            "bag": str(contacts), "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench})
-        text = contacts_table(report_c)
-        if plot_path is not None:
-            plot_contacts(report_c, truth, runs, plot_path, bag=contacts, config=cfg)
-        report: Any = report_c
-    elif payload is not None:
-        result, info = evaluate_adaptation(
-            payload,
-            cfg,
-            forgetting=forgetting,
-            forgetting_nonparametric=forgetting_nonparametric,
-            change_s=pickup_time_s,
-            pretrain_path=train,
-            topics=topics,
-            kinds=models or ("SP",),
-            window_s=window_s,
-            progress=progress,
-        )
-        stride = max(1, len(result.time_s) // 2000)  # ≤ 2000 curve points in the JSON; summaries use all
-        adaptation = adaptation_report(result, config=cfg.to_flat(), protocol=info, stride=stride)
-        text = adaptation_table(adaptation)
-        if plot_path is not None:
-            plot_adaptation(adaptation, plot_path)
-        report = adaptation
-    else:
-        if train is None or test is None:
-            raise ValueError("the paper protocol needs --train and --test")
-        with recovery_notes() as recovered:
-            result, info = evaluate_bags(
-                train,
-                test,
-                cfg,
-                topics=topics,
-                kinds=models or KINDS,
-                splits=splits,
-                split_size=split_size,
-                window_s=window_s,
-                first_s=first_s,
-                train_limit=train_limit,
-                test_limit=test_limit,
-                test_skip=test_skip,
-                horizons=horizons,
-                progress=progress,
-            )
-        if recovered:
-            # a truncated or damaged bag was read as far as possible: the report says so, with what was lost
-            info["recovered_bags"] = recovered
-        horizon = info.pop("horizons", None)
-        if horizon is not None:
-            info["horizons"] = horizon.to_json()
-        report = protocol_report(result, config=cfg.to_flat(), protocol=info)
-        text = evaluation_text(report)
-        for note in recovered:
-            text = f"WARNING: {note}\n\n" + text
-        if horizon is not None:
-            text += "\n## By the age of the model\n\n" + horizon_markdown(horizon)
-            if horizon_plot_path is not None:
-                horizon_figure(horizon, horizon_plot_path, title=f"{Path(train).name} → {Path(test).name}")
-        if plot_path is not None:
-            plot_protocol(report, plot_path)
-        if plot_truth_path is not None:
-            plot_protocol(report, plot_truth_path, truth=True)
-        if per_sample_path is not None:
-            write_per_sample(result, per_sample_path, cfg["uncertainty.noise_time_constant"])
-        if per_sample_plot_path is not None:
-            per_sample_figure(result, per_sample_plot_path, title=f"{Path(train).name} → {Path(test).name}")
-    if json_path is not None:
-        write_json(report, json_path)
-    if markdown_path is not None:
-        atomic_write_text(markdown_path, text)
-    return text
+        return evaluate_contacts(contacts, cfg, topics=topics, paths=paths)
+    if payload is not None:
+        return evaluate_payload(payload, cfg, topics=topics, models=models, forgetting=forgetting,
+                                forgetting_nonparametric=forgetting_nonparametric,
+                                pickup_time_s=pickup_time_s, pretrain=train,
+                                window_s=opts.get("window_s", DEFAULT_WINDOW_S), paths=paths,
+                                progress=progress)
+    if train is None or test is None:
+        raise ValueError("the paper protocol needs --train and --test")
+    return evaluate_paper(train, test, cfg, topics=topics, models=models, options=ProtocolOptions(**opts),
+                          horizons=horizons, paths=paths, progress=progress)
 
 
 def run_tune(
@@ -269,7 +311,7 @@ def run_tune(
     train_n: int | None = None,
     splits: int = 5,
     split_size: int | None = None,
-    window_s: float = 3.0,
+    window_s: float = DEFAULT_WINDOW_S,
     jobs: int = 1,
 ) -> str:
     """Select hyperparameters on a training bag and write the tuned parameter file.

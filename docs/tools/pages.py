@@ -20,10 +20,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from docs.tools.claims import restated_checks
+from docs.tools.replicates import ReplicateSummary, replicates_markdown
 from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.eval.compare import compare_pair, format_p
-from semiparam_ros.eval.replicates import ReplicateSummary, replicates_markdown
-from semiparam_ros.eval.report import AdaptationReport, ProtocolReport, restated_checks
+from semiparam_ros.eval.options import Variant
+from semiparam_ros.eval.report import AdaptationReport, ProtocolReport
 from semiparam_ros.eval.tables import (
     adaptation_table,
     checks_table,
@@ -354,8 +356,9 @@ def template_claims(inputs: PageInputs) -> dict[str, bool]:
             for g in ("force", "torque")
         )
     s = payload.summary
-    adaptive = {k.split()[0]: v for k, v in s.items() if "adaptive" in k}
-    frozen = {k.split()[0]: v for k, v in s.items() if "no adaptation" in k}
+    variants = {Variant.parse(k): v for k, v in s.items()}
+    adaptive = {v.kind: x for v, x in variants.items() if v.adaptive}
+    frozen = {v.kind: x for v, x in variants.items() if v.adaptive is False}
     if {"SP", "SPJ"} <= set(adaptive) and {"SP", "SPJ"} <= set(frozen):
         claims["payload_both_recover_with_adaptation"] = all(
             r.recovered for k in ("SP", "SPJ") for r in adaptive[k].values()
