@@ -51,9 +51,9 @@ def score(config_path: Path, train_bag: Path, test_bag: Path, lam: float, overri
     npm = sp.nonparametric
     YP, R, NU = [], [], []
     for x in te.X:
-        yp, r, _, phi = sp._model_valid(x, sp.parametric._phi(x))
+        yp, r, _, phi = sp._model_valid(x, sp.parametric.phi_cached(x))
         if phi is not None:
-            _, v = npm.rls._predict_valid(phi, True)
+            _, v = npm.rls.predict_checked(phi, True)
             nu = npm.rls.lam * float(v[0])
             r = r / np.exp(-((nu / sp.novelty_scale) ** 2))  # undo the default weight: the raw residual
         else:

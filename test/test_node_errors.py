@@ -42,7 +42,7 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
 
     monkeypatch.setattr(est.model, "predict_learn_one", buggy)  # the learning path with the gate off
     # and with the contact gate on (predict, then learn the prediction's context: the estimator's entry)
-    monkeypatch.setattr(est.model, "_learn_ahead_valid", buggy)
+    monkeypatch.setattr(est.model, "learn_ahead_checked", buggy)
     # through the executor, as live: queued input is processed by an executor callback (the catch-up
     # timer, armed as when a backlog remains), and the error raises out of spin_once
     executor = EXECUTORS[executor_name](context=node.context)
@@ -66,7 +66,7 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
         raise RejectedSampleError("x contains NaN")
 
     monkeypatch.setattr(est.model, "predict_learn_one", rejecting)
-    monkeypatch.setattr(est.model, "_learn_ahead_valid", rejecting)
+    monkeypatch.setattr(est.model, "learn_ahead_checked", rejecting)
     n_rejected = 0
     for _ in range(100):
         msg = next(messages)

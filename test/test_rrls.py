@@ -104,7 +104,7 @@ def test_apply_pending_gives_the_same_state_as_the_fused_prediction():
     Zs, Us = rng.standard_normal((50, b)), rng.standard_normal((50, t))
     for z, u in zip(Zs, Us, strict=True):
         for rls in (fused, idle):
-            rls._defer_checked(RecursiveRLS._checked_step(z[None].copy(), u[None].copy()))
+            rls.defer_step(RecursiveRLS.checked_step(z[None].copy(), u[None].copy()))
         assert idle.has_pending and idle.apply_pending() and not idle.has_pending
         assert not idle.apply_pending()  # nothing left
         q = rng.standard_normal(b)
@@ -414,7 +414,7 @@ def test_rows_out_update_the_residual_matrix(k, beta):
     C = np.zeros((t, t))
     S_old = np.zeros((t, t))
     for n, (Z, U) in enumerate(steps):
-        P, E = rls._predict_update_rows_out(np.ascontiguousarray(Z), np.ascontiguousarray(U))
+        P, E = rls.predict_update_rows_out(np.ascontiguousarray(Z), np.ascontiguousarray(U))
         assert E.shape == (k + (1 if beta < 1 else 0), t)
         C = beta * C + U.T @ U
         _, B, W = closed_form(steps[: n + 1], b, t, 0.3, beta)

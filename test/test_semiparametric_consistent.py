@@ -51,13 +51,13 @@ def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     for x, y in zip(X, Y, strict=True):
         m.learn_one(x, y)
     pi = m.parametric.parameters
-    Z = np.array([m.nonparametric._features(x)[0] for x in X])
+    Z = np.array([m.nonparametric.features_of(x)[0] for x in X])
     targets = Y - np.array([regressor(x) @ pi for x in X])
     A = Z.T @ Z + 0.1 * np.eye(Z.shape[1])
     W = np.linalg.solve(A, Z.T @ targets)
     Xt, _ = data(50, 1)
     for x in Xt:
-        z = m.nonparametric._features(x)[0]
+        z = m.nonparametric.features_of(x)[0]
         v = z @ np.linalg.solve(A, z)
         want = math.exp(-((0.1 * v / 0.05) ** 2)) * (z @ W)
         pred = m.predict_one(x)

@@ -189,7 +189,7 @@ def test_cascade_checks_both_stages_before_changing_either(monkeypatch):
     def refuse(Z, U, owned=False):
         raise RejectedSampleError("refused")
 
-    monkeypatch.setattr(model.nonparametric.rls, "_checked_step", refuse)
+    monkeypatch.setattr(model.nonparametric.rls, "checked_step", refuse)
     with pytest.raises(RejectedSampleError, match="refused"):
         model.learn_ahead(context, Y[30])
     after = model.state_dict()
@@ -253,14 +253,15 @@ def test_standardized_features_match_the_numpy_map_within_the_rounding_bound():
     std = Standardizer(7, mean=rng.normal(size=7), scale=rng.uniform(0.01, 3.0, 7))
     for _ in range(50):
         x = rng.normal(0.0, 5.0, 7)
-        got = kernels.standardized_features(x, std.mean_, std.scale_, rff.omega_, rff.offset_, rff._scale)
+        got = kernels.standardized_features(x, std.mean_, std.scale_, rff.omega_, rff.offset_,
+                                            rff.feature_scale)
         z = std.transform(x)
         ref = rff.transform(z)
         # phase error ≤ (n + 1)·ε·(Σ|z_i Ω_ij| + |b_j|) each side, cos 1-Lipschitz, plus each cos's own
         # error (the kernel calls libm's cos, numpy its own SIMD one: ≤ 1 ulp ≤ 2ε near 1 each, < 3ε
         # apart in practice, as ε·|cos| ≤ ε below 0.5)
         phase = np.abs(z) @ np.abs(rff.omega_) + np.abs(rff.offset_)
-        bound = rff._scale * (2 * (7 + 1) * EPS * phase + 3 * EPS)
+        bound = rff.feature_scale * (2 * (7 + 1) * EPS * phase + 3 * EPS)
         assert got.shape == (1, 1000)
         assert np.all(np.abs(got[0] - ref) <= bound)
 

@@ -8,7 +8,8 @@ bit-identical to the numpy expressions they replace, which stay in the callers a
 other input type and are what the tests compare against. Only float64 1-D arrays are passed.
 
 :func:`standardized_features` is the exception: it fuses the standardization and the random Fourier
-feature map of one input (numpy's version, ``Standardizer._apply`` then ``RandomFourierFeatures._map``, is
+feature map of one input (numpy's version, ``Standardizer.apply_checked`` then
+``RandomFourierFeatures.map_checked``, is
 six calls and a BLAS product), and sums the phase in its own order, so it agrees with numpy to rounding
 (the bound is in its docstring and the test), not bit for bit.
 """

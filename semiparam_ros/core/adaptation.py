@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 
+from semiparam_ros.core.learner import Learner
 from semiparam_ros.core.rrls import RecursiveRLS
 from semiparam_ros.errors import ConfigurationError
 
@@ -46,17 +47,14 @@ def forgetting_factor(time_constant_s: float, period_s: float) -> float:
     return math.exp(-period / tau)
 
 
-def learners(model: object) -> Iterator[RecursiveRLS]:
-    """Iterate over the recursive least-squares learners of a model (P, NP, or either SP combination).
+def learners(model: Learner) -> Iterator[RecursiveRLS]:
+    """Iterate over the learners of a model whose forgetting the memory time sets.
 
     Args:
-        model: A learner of :mod:`semiparam_ros.core.semiparametric` or
-            :mod:`semiparam_ros.core.semiparametric_joint`.
+        model: A :class:`~semiparam_ros.core.learner.Learner` (P, NP, or any SP combination).
 
     Yields:
-        Each :class:`RecursiveRLS` of the model, parametric stage first.
+        Each :class:`RecursiveRLS` of :meth:`~semiparam_ros.core.learner.Learner.adaptive_stages`,
+        parametric stage first.
     """
-    for stage in (model, getattr(model, "parametric", None), getattr(model, "nonparametric", None)):
-        rls = getattr(stage, "rls", None)
-        if isinstance(rls, RecursiveRLS):
-            yield rls
+    yield from model.adaptive_stages()

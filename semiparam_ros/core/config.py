@@ -37,6 +37,7 @@ __all__ = [
     "describe_parameters",
     "load_config",
     "parameter_spec",
+    "structural_values",
     "unknown_parameter_message",
     "validate_value",
     "write_config",
@@ -60,6 +61,14 @@ class ParameterSpec:
         min_exclusive: Whether ``min`` itself is excluded (e.g. a regularization λ > 0).
         length: Required length of an array parameter, or ``None``.
         read_only: Whether the value can only be set at start-up (structure of the model).
+        structural: Whether the value is part of the learned model's structure: a checkpoint names it in
+            its fingerprint and loads only into a model built with the same value
+            (:func:`structural_values`).
+        kinds: The learner kinds (``P``, ``NP``, ``SP``) whose structure the value is part of.
+        unless: A value with which checkpoints written before the parameter existed agree: the value is
+            left out of the fingerprint when equal to it, so those still load (default: always named).
+        unless_as: The same, compared with the value of this other parameter.
+        only_if: ``(name, value)`` pairs that must all hold for the value to be named.
     """
 
     name: str
@@ -72,6 +81,11 @@ class ParameterSpec:
     min_exclusive: bool = False
     length: int | None = None
     read_only: bool = True
+    structural: bool = False
+    kinds: tuple[str, ...] = ("P", "NP", "SP")
+    unless: Any = None
+    unless_as: str | None = None
+    only_if: tuple[tuple[str, Any], ...] = ()
 
     def range_text(self) -> str:
         """Return the allowed range as text for error messages and parameter descriptors."""
@@ -101,16 +115,18 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "with robot.urdf: 'topic:<name>', how long the node waits for the URDF on that topic at "
                   "start-up [s]; 0 = as long as it takes", min=0.0, max=1e6),
     ParameterSpec("robot.joints", "string_array", list(_ICUB_JOINTS),
-                  "moving joints used for learning, in this order (q [rad], dq [rad/s], ddq [rad/s^2])"),
+                  "moving joints used for learning, in this order (q [rad], dq [rad/s], ddq [rad/s^2])",
+                  structural=True),
     ParameterSpec("robot.locked_joints", "string_array", [],
-                  "names of other joints given a fixed position (all others are locked at 0 rad)"),
+                  "names of other joints given a fixed position (all others are locked at 0 rad)",
+                  structural=True),
     ParameterSpec("robot.locked_positions", "double_array", [],
-                  "positions of robot.locked_joints [rad], same length"),
+                  "positions of robot.locked_joints [rad], same length", structural=True),
     ParameterSpec("robot.ft_sensor", "string", "r_arm_ft_sensor",
-                  "fixed URDF joint of the six-axis F/T sensor (output = wrench)"),
+                  "fixed URDF joint of the six-axis F/T sensor (output = wrench)", structural=True),
     ParameterSpec("robot.output", "string", "wrench",
                   "learned quantity: the F/T sensor wrench, or the joint torques from JointState.effort",
-                  choices=("wrench", "joint_torques")),
+                  choices=("wrench", "joint_torques"), structural=True),
     ParameterSpec("robot.frame_id", "string", "r_arm_ft_sensor",
                   "expected frame_id of the WrenchStamped input; empty accepts any"),
     ParameterSpec("robot.gravity", "double_array", [0.0, 0.0, -9.81],
@@ -175,7 +191,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("parametric.lam", "double", 1e-2,
                   "ridge regularization of the rigid-body (base inertial parameter) stage; with "
                   "parametric.column_scaling it acts on dimensionless parameters (see core.estimator)",
-                  min=0.0, min_exclusive=True, max=1e12),
+                  min=0.0, min_exclusive=True, max=1e12, structural=True),
     ParameterSpec("parametric.consistent", "bool", True,
                   "predict at desired states (feed-forward, load_model) with the physically consistent "
                   "rigid-body parameters, projected from the online estimate in a worker process every "
@@ -187,66 +203,75 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("parametric.prior", "string", "urdf",
                   "what the rigid-body stage is regularized toward (and predicts before any data): 'urdf' = "
                   "the URDF's base parameters (RNEA with the URDF; zero friction and offsets), 'zero' = all "
-                  "zero, the paper's protocol", choices=("urdf", "zero")),
+                  "zero, the paper's protocol", choices=("urdf", "zero"),
+                  structural=True, kinds=("P", "SP"), unless="zero"),
     ParameterSpec("parametric.column_scaling", "bool", True,
                   "scale each regressor column by its RMS over random states, so that one parametric.lam "
                   "means the same for parameters of very different magnitudes (false = the paper's raw "
-                  "columns)"),
+                  "columns)", structural=True, kinds=("P", "SP"), unless=False),
     ParameterSpec("parametric.friction", "bool", True,
                   "joint_torques: learn per-joint viscous [N·m·s/rad] and Coulomb [N·m] friction, "
                   "f_v·dq + f_c·tanh(dq/v_s)"),
     ParameterSpec("parametric.coulomb_velocity", "double", 0.05,
                   "velocity scale v_s of the smooth Coulomb sign tanh(dq/v_s) [rad/s]: a few times the "
                   "velocity noise, so that noise at rest does not flip the sign", min=0.0,
-                  min_exclusive=True, max=10.0),
+                  min_exclusive=True, max=10.0,
+                  structural=True, kinds=("P", "SP"),
+                  only_if=(("parametric.friction", True), ("robot.output", "joint_torques"))),
     ParameterSpec("parametric.offsets", "bool", True,
                   "joint_torques: learn a constant torque offset per joint [N·m]"),
     ParameterSpec("parametric.armature", "bool", False,
                   "joint_torques: learn a motor armature inertia per joint (a ddq_i column) [kg·m^2]"),
     ParameterSpec("parametric.forgetting", "double", 1.0,
                   "forgetting factor of the rigid-body stage (1 = no forgetting; the regularizer is kept)",
-                  min=0.9, max=1.0, min_exclusive=False),
+                  min=0.9, max=1.0, min_exclusive=False, structural=True),
     ParameterSpec("parametric.sensor_offset", "bool", False,
-                  "add the six constant F/T sensor offsets as extra parameters"),
+                  "add the six constant F/T sensor offsets as extra parameters", structural=True),
     # nonparametric stage
     ParameterSpec("nonparametric.lam", "double", 1e-3,
                   "ridge regularization of the random-feature residual stage", min=0.0, min_exclusive=True,
-                  max=1e12),
+                  max=1e12, structural=True),
     ParameterSpec("nonparametric.n_features", "integer", 500,
                   "number D of random Fourier features (the factor takes 8·D² bytes: 200 MB at D = 5000; "
-                  "D = 500 keeps a 1 kHz loop on two cores)", min=1, max=5000),
+                  "D = 500 keeps a 1 kHz loop on two cores)", min=1, max=5000, structural=True),
     ParameterSpec("nonparametric.sigma", "double", 6.0,
-                  "Gaussian kernel width on standardized inputs", min=0.0, min_exclusive=True, max=1e6),
+                  "Gaussian kernel width on standardized inputs", min=0.0, min_exclusive=True, max=1e6,
+                  structural=True),
     ParameterSpec("nonparametric.forgetting", "double", 1.0,
                   "forgetting factor of the residual stage (1 = no forgetting; the regularizer is kept)",
-                  min=0.9, max=1.0),
-    ParameterSpec("nonparametric.seed", "integer", 0, "seed of the random features", min=0, max=2**31 - 1),
+                  min=0.9, max=1.0, structural=True),
+    ParameterSpec("nonparametric.seed", "integer", 0, "seed of the random features", min=0, max=2**31 - 1,
+                  structural=True),
     ParameterSpec("nonparametric.standardizer_warmup", "integer", 0,
                   "samples used to estimate the input standardization before the residual stage learns, "
                   "overriding nonparametric.standardizer_warmup_s; 0 = use standardizer_warmup_s",
-                  min=0, max=10**7),
+                  min=0, max=10**7, structural=True, unless=0),
     ParameterSpec("nonparametric.standardizer_warmup_s", "double", 2.0,
                   "duration of the input standardization's warm-up [s], converted to samples at the measured "
                   "sample rate (2 s = the former 200 samples at 100 Hz)", min=0.0, min_exclusive=True,
-                  max=1e5),
+                  max=1e5, structural=True, only_if=(("nonparametric.standardizer_warmup", 0),)),
     ParameterSpec("nonparametric.min_scale.position", "double", 0.05,
                   "floor of the standardization scale of joint positions [rad] (a warm-up at rest measures "
-                  "only sensor noise)", min=0.0, max=1e3),
+                  "only sensor noise)", min=0.0, max=1e3, structural=True),
     ParameterSpec("nonparametric.min_scale.velocity", "double", 0.1,
-                  "floor of the standardization scale of joint velocities [rad/s]", min=0.0, max=1e4),
+                  "floor of the standardization scale of joint velocities [rad/s]", min=0.0, max=1e4,
+                  structural=True),
     ParameterSpec("nonparametric.min_scale.acceleration", "double", 1.0,
-                  "floor of the standardization scale of joint accelerations [rad/s^2]", min=0.0, max=1e5),
+                  "floor of the standardization scale of joint accelerations [rad/s^2]", min=0.0, max=1e5,
+                  structural=True),
     ParameterSpec("nonparametric.min_scale.force", "double", 1.0,
                   "wrench output: floor of the standardization scale of predicted forces [N] (residual-stage "
                   "input of SP)",
-                  min=0.0, max=1e5),
+                  min=0.0, max=1e5, structural=True),
     ParameterSpec("nonparametric.min_scale.torque", "double", 0.05,
                   "wrench output: floor of the standardization scale of predicted torques [N·m] (SP)",
-                  min=0.0, max=1e5),
+                  min=0.0, max=1e5, structural=True),
     ParameterSpec("nonparametric.min_scale.joint_torque", "double", 0.05,
                   "joint_torques output: floor of the standardization scale of predicted joint torques "
                   "[N·m] (SP); only a warm-up whose torques barely move reaches it (the arm at rest)",
-                  min=0.0, max=1e5),
+                  min=0.0, max=1e5,
+                  structural=True, kinds=("NP", "SP"),
+                  only_if=(("robot.output", "joint_torques"),), unless_as="nonparametric.min_scale.torque"),
     # how the two stages are combined
     ParameterSpec("semiparametric.combination", "string", "consistent",
                   "SP model: 'cascade' = the paper's (rigid-body stage alone first, residual stage on "
@@ -255,7 +280,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "'consistent' = rigid-body stage alone first, a residual on x that stays consistent with "
                   "the current parameters and falls back to zero where x is novel (the model), plus a fast "
                   "tracker of the model's error (one step ahead); see core/semiparametric_consistent.py",
-                  choices=("cascade", "joint", "consistent")),
+                  choices=("cascade", "joint", "consistent"),
+                  structural=True, kinds=("SP",), unless="cascade"),
     ParameterSpec("semiparametric.novelty_scale", "double", 0.01,
                   "'consistent': the residual is weighted by exp(-(nu/novelty_scale)^2), nu = lambda·v the "
                   "fraction of its prior variance left at the state (dimensionless; ≈ 0 where the data "
@@ -285,7 +311,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "nonparametric.forgetting by beta = exp(-T/tau), T the sample period measured (median "
                   "step) over the first samples (until then, and in tools that do not know the rate, the "
                   "per-sample factors apply); 0 = use the per-sample forgetting factors only",
-                  min=0.0, max=1e9),
+                  min=0.0, max=1e9, structural=True, unless=0.0),
     ParameterSpec("uncertainty.noise_time_constant", "double", 2.0,
                   "time constant of the running estimate of the noise scale s^2 per output [s]; the "
                   "published std is sqrt(s^2 (1 + z A^-1 z^T)); with the consistent SP, s^2 is of the "
@@ -583,6 +609,40 @@ class EstimatorConfig:
         from semiparam_ros.core.dynamics import resolve_urdf  # lazy: pinocchio is heavy
 
         return resolve_urdf(self["robot.urdf"])
+
+
+def structural_values(config: EstimatorConfig, kind: str) -> dict[str, Any]:
+    """Return the structural parameters of a learner of ``kind`` (the checkpoint fingerprint's entries).
+
+    A parameter is named when its spec is ``structural``, ``kind`` is among its ``kinds``, every
+    ``only_if`` condition holds and its value differs from ``unless`` (or from the value of ``unless_as``).
+
+    Args:
+        config: The configuration.
+        kind: ``P``, ``NP`` or ``SP``.
+
+    Returns:
+        Parameter names to values.
+
+    >>> cfg = EstimatorConfig.defaults()
+    >>> values = structural_values(cfg, "SP")
+    >>> values["nonparametric.n_features"], values["semiparametric.combination"]
+    (500, 'consistent')
+    >>> "semiparametric.combination" in structural_values(cfg, "P"), "sync.tolerance" in values
+    (False, False)
+    """
+    out: dict[str, Any] = {}
+    for spec in PARAMETERS:
+        if not spec.structural or kind not in spec.kinds:
+            continue
+        if any(config[name] != value for name, value in spec.only_if):
+            continue
+        value = config[spec.name]
+        legacy = config[spec.unless_as] if spec.unless_as is not None else spec.unless
+        if legacy is not None and value == legacy:
+            continue
+        out[spec.name] = value
+    return out
 
 
 def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:

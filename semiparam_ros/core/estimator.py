@@ -23,7 +23,7 @@ from semiparam_ros.core._step_kernels import joined_within
 from semiparam_ros.core.acceleration import AccelerationConfig
 from semiparam_ros.core.adaptation import forgetting_factor, learners
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
-from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.config import EstimatorConfig, structural_values
 from semiparam_ros.core.dynamics import RigidBodyRegressor
 from semiparam_ros.core.gate import ContactGate, GateConfig, Verdict
 from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
@@ -82,27 +82,6 @@ _CHECKPOINT_VERSION = 1
 # loaded RecursiveRLS/Standardizer keeps the checkpoint's λ, β and warm-up (even through reset()), so
 # accepting a checkpoint written with other values would silently run those while the configuration
 # says otherwise. Run-time switches (learning_enabled, checkpoint.*, diagnostics.*) may change.
-_STRUCTURAL = (
-    "robot.joints",
-    "robot.output",
-    "robot.ft_sensor",
-    "robot.locked_joints",
-    "robot.locked_positions",
-    "parametric.sensor_offset",
-    "parametric.lam",
-    "parametric.forgetting",
-    "nonparametric.n_features",
-    "nonparametric.sigma",
-    "nonparametric.seed",
-    "nonparametric.lam",
-    "nonparametric.forgetting",
-    "nonparametric.standardizer_warmup",
-    "nonparametric.min_scale.position",
-    "nonparametric.min_scale.velocity",
-    "nonparametric.min_scale.acceleration",
-    "nonparametric.min_scale.force",
-    "nonparametric.min_scale.torque",
-)
 
 
 def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None,
@@ -586,7 +565,7 @@ class OnlineEstimator:
             self.n_learning_skipped += 1
             return StepResult(sample, prediction, time.perf_counter() - start, False, std, None)
         # a priori, with the relative variance v = z A⁻¹ zᵀ of each output (the state is not changed)
-        ahead = model._predict_ahead_valid(x)
+        ahead = model.predict_ahead_checked(x)
         prediction = ahead.prediction
         variance = prediction.variance
         assert variance is not None  # a context always carries it
@@ -597,7 +576,7 @@ class OnlineEstimator:
             verdict = self.gate.decide(sample.stamp_ns, error, std, float(variance.max()))
             learned = verdict.learn
             if learned:
-                model._learn_ahead_valid(ahead, y)
+                model.learn_ahead_checked(ahead, y)
                 self.n_samples_learned += 1
         else:
             # gate off: exactly the paper's predict-then-learn (bit-identical predictions)
@@ -804,33 +783,9 @@ class OnlineEstimator:
         self.gate.reset()
 
     def _fingerprint(self) -> str:
-        structure = {name: self.config[name] for name in _STRUCTURAL}
-        if not self.config["nonparametric.standardizer_warmup"]:
-            # a warm-up in seconds: its sample count depends on the rate, so the fingerprint names the seconds
-            del structure["nonparametric.standardizer_warmup"]
-            key = "nonparametric.standardizer_warmup_s"
-            structure[key] = self.config[key]
-        if self.kind == "SP" and self.config["semiparametric.combination"] != "cascade":
-            # only when not the default, so that checkpoints written before the option existed still load
-            structure["semiparametric.combination"] = self.config["semiparametric.combination"]
-        # identification options, likewise only when they differ from what earlier checkpoints were written
-        # with (zero prior, raw columns); friction/offsets/armature show in the base-parameter names
-        if self.kind != "NP":
-            if self.config["parametric.prior"] != "zero":
-                structure["parametric.prior"] = self.config["parametric.prior"]
-            if self.config["parametric.column_scaling"]:
-                structure["parametric.column_scaling"] = True
-            if any(name.endswith(".coulomb") for name in self.parameter_names):
-                structure["parametric.coulomb_velocity"] = self.config["parametric.coulomb_velocity"]
-        if self.config["adaptation.time_constant"] > 0.0:
-            # only when on, so that checkpoints written before the option existed (or with it off) still load
-            structure["adaptation.time_constant"] = self.config["adaptation.time_constant"]
-        if (self.kind != "P" and self.config["robot.output"] == "joint_torques"
-                and self.config["nonparametric.min_scale.joint_torque"]
-                != self.config["nonparametric.min_scale.torque"]):
-            # joint-torque checkpoints written before the key existed used min_scale.torque as this floor
-            key = "nonparametric.min_scale.joint_torque"
-            structure[key] = self.config[key]
+        # the parameters the parameter table flags as structural (core.config.structural_values), the
+        # learner kind and the base parameters (friction, offsets and armature show in their names)
+        structure = structural_values(self.config, self.kind)
         structure["kind"] = self.kind
         structure["base_parameters"] = list(self.parameter_names)
         return json.dumps(structure, sort_keys=True)

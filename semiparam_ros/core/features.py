@@ -74,7 +74,7 @@ class RandomFourierFeatures:
         rng = np.random.default_rng(self.seed)
         self.omega_ = rng.normal(0.0, 1.0 / sigma, size=(self.n_inputs, self.n_features))
         self.offset_ = rng.uniform(0.0, 2.0 * np.pi, size=self.n_features)
-        self._scale = math.sqrt(2.0 / self.n_features)
+        self.feature_scale = math.sqrt(2.0 / self.n_features)
 
     def transform(self, X: Any) -> np.ndarray:
         """Map inputs to features.
@@ -89,15 +89,15 @@ class RandomFourierFeatures:
             RejectedSampleError: Wrong shape, NaN or inf.
         """
         X2, single = _as_inputs(X, self.n_inputs)
-        F = self._map(X2)
+        F = self.map_checked(X2)
         return F[0] if single else F
 
-    def _map(self, X: np.ndarray) -> np.ndarray:
+    def map_checked(self, X: np.ndarray) -> np.ndarray:
         """Features of already validated input (1-D or 2-D float64), without checks."""
         F = X @ self.omega_
         F += self.offset_
         np.cos(F, out=F)
-        F *= self._scale
+        F *= self.feature_scale
         return F
 
     __call__ = transform
@@ -146,7 +146,7 @@ class RandomFourierFeatures:
             raise CheckpointError(f"invalid sigma {sigma!r} in RandomFourierFeatures state")
         obj.sigma, obj.seed = sigma, seed
         obj.omega_, obj.offset_ = np.ascontiguousarray(omega), offset.copy()
-        obj._scale = math.sqrt(2.0 / obj.n_features)
+        obj.feature_scale = math.sqrt(2.0 / obj.n_features)
         return obj
 
     def __repr__(self) -> str:
@@ -297,10 +297,10 @@ class Standardizer:
             raise ValueError(f"Standardizer is not ready (warm-up {self.count_}/{self.warmup} samples); "
                              "fit it or feed the warm-up first")
         X2, single = _as_inputs(X, self.n_inputs)
-        Y = self._apply(X2)
+        Y = self.apply_checked(X2)
         return Y[0] if single else Y
 
-    def _apply(self, X: np.ndarray) -> np.ndarray:
+    def apply_checked(self, X: np.ndarray) -> np.ndarray:
         """Standardize already validated input with the current statistics, without checks."""
         return (X - self.mean_) / self.scale_
 

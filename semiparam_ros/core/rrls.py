@@ -275,14 +275,14 @@ class RecursiveRLS:
 
     def _defer(self, Z2: np.ndarray, U2: np.ndarray) -> None:
         """Validate the values of one step and leave a copy of it pending."""
-        self._defer_checked(self._checked_step(Z2, U2))
+        self.defer_step(self.checked_step(Z2, U2))
 
     @staticmethod
-    def _checked_step(Z2: np.ndarray, U2: np.ndarray, *,
+    def checked_step(Z2: np.ndarray, U2: np.ndarray, *,
                       owned: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Check the values of one step's (k, b) / (k, t) rows and return copies (the learner is untouched).
 
-        With :meth:`_defer_checked`, the two halves of :meth:`_defer`: a caller updating several learners
+        With :meth:`defer_step`, the two halves of :meth:`_defer`: a caller updating several learners
         checks every learner's rows first, so that a refused value leaves all of them unchanged. With
         ``owned`` the arrays themselves are kept (no copy): for arrays nobody writes to afterwards.
 
@@ -298,8 +298,8 @@ class RecursiveRLS:
                                       "in magnitude")
         return Zc, Uc
 
-    def _defer_checked(self, step: tuple[np.ndarray, np.ndarray]) -> None:
-        """Leave one step checked and copied by :meth:`_checked_step` pending (cannot fail)."""
+    def defer_step(self, step: tuple[np.ndarray, np.ndarray]) -> None:
+        """Leave one step checked and copied by :meth:`checked_step` pending (cannot fail)."""
         self._flush()
         self._pending = step
         self._W = None
@@ -323,14 +323,14 @@ class RecursiveRLS:
             RejectedSampleError: As :meth:`update`; the learner is left unchanged.
         """
         Z2, U2, single = self._check_rows(Z, U)
-        P = self._predict_update_valid(Z2, U2)
+        P = self.predict_update_checked(Z2, U2)
         return P[0] if single else P
 
-    def _update_valid(self, Z2: np.ndarray, U2: np.ndarray) -> None:
+    def update_checked(self, Z2: np.ndarray, U2: np.ndarray) -> None:
         """:meth:`update` for C-contiguous float64 (k, b) / (k, t) arrays of checked shape."""
         self._defer(Z2, U2)
 
-    def _predict_update_valid(self, Z2: np.ndarray, U2: np.ndarray) -> np.ndarray:
+    def predict_update_checked(self, Z2: np.ndarray, U2: np.ndarray) -> np.ndarray:
         """:meth:`predict_update` for already validated C-contiguous float64 (k, b) / (k, t) arrays."""
         k = Z2.shape[0]
         if k > _MAX_TRACKED_ROWS:
@@ -377,7 +377,7 @@ class RecursiveRLS:
         """Rows rotated out per time step besides the data rows: 1 with the prior-keeping row, else 0."""
         return 1 if self._reg > 0.0 else 0
 
-    def _predict_update_rows_out(self, Z2: np.ndarray, U2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def predict_update_rows_out(self, Z2: np.ndarray, U2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One time step that also returns the rows the rotations leave below ``[R | d]``.
 
         For validated C-contiguous float64 (k, b) / (k, t) arrays with k ≤ 32. The returned ``E``
@@ -445,7 +445,7 @@ class RecursiveRLS:
                 and Z.flags.c_contiguous):
             return self._predict_row(Z, return_variance)
         Z2, single = self._check_features(Z)
-        P, var = self._predict_valid(Z2, return_variance)
+        P, var = self.predict_checked(Z2, return_variance)
         if single:
             return (P[0], var[0]) if return_variance else P[0]  # type: ignore[index]
         return (P, var) if return_variance else P  # type: ignore[return-value]
@@ -453,7 +453,7 @@ class RecursiveRLS:
     def _predict_row(self, z: np.ndarray, want_variance: bool) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """:meth:`predict` of one C-contiguous float64 (b,) row: the kernels check its values.
 
-        The same kernels and operations as :meth:`_predict_valid` with k = 1 (so the same bits), in one
+        The same kernels and operations as :meth:`predict_checked` with k = 1 (so the same bits), in one
         compiled call that checks the row before it touches the state.
         """
         P = np.empty(self.n_outputs)
@@ -477,7 +477,7 @@ class RecursiveRLS:
         # the variance is a () scalar, as var[0] of the general path
         return (P, np.float64(var)) if want_variance else P  # type: ignore[return-value]
 
-    def _predict_valid(self, Z2: np.ndarray, want_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    def predict_checked(self, Z2: np.ndarray, want_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """:meth:`predict` for a validated C-contiguous float64 (k, b) array: ``(Z W, var or None)``."""
         k = Z2.shape[0]
         # the path depends on k only (not on what is cached), so equal states give bit-equal predictions
@@ -492,7 +492,7 @@ class RecursiveRLS:
                 solve_predict(self._M, Z2, P, var)
             return P, (var if want_variance else None)
         P = Z2 @ self.weights
-        return P, (self._variance_valid(Z2) if want_variance else None)
+        return P, (self.variance_checked(Z2) if want_variance else None)
 
     def variance(self, Z: np.ndarray) -> np.ndarray:
         """``z A⁻¹ zᵀ`` per row by one triangular solve (``‖R⁻ᵀzᵀ‖²``).
@@ -510,10 +510,11 @@ class RecursiveRLS:
             RejectedSampleError: Wrong shape or non-finite entries.
         """
         Z2, single = self._check_features(Z)
-        out = self._variance_valid(Z2)
+        out = self.variance_checked(Z2)
         return out[0] if single else out
 
-    def _variance_valid(self, Z2: np.ndarray) -> np.ndarray:
+    def variance_checked(self, Z2: np.ndarray) -> np.ndarray:
+        """Return the relative predictive variance of checked rows Z2 (no pending update left behind)."""
         self._flush()
         if Z2.shape[0] <= _MAX_SOLVED_ROWS:
             P = np.empty((Z2.shape[0], self.n_outputs))

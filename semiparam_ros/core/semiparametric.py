@@ -89,16 +89,16 @@ class PredictionContext:
             warm-up counts 0, as in :func:`~semiparam_ros.core.uncertainty.predict_with_variance`).
     """
 
-    __slots__ = ("_Phi", "_model", "_phi", "_seen", "_x", "prediction")
+    __slots__ = ("Phi", "model", "phi", "prediction", "seen", "x")
 
     def __init__(self, prediction: Prediction, model: _Model, x: np.ndarray, Phi: np.ndarray | None,
                  phi: np.ndarray | None) -> None:
         self.prediction = prediction
-        self._model: _Model | None = model
-        self._seen = model.n_samples_seen
-        self._x = x  # validated input (of the model)
-        self._Phi = Phi  # rigid-body regressor rows (t, p), or None (NP)
-        self._phi = phi  # random features (1, D), or None (P, or a residual stage in its warm-up)
+        self.model: _Model | None = model
+        self.seen = model.n_samples_seen
+        self.x = x  # validated input (of the model)
+        self.Phi = Phi  # rigid-body regressor rows (t, p), or None (NP)
+        self.phi = phi  # random features (1, D), or None (P, or a residual stage in its warm-up)
 
 
 class _Model:
@@ -116,7 +116,7 @@ class _Model:
         Raises:
             ValueError: If it was made by another model, already used, or the model learned since.
         """
-        if context._model is not self or context._seen != self.n_samples_seen:
+        if context.model is not self or context.seen != self.n_samples_seen:
             raise ValueError("stale prediction context: learn_ahead needs the context of this model's last "
                              "predict_ahead, with nothing learned in between")
         return context
@@ -134,7 +134,7 @@ class _Model:
         Raises:
             RejectedSampleError: Bad x or regressor output.
         """
-        return self._predict_ahead_valid(self._check_x(x).copy())  # the context must not see x change
+        return self.predict_ahead_checked(self._check_x(x).copy())  # the context must not see x change
 
     def learn_ahead(self, context: PredictionContext, y: Any) -> None:
         """Learn y for the input of ``context`` (from :meth:`predict_ahead`, nothing learned since).
@@ -150,7 +150,7 @@ class _Model:
             RejectedSampleError: Bad y (the model and the context are unchanged).
             ValueError: A stale or already used context (a programming error).
         """
-        self._learn_ahead_valid(context, check_finite_array("y", y, (self.n_outputs,)))
+        self.learn_ahead_checked(context, check_finite_array("y", y, (self.n_outputs,)))
 
     def predict_held(self, x: Any) -> Prediction:
         """Predict x cheaply for a sample that will not be learned (a node that falls behind).
@@ -161,15 +161,19 @@ class _Model:
         Raises:
             RejectedSampleError: Bad x or regressor output.
         """
-        return self._predict_ahead_valid(self._check_x(x).copy()).prediction
+        return self.predict_ahead_checked(self._check_x(x).copy()).prediction
 
-    def _learners(self) -> tuple[RecursiveRLS, ...]:  # pragma: no cover - abstract
+    def rls_stages(self) -> tuple[RecursiveRLS, ...]:  # pragma: no cover - abstract
         """Return the recursive least-squares learners holding this model's state."""
         raise NotImplementedError
 
+    def adaptive_stages(self) -> tuple[RecursiveRLS, ...]:
+        """Return the learners whose forgetting ``adaptation.time_constant`` sets (parametric stage first)."""
+        return self.rls_stages()
+
     def has_pending(self) -> bool:
         """Tell whether a learner holds a deferred update (applied by the next prediction or now)."""
-        return any(rls.has_pending for rls in self._learners())
+        return any(rls.has_pending for rls in self.rls_stages())
 
     def apply_pending(self) -> bool:
         """Apply the learners' deferred updates now (see :meth:`RecursiveRLS.apply_pending`).
@@ -178,17 +182,17 @@ class _Model:
             Whether any update was pending.
         """
         applied = False
-        for rls in self._learners():
+        for rls in self.rls_stages():
             applied = rls.apply_pending() or applied
         return applied
 
     def _check_x(self, x: Any) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:  # pragma: no cover - abstract
+    def predict_ahead_checked(self, xv: np.ndarray) -> PredictionContext:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:  # pragma: no cover
+    def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:  # pragma: no cover
         raise NotImplementedError
 
     def copy(self) -> Any:
@@ -288,17 +292,17 @@ class ParametricModel(_Model):
         self.prior.flags.writeable = False
         self._has_prior = bool(np.any(p != 0.0))
 
-    def _prior_output(self, Phi: np.ndarray) -> np.ndarray | None:
+    def prior_output(self, Phi: np.ndarray) -> np.ndarray | None:
         """``Φπ₀`` (t,), or None for a zero prior."""
         return Phi @ self.prior if self._has_prior else None
 
-    def _predict_phi(
+    def predict_phi(
         self, Phi: np.ndarray, want_variance: bool = False
     ) -> tuple[np.ndarray, np.ndarray | None]:
         """``Φ(π₀ + δ̂)`` (t,) for a validated regressor, and ``diag(Φ A⁻¹ Φᵀ)`` when asked (one pass)."""
-        P, var = self.rls._predict_valid(np.ascontiguousarray(Phi), want_variance)
+        P, var = self.rls.predict_checked(np.ascontiguousarray(Phi), want_variance)
         yp = P[:, 0]
-        y0 = self._prior_output(Phi)
+        y0 = self.prior_output(Phi)
         return (yp if y0 is None else yp + y0), var
 
     def predict_many(self, X: Any, rigid: np.ndarray | None = None) -> Prediction:
@@ -319,42 +323,43 @@ class ParametricModel(_Model):
             RejectedSampleError: Wrong shape, NaN/inf in X, or a bad regressor output.
         """
         X2 = check_finite_array("X", X, (None, None))
-        Phi = self._phi_rows(X2)
-        yp, var = self._predict_phi_rows(Phi)
+        Phi = self.phi_rows(X2)
+        yp, var = self.predict_phi_rows(Phi)
         if rigid is not None:
             yp = Phi @ check_finite_array("rigid", rigid, (self.n_params,))
         return Prediction(yp, np.zeros_like(yp), yp.copy(), var)
 
-    def _phi_rows(self, X2: np.ndarray) -> np.ndarray:
+    def phi_rows(self, X2: np.ndarray) -> np.ndarray:
         """Stacked regressors (N, t, p) of validated inputs (N, n_inputs)."""
         Phi = np.empty((X2.shape[0], self.n_outputs, self.n_params))
         for i in range(X2.shape[0]):
             Phi[i] = self._phi_uncached(np.ascontiguousarray(X2[i]))
         return Phi
 
-    def _predict_phi_rows(self, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def predict_phi_rows(self, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(Φ(π₀ + δ̂), diag(Φ A⁻¹ Φᵀ))`` of stacked regressors (N, t, p), both (N, t)."""
         n, t, p = Phi.shape
         rows = np.ascontiguousarray(Phi.reshape(n * t, p))
-        P, var = self.rls._predict_valid(rows, True)
+        P, var = self.rls.predict_checked(rows, True)
         assert var is not None  # asked for
         yp = P[:, 0] if not self._has_prior else P[:, 0] + rows @ self.prior
         return yp.reshape(n, t), var.reshape(n, t)
 
-    def _predict_update_phi(self, Phi: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def predict_update_phi(self, Phi: np.ndarray, y: np.ndarray) -> np.ndarray:
         """A-priori ``Φ(π₀ + δ̂)``, then learn ``y − Φπ₀`` (validated inputs); counters untouched."""
-        y0 = self._prior_output(Phi)
+        y0 = self.prior_output(Phi)
         if y0 is None:
-            return self.rls._predict_update_valid(Phi, y.reshape(-1, 1))[:, 0]
-        return self.rls._predict_update_valid(Phi, (y - y0).reshape(-1, 1))[:, 0] + y0
+            return self.rls.predict_update_checked(Phi, y.reshape(-1, 1))[:, 0]
+        return self.rls.predict_update_checked(Phi, (y - y0).reshape(-1, 1))[:, 0] + y0
 
-    def _update_phi(self, Phi: np.ndarray, y: np.ndarray) -> None:
+    def update_phi(self, Phi: np.ndarray, y: np.ndarray) -> None:
         """Learn ``y − Φπ₀`` (validated inputs); counters untouched."""
-        y0 = self._prior_output(Phi)
-        self.rls._update_valid(Phi, (y if y0 is None else y - y0).reshape(-1, 1))
+        y0 = self.prior_output(Phi)
+        self.rls.update_checked(Phi, (y if y0 is None else y - y0).reshape(-1, 1))
 
     # --- internals shared with SemiparametricModel
-    def _phi(self, x: np.ndarray) -> np.ndarray:
+    def phi_cached(self, x: np.ndarray) -> np.ndarray:
+        """Return the regressor Φ(x) (outputs × parameters), reusing the last one when x is the same."""
         cache = self._phi_cache
         if cache is not None and np.array_equal(cache[0], x):
             return cache[1]
@@ -362,7 +367,7 @@ class ParametricModel(_Model):
         self._phi_cache = (np.array(x, dtype=np.float64), Phi)
         return Phi
 
-    def _phi_fresh(self, x: np.ndarray) -> np.ndarray:
+    def phi_fresh(self, x: np.ndarray) -> np.ndarray:
         """Φ(x) evaluated now (x is new: no comparison with the cache), then cached for a learn of x."""
         Phi = self._phi_uncached(x)
         self._phi_cache = (x.copy(), Phi)
@@ -383,22 +388,25 @@ class ParametricModel(_Model):
         yv = None if y is None else check_finite_array("y", y, (self.n_outputs,))
         return xv, yv
 
-    def _learners(self) -> tuple[RecursiveRLS, ...]:
+    def rls_stages(self) -> tuple[RecursiveRLS, ...]:
+        """Return the recursive least-squares learners holding this model's state (the learner contract)."""
         return (self.rls,)
 
     def _check_x(self, x: Any) -> np.ndarray:
         return check_finite_array("x", x, (None,))
 
-    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
-        Phi = self._phi_fresh(xv)
-        yp, var = self._predict_phi(Phi, True)
+    def predict_ahead_checked(self, xv: np.ndarray) -> PredictionContext:
+        """Do :meth:`predict_ahead` for an input already checked (finite, the model's shape) and copied."""
+        Phi = self.phi_fresh(xv)
+        yp, var = self.predict_phi(Phi, True)
         pred = Prediction(yp, np.zeros(self.n_outputs), yp.copy(), var)
         return PredictionContext(pred, self, xv, Phi, None)
 
-    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
-        Phi = self._take(context)._Phi
+    def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
+        """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
+        Phi = self._take(context).Phi
         assert Phi is not None  # a ParametricModel's context always holds the regressor
-        self._update_phi(Phi, yv)
+        self.update_phi(Phi, yv)
         self.n_samples_seen += 1
 
     # --- interface
@@ -413,8 +421,8 @@ class ParametricModel(_Model):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _ = self._check(x)
-        Phi = self._phi(xv)
-        yp, var = self._predict_phi(Phi, return_variance)
+        Phi = self.phi_cached(xv)
+        yp, var = self.predict_phi(Phi, return_variance)
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy(), var)
 
     def learn_one(self, x: Any, y: Any) -> None:
@@ -425,8 +433,8 @@ class ParametricModel(_Model):
         """
         xv, yv = self._check(x, y)
         assert yv is not None  # _check returns y checked when it is given
-        Phi = self._phi(xv)
-        self._update_phi(Phi, yv)
+        Phi = self.phi_cached(xv)
+        self.update_phi(Phi, yv)
         self.n_samples_seen += 1
 
     def predict_learn_one(self, x: Any, y: Any) -> Prediction:
@@ -437,8 +445,8 @@ class ParametricModel(_Model):
         """
         xv, yv = self._check(x, y)
         assert yv is not None  # _check returns y checked when it is given
-        Phi = self._phi(xv)
-        yp = self._predict_update_phi(Phi, yv)
+        Phi = self.phi_cached(xv)
+        yp = self.predict_update_phi(Phi, yv)
         self.n_samples_seen += 1
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy())
 
@@ -535,59 +543,63 @@ class NonparametricModel(_Model):
         self._initial_standardizer = self.standardizer.copy()
         self.n_samples_seen = 0
 
-    def _features(self, x: np.ndarray) -> np.ndarray:
+    def features_of(self, x: np.ndarray) -> np.ndarray:
         """φ(s(x)) for a validated 1-D x, as a (1, D) row (finite by construction: cos of finite input).
 
         One compiled call (:func:`~semiparam_ros.core._step_kernels.standardized_features`); equal to
         ``rff.transform(standardizer.transform(x))`` to rounding.
         """
         std, rff = self.standardizer, self.rff
-        return standardized_features(x, std.mean_, std.scale_, rff.omega_, rff.offset_, rff._scale)
+        return standardized_features(x, std.mean_, std.scale_, rff.omega_, rff.offset_, rff.feature_scale)
 
-    def _predict(self, xin: np.ndarray, return_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    def predict_input(self, xin: np.ndarray, return_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """Predict the residual at a checked input: ``(r, relative variance or None)`` (NaN in warm-up)."""
         if not self.standardizer.ready:
             var = np.full(self.n_outputs, np.nan) if return_variance else None
             return np.zeros(self.n_outputs), var
-        phi = self._features(xin)
+        phi = self.features_of(xin)
         # one forward substitution gives both (fused with a pending update: see RecursiveRLS.predict)
-        P, v = self.rls._predict_valid(phi, return_variance)
+        P, v = self.rls.predict_checked(phi, return_variance)
         var = np.full(self.n_outputs, float(v[0])) if v is not None else None
         return P[0], var
 
-    def _learn(self, xin: np.ndarray, target: np.ndarray, want_prediction: bool) -> np.ndarray:
+    def learn_input(self, xin: np.ndarray, target: np.ndarray, want_prediction: bool) -> np.ndarray:
         """Warm-up or update with validated inputs; returns the a-priori prediction if asked."""
         if not self.standardizer.ready:
             self.standardizer.partial_fit(xin)
             return np.zeros(self.n_outputs)
-        phi = self._features(xin)
+        phi = self.features_of(xin)
         if want_prediction:
-            return self.rls._predict_update_valid(phi, target.reshape(1, -1))[0]
-        self.rls._update_valid(phi, target.reshape(1, -1))
+            return self.rls.predict_update_checked(phi, target.reshape(1, -1))[0]
+        self.rls.update_checked(phi, target.reshape(1, -1))
         return np.zeros(0)
 
-    def _learners(self) -> tuple[RecursiveRLS, ...]:
+    def rls_stages(self) -> tuple[RecursiveRLS, ...]:
+        """Return the recursive least-squares learners holding this model's state (the learner contract)."""
         return (self.rls,)
 
     def _check_x(self, x: Any) -> np.ndarray:
         return check_finite_array("x", x, (self.n_inputs,))
 
-    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
+    def predict_ahead_checked(self, xv: np.ndarray) -> PredictionContext:
+        """Do :meth:`predict_ahead` for an input already checked (finite, the model's shape) and copied."""
         t = self.n_outputs
         if not self.standardizer.ready:
             r, var, phi = np.zeros(t), np.zeros(t), None
         else:
-            phi = self._features(xv)
-            P, v = self.rls._predict_valid(phi, True)
+            phi = self.features_of(xv)
+            P, v = self.rls.predict_checked(phi, True)
             assert v is not None  # asked for
             r, var = P[0], np.full(t, float(v[0]))
         return PredictionContext(Prediction(np.zeros(t), r, r.copy(), var), self, xv, None, phi)
 
-    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
-        phi = self._take(context)._phi
+    def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
+        """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
+        phi = self._take(context).phi
         if phi is None:
-            self.standardizer.partial_fit(context._x)
+            self.standardizer.partial_fit(context.x)
         else:
-            self.rls._update_valid(phi, yv.reshape(1, -1))
+            self.rls.update_checked(phi, yv.reshape(1, -1))
         self.n_samples_seen += 1
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
@@ -597,7 +609,7 @@ class NonparametricModel(_Model):
             RejectedSampleError: Bad x.
         """
         xv = check_finite_array("x", x, (self.n_inputs,))
-        r, var = self._predict(xv, return_variance)
+        r, var = self.predict_input(xv, return_variance)
         return Prediction(np.zeros(self.n_outputs), r, r.copy(), var)
 
     def learn_one(self, x: Any, y: Any) -> None:
@@ -608,7 +620,7 @@ class NonparametricModel(_Model):
         """
         xv = check_finite_array("x", x, (self.n_inputs,))
         yv = check_finite_array("y", y, (self.n_outputs,))
-        self._learn(xv, yv, False)
+        self.learn_input(xv, yv, False)
         self.n_samples_seen += 1
 
     def predict_learn_one(self, x: Any, y: Any) -> Prediction:
@@ -619,7 +631,7 @@ class NonparametricModel(_Model):
         """
         xv = check_finite_array("x", x, (self.n_inputs,))
         yv = check_finite_array("y", y, (self.n_outputs,))
-        r = self._learn(xv, yv, True)
+        r = self.learn_input(xv, yv, True)
         self.n_samples_seen += 1
         return Prediction(np.zeros(self.n_outputs), r, r.copy())
 
@@ -713,7 +725,7 @@ class _TwoStageModel(_Model):
     n_outputs: int
     n_samples_seen: int
 
-    def _learners(self) -> tuple[RecursiveRLS, ...]:
+    def rls_stages(self) -> tuple[RecursiveRLS, ...]:
         return (self.parametric.rls, self.nonparametric.rls)
 
     @property
@@ -727,7 +739,7 @@ class _TwoStageModel(_Model):
     def _check(self, x: Any, y: Any = None) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         xv = check_finite_array("x", x, (self.n_inputs,))
         yv = None if y is None else check_finite_array("y", y, (self.n_outputs,))
-        return xv, yv, self.parametric._phi(xv)
+        return xv, yv, self.parametric.phi_cached(xv)
 
     @property
     def parameters(self) -> np.ndarray:
@@ -868,8 +880,8 @@ class SemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        yp, var_p = self.parametric._predict_phi(Phi, return_variance)
-        r, var_np = self.nonparametric._predict(np.concatenate([xv, yp]), return_variance)
+        yp, var_p = self.parametric.predict_phi(Phi, return_variance)
+        r, var_np = self.nonparametric.predict_input(np.concatenate([xv, yp]), return_variance)
         var = None
         if var_p is not None:
             assert var_np is not None  # _predict computes it when asked
@@ -877,14 +889,15 @@ class SemiparametricModel(_TwoStageModel):
             var = var_p + var_np if self.nonparametric.standardizer.ready else var_p
         return Prediction(yp, r, yp + r, var)
 
-    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
+    def predict_ahead_checked(self, xv: np.ndarray) -> PredictionContext:
+        """Do :meth:`predict_ahead` for an input already checked (finite, the model's shape) and copied."""
         par, npm = self.parametric, self.nonparametric
-        Phi = par._phi_fresh(xv)
-        yp, var = par._predict_phi(Phi, True)
+        Phi = par.phi_fresh(xv)
+        yp, var = par.predict_phi(Phi, True)
         assert var is not None  # asked for
         if npm.standardizer.ready:
-            phi = npm._features(np.concatenate([xv, yp]))
-            P, v = npm.rls._predict_valid(phi, True)
+            phi = npm.features_of(np.concatenate([xv, yp]))
+            P, v = npm.rls.predict_checked(phi, True)
             assert v is not None  # asked for
             r = P[0]
             var = var + float(v[0])
@@ -892,27 +905,28 @@ class SemiparametricModel(_TwoStageModel):
             phi, r = None, np.zeros(self.n_outputs)  # the warm-up predicts 0 and adds no variance
         return PredictionContext(Prediction(yp, r, yp + r, var), self, xv, Phi, phi)
 
-    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
+    def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
+        """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
         # learn_one's _step with the regressor, ŷ and features of the prediction; both stages' rows are
         # checked before either learner changes, so a refused value leaves the model as it was
         par, npm = self.parametric, self.nonparametric
-        Phi, phi = self._take(context)._Phi, context._phi
+        Phi, phi = self._take(context).Phi, context.phi
         assert Phi is not None  # a two-stage context always holds the regressor
         yp = context.prediction.parametric
-        y0 = par._prior_output(Phi)
+        y0 = par.prior_output(Phi)
         # Φ (also cached by the parametric stage), φ and the targets below are read-only from here on: owned
         target = yv.copy() if y0 is None else yv - y0
-        par_step = par.rls._checked_step(Phi, target.reshape(-1, 1), owned=True)
+        par_step = par.rls.checked_step(Phi, target.reshape(-1, 1), owned=True)
         if phi is None:
             # warm-up (see _step and the class docstring for the ŷ block's statistics)
-            xv = context._x
+            xv = context.x
             measured = self.yhat_statistics == "measured"
             npm.standardizer.partial_fit(np.concatenate([xv, yv if measured else yp]))
-            par.rls._defer_checked(par_step)
+            par.rls.defer_step(par_step)
         else:
-            np_step = npm.rls._checked_step(phi, (yv - yp).reshape(1, -1), owned=True)
-            par.rls._defer_checked(par_step)
-            npm.rls._defer_checked(np_step)
+            np_step = npm.rls.checked_step(phi, (yv - yp).reshape(1, -1), owned=True)
+            par.rls.defer_step(par_step)
+            npm.rls.defer_step(np_step)
         par.n_samples_seen += 1
         npm.n_samples_seen += 1
         self.n_samples_seen += 1
@@ -920,7 +934,7 @@ class SemiparametricModel(_TwoStageModel):
     def _step(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
         xv, yv, Phi = self._check(x, y)
         assert yv is not None
-        yp = self.parametric._predict_update_phi(Phi, yv)
+        yp = self.parametric.predict_update_phi(Phi, yv)
         self.parametric.n_samples_seen += 1
         npm = self.nonparametric
         if not npm.standardizer.ready and self.yhat_statistics == "measured":
@@ -928,7 +942,7 @@ class SemiparametricModel(_TwoStageModel):
             npm.standardizer.partial_fit(np.concatenate([xv, yv]))
             r = np.zeros(self.n_outputs)
         else:
-            r = npm._learn(np.concatenate([xv, yp]), yv - yp, want_prediction)
+            r = npm.learn_input(np.concatenate([xv, yp]), yv - yp, want_prediction)
         self.nonparametric.n_samples_seen += 1
         self.n_samples_seen += 1
         return Prediction(yp, r, yp + r) if want_prediction else None

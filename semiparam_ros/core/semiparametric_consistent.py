@@ -280,13 +280,13 @@ def structural_entries(regressor: Regressor, n_inputs: int, n_outputs: int, n_pa
 class _Context(PredictionContext):
     """A prediction context that also keeps the local tracker's reference prediction and weight at x."""
 
-    __slots__ = ("_kappa", "_model_total")
+    __slots__ = ("kappa", "model_total")
 
     def __init__(self, prediction: Prediction, model: Any, x: np.ndarray, Phi: np.ndarray | None,
                  phi: np.ndarray | None, model_total: np.ndarray, kappa: float) -> None:
         super().__init__(prediction, model, x, Phi, phi)
-        self._model_total = model_total
-        self._kappa = kappa  # the tracker's weight at x
+        self.model_total = model_total
+        self.kappa = kappa  # the tracker's weight at x
 
 
 class ConsistentSemiparametricModel(_TwoStageModel):
@@ -407,7 +407,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         the residual ``g·r`` and its relative variance as last computed (see :meth:`predict_held`).
         """
         par_model, npm = self.parametric, self.nonparametric
-        yp, var = par_model._predict_phi(Phi, True)
+        yp, var = par_model.predict_phi(Phi, True)
         assert var is not None  # asked for
         if rigid is not None:
             yp = Phi @ rigid
@@ -418,8 +418,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             self._held = None
             return yp, np.zeros(self.n_outputs), var, None
         t = self.n_outputs
-        phi = npm._features(xv)
-        P, v = npm.rls._predict_valid(phi, True)
+        phi = npm.features_of(xv)
+        P, v = npm.rls.predict_checked(phi, True)
         assert v is not None  # asked for
         pk = P[0]
         delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
@@ -430,7 +430,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
         return yp, r, var + float(v[0]), phi
 
-    def _predict_valid(self, xv: np.ndarray, Phi: np.ndarray, *, held: bool = False
+    def predict_checked(self, xv: np.ndarray, Phi: np.ndarray, *, held: bool = False
                        ) -> tuple[Prediction, np.ndarray, np.ndarray | None, float]:
         """Return the prediction, ``model(x) + wΦδ_f`` (the local tracker's reference), φ and κ(x)."""
         yp, r, var, phi = self._model_valid(xv, Phi, held=held)
@@ -439,7 +439,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             return Prediction(yp, r, model_total, var, np.zeros(self.n_outputs)), model_total, phi, 0.0
         kappa = self.tracker.weight(xv)
         kappa_fast = kappa ** (1.0 / self.FAST_FADE ** 2)  # the same fade over FAST_FADE × the distances
-        P, v = self.fast._predict_valid(Phi, True)
+        P, v = self.fast.predict_checked(Phi, True)
         assert v is not None  # asked for
         c = P[:, 0]
         fast = model_total + (kappa_fast * self.fast_weight(c, v)) * c
@@ -476,13 +476,18 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        pred = self._predict_valid(xv, Phi)[0]
+        pred = self.predict_checked(xv, Phi)[0]
         if not return_variance:
             pred = Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
         return pred
 
-    def _learners(self) -> tuple[RecursiveRLS, ...]:
+    def rls_stages(self) -> tuple[RecursiveRLS, ...]:
+        """Return the recursive least-squares learners holding this model's state (the learner contract)."""
         return (self.parametric.rls, self.nonparametric.rls, self.fast)
+
+    def adaptive_stages(self) -> tuple[RecursiveRLS, ...]:
+        """Return the two stages' learners (the fast tracker keeps its own memory, ``set_sample_period``)."""
+        return (self.parametric.rls, self.nonparametric.rls)
 
     def predict_held(self, x: Any) -> Prediction:
         """Predict x as :meth:`predict_one` but with the residual held from the last full prediction.
@@ -503,7 +508,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        return self._predict_valid(xv, Phi, held=True)[0]
+        return self.predict_checked(xv, Phi, held=True)[0]
 
     def predict_model(self, x: Any, rigid: np.ndarray | None = None) -> Prediction:
         """Predict model(x) alone (rigid-body part + weighted residual; no fast correction).
@@ -551,16 +556,16 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """
         X2 = check_finite_array("X", X, (None, self.n_inputs))
         par_model, npm = self.parametric, self.nonparametric
-        Phi = par_model._phi_rows(X2)
-        yp, var = par_model._predict_phi_rows(Phi)
+        Phi = par_model.phi_rows(X2)
+        yp, var = par_model.predict_phi_rows(Phi)
         rigid = self._checked_rigid(rigid)
         if rigid is not None:
             yp = Phi @ rigid
         r = np.zeros_like(yp)
         if npm.standardizer.ready:
             n, t, p = Phi.shape
-            phi = np.ascontiguousarray(npm.rff._map(npm.standardizer._apply(X2)))
-            P, v = npm.rls._predict_valid(phi, True)
+            phi = np.ascontiguousarray(npm.rff.map_checked(npm.standardizer.apply_checked(X2)))
+            P, v = npm.rls.predict_checked(phi, True)
             assert v is not None  # asked for
             delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
             full = np.zeros((n, t * p))
@@ -572,37 +577,39 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         return Prediction(yp, r, yp + r, var)
 
     # ------------------------------------------------------------------ learning
-    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
-        Phi = self.parametric._phi_fresh(xv)
-        pred, model_total, phi, kappa = self._predict_valid(xv, Phi)
+    def predict_ahead_checked(self, xv: np.ndarray) -> PredictionContext:
+        """Do :meth:`predict_ahead` for an input already checked (finite, the model's shape) and copied."""
+        Phi = self.parametric.phi_fresh(xv)
+        pred, model_total, phi, kappa = self.predict_checked(xv, Phi)
         return _Context(pred, self, xv, Phi, phi, model_total, kappa)
 
-    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
+    def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
+        """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
         ctx = self._take(context)
-        assert isinstance(ctx, _Context) and ctx._Phi is not None  # made by _predict_ahead_valid
-        Phi, phi, xv = ctx._Phi, ctx._phi, ctx._x
+        assert isinstance(ctx, _Context) and ctx.Phi is not None  # made by _predict_ahead_valid
+        Phi, phi, xv = ctx.Phi, ctx.phi, ctx.x
         par_model, npm = self.parametric, self.nonparametric
-        y0 = par_model._prior_output(Phi)
+        y0 = par_model.prior_output(Phi)
         target = yv.copy() if y0 is None else yv - y0
         # both learners' rows are checked before either changes: a refused value leaves the model as it was
-        par_step = par_model.rls._checked_step(Phi, target.reshape(-1, 1), owned=True)
+        par_step = par_model.rls.checked_step(Phi, target.reshape(-1, 1), owned=True)
         fast_step = None
         if self.use_tracker:
             # the fast correction learns the error of model(x) (the a-priori model, without corrections)
             pred = ctx.prediction
             model_only = pred.total if pred.correction is None else pred.total - pred.correction
-            fast_step = RecursiveRLS._checked_step(Phi, (yv - model_only).reshape(-1, 1))
+            fast_step = RecursiveRLS.checked_step(Phi, (yv - model_only).reshape(-1, 1))
         if phi is None:
             npm.standardizer.partial_fit(xv)
-            par_model.rls._defer_checked(par_step)
+            par_model.rls.defer_step(par_step)
         else:
             u = np.concatenate([target, Phi.reshape(-1)[self._phi_entries]]).reshape(1, -1)
-            np_step = RecursiveRLS._checked_step(phi, u, owned=True)
-            par_model.rls._defer_checked(par_step)
-            npm.rls._defer_checked(np_step)
+            np_step = RecursiveRLS.checked_step(phi, u, owned=True)
+            par_model.rls.defer_step(par_step)
+            npm.rls.defer_step(np_step)
         if fast_step is not None:
-            self.fast._defer_checked(fast_step)
-            self.tracker.update(xv, yv, ctx._model_total, ctx._kappa)
+            self.fast.defer_step(fast_step)
+            self.tracker.update(xv, yv, ctx.model_total, ctx.kappa)
         par_model.n_samples_seen += 1
         npm.n_samples_seen += 1
         self.n_samples_seen += 1

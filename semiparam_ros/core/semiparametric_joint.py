@@ -18,7 +18,7 @@ optimal W is ridge regression of the columns ``y_k − Φ_k π`` (k = output) on
 random-feature :class:`RecursiveRLS` regresses the ``t(1+p)`` columns ``U = [y, Φ_1, …, Φ_t]`` (``Φ_k`` the
 k-th row of the regressor, p = n_params) on φ; its factor stays ``[R | d_y | G]``. What it leaves
 unexplained, ``S = Σ β^{n−m} UᵀU − [d_y|G]ᵀ[d_y|G]``, grows each step by ``EᵀE`` where ``E`` are the rows
-its rotations push out (:meth:`RecursiveRLS._predict_update_rows_out`). The profiled objective in π is
+its rotations push out (:meth:`RecursiveRLS.predict_update_rows_out`). The profiled objective in π is
 ``Σ_k [1, −πᵀ] S_kk [1, −πᵀ]ᵀ + λ_P ‖π‖²`` (``S_kk`` the block of output k), i.e. ordinary recursive ridge
 regression of the ``y``-part of each rotated-out row on its ``Φ_k``-part: a second, p-dimensional
 RecursiveRLS with the t rows ``(E[:, t + kp : t + (k+1)p], E[:, k])`` per rotated-out row. Its weights are
@@ -146,10 +146,10 @@ class JointSemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        pred, _ = self._predict_valid(xv, Phi, return_variance)
+        pred, _ = self.predict_checked(xv, Phi, return_variance)
         return pred
 
-    def _predict_valid(self, xv: np.ndarray, Phi: np.ndarray,
+    def predict_checked(self, xv: np.ndarray, Phi: np.ndarray,
                        return_variance: bool) -> tuple[Prediction, np.ndarray | None]:
         """:meth:`predict_one` for a validated x and its regressor; also returns the features (or None)."""
         pi = self.parametric.rls.weights[:, 0]
@@ -157,35 +157,37 @@ class JointSemiparametricModel(_TwoStageModel):
         t, p = self.n_outputs, self.n_params
         phi = None
         if npm.standardizer.ready:
-            phi = npm._features(xv)
+            phi = npm.features_of(xv)
             # one forward substitution (O(D²)) instead of the t(1+p)-column weights (O(t(1+p)·D²))
-            P, v = npm.rls._predict_valid(phi, return_variance)
+            P, v = npm.rls.predict_checked(phi, return_variance)
             pk = P[0]
             var_k = float(v[0]) if v is not None else 0.0
         else:
             pk = np.zeros(t * (1 + p))
             var_k = 0.0
         par, total, eU = self._combine(Phi, pk, pi)
-        y0 = self.parametric._prior_output(Phi)
+        y0 = self.parametric.prior_output(Phi)
         if y0 is not None:
             par, total = par + y0, total + y0
-        var = var_k + self.parametric.rls._variance_valid(eU) if return_variance else None
+        var = var_k + self.parametric.rls.variance_checked(eU) if return_variance else None
         return Prediction(par, total - par, total, var), phi
 
-    def _predict_ahead_valid(self, xv: np.ndarray) -> PredictionContext:
-        Phi = self.parametric._phi_fresh(xv)
-        pred, phi = self._predict_valid(xv, Phi, True)
+    def predict_ahead_checked(self, xv: np.ndarray) -> PredictionContext:
+        """Do :meth:`predict_ahead` for an input already checked (finite, the model's shape) and copied."""
+        Phi = self.parametric.phi_fresh(xv)
+        pred, phi = self.predict_checked(xv, Phi, True)
         return PredictionContext(pred, self, xv, Phi, phi)
 
-    def _learn_ahead_valid(self, context: PredictionContext, yv: np.ndarray) -> None:
-        Phi = self._take(context)._Phi
+    def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
+        """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
+        Phi = self._take(context).Phi
         assert Phi is not None  # a two-stage context always holds the regressor
-        self._learn_valid(context._x, yv, Phi, context._phi)
+        self._learn_valid(context.x, yv, Phi, context.phi)
 
     def _step(self, x: Any, y: Any) -> Prediction:
         xv, yv, Phi = self._check(x, y)
         assert yv is not None
-        phi = self.nonparametric._features(xv) if self.nonparametric.standardizer.ready else None
+        phi = self.nonparametric.features_of(xv) if self.nonparametric.standardizer.ready else None
         return self._learn_valid(xv, yv, Phi, phi)
 
     def _learn_valid(self, xv: np.ndarray, yv: np.ndarray, Phi: np.ndarray,
@@ -198,7 +200,7 @@ class JointSemiparametricModel(_TwoStageModel):
         t, p = self.n_outputs, self.n_params
         pi = self.parametric.rls.weights[:, 0]  # δ̂ = π̂ − π₀
         npm = self.nonparametric
-        y0 = self.parametric._prior_output(Phi)
+        y0 = self.parametric.prior_output(Phi)
         if y0 is not None:
             yv = yv - y0  # (1) in δ: the targets are what the prior leaves over
         if phi is None:
@@ -207,20 +209,20 @@ class JointSemiparametricModel(_TwoStageModel):
             # after the warm-up: until then it holds only its prior, which is left undecayed)
             npm.standardizer.partial_fit(xv)
             par = Phi @ pi
-            self.parametric.rls._update_valid(Phi, yv.reshape(-1, 1))
+            self.parametric.rls.update_checked(Phi, yv.reshape(-1, 1))
             if y0 is not None:
                 par = par + y0
             pred = Prediction(par, np.zeros(t), par.copy())
         else:
             u = np.concatenate([yv, Phi.reshape(-1)]).reshape(1, -1)
-            pk, E = npm.rls._predict_update_rows_out(phi, u)
+            pk, E = npm.rls.predict_update_rows_out(phi, u)
             par, total, _ = self._combine(Phi, pk[0], pi)
             # every rotated-out row gives t rows (Φ_k part, y_k part) of the profiled problem in π; they are
             # finite (an orthogonal transform of finite, validated rows), so this update cannot be refused
             # after the kernel learner's has been made
             Zp = np.ascontiguousarray(E[:, t:].reshape(-1, p))
             Up = np.ascontiguousarray(E[:, :t].reshape(-1, 1))
-            self.parametric.rls._update_valid(Zp, Up)
+            self.parametric.rls.update_checked(Zp, Up)
             if y0 is not None:
                 par, total = par + y0, total + y0
             pred = Prediction(par, total - par, total)
