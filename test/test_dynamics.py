@@ -17,6 +17,8 @@ from semiparam_ros.core.dynamics import (
     is_physically_consistent,
     point_mass_parameters,
 )
+from semiparam_ros.errors import ConfigurationError
+from semiparam_ros.sim.frames import body_placement, frame_in_body, frame_placement
 
 ICUB_JOINTS = ["r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow"]
 ICUB_SENSOR = "r_arm_ft_sensor"
@@ -222,7 +224,7 @@ def test_regressor_batch_equals_single_and_returns_fresh_arrays(icub):
 
 def test_payload_point_mass_in_distal_slot_matches_rnea(icub, icub_text):
     """The simulator's payload recipe: urdf_parameters() + point_mass_parameters() in the hand body's slot."""
-    body, T = icub.frame_in_body("r_hand_dh_frame")
+    body, T = frame_in_body(icub, "r_hand_dh_frame")
     assert body == icub.distal_body_name
     p_body = T[:3, :3] @ np.array([0.02, 0.0, 0.05]) + T[:3, 3]
     mass = 0.5
@@ -242,9 +244,9 @@ def test_payload_point_mass_in_distal_slot_matches_rnea(icub, icub_text):
         pin.framesForwardKinematics(ref, data, reference_state(ref, ICUB_JOINTS, q, dq, ddq)[0])
         fid = ref.getFrameId("r_hand_dh_frame")
         np.testing.assert_allclose(
-            icub.frame_placement(q, "r_hand_dh_frame"), data.oMf[fid].homogeneous, atol=1e-12
+            frame_placement(icub, q, "r_hand_dh_frame"), data.oMf[fid].homogeneous, atol=1e-12
         )
-        np.testing.assert_allclose(icub.body_placement(q, body) @ T, data.oMf[fid].homogeneous, atol=1e-12)
+        np.testing.assert_allclose(body_placement(icub, q, body) @ T, data.oMf[fid].homogeneous, atol=1e-12)
 
 
 def test_point_mass_parameters_match_pinocchio_inertia():
@@ -509,6 +511,41 @@ def test_bad_state_vectors_raise_value_error_naming_vector_and_joint(icub):
     with pytest.raises(ValueError, match="unknown body"):
         icub.body_index("r_hand")
     with pytest.raises(ValueError, match="unknown frame"):
-        icub.frame_placement(ok, "r_hnd")
+        frame_placement(icub, ok, "r_hnd")
     with pytest.raises(ValueError, match="not attached"):
-        icub.frame_in_body("chest")
+        frame_in_body(icub, "chest")
+
+
+def test_one_spec_builds_the_same_regressor_as_the_keywords_and_pickles(icub, icub_text):
+    """RegressorSpec is the one record of the construction options: the spec and the keyword form give the
+    same regressor (Pinocchio's RNEA-independent check: equal matrices at random states), a deep copy
+    rebuilds from the spec, a misspelt option is a ConfigurationError naming it."""
+    import copy
+
+    from semiparam_ros.core.urdf import RegressorSpec
+
+    spec = RegressorSpec(ICUB_JOINTS, ft_sensor=ICUB_SENSOR)
+    by_spec = RigidBodyRegressor(icub_text, spec)
+    rng = np.random.default_rng(5)
+    q, dq, ddq = (rng.uniform(-1, 1, (4, len(ICUB_JOINTS))) for _ in range(3))
+    assert np.array_equal(by_spec.regressor(q, dq, ddq), icub.regressor(q, dq, ddq))
+    clone = copy.deepcopy(by_spec)
+    assert clone.spec == by_spec.spec
+    assert np.array_equal(clone.regressor(q, dq, ddq), icub.regressor(q, dq, ddq))
+    with pytest.raises(ConfigurationError, match="ft_sensr"):
+        RigidBodyRegressor(icub_text, ICUB_JOINTS, ft_sensr=ICUB_SENSOR)
+    with pytest.raises(ConfigurationError, match="not both"):
+        RigidBodyRegressor(icub_text, spec, output="wrench")
+
+
+def test_deprecated_frame_queries_warn_and_agree_with_sim_frames(icub):
+    q = np.full(len(ICUB_JOINTS), 0.2)
+    with pytest.warns(DeprecationWarning, match="sim.frames"):
+        body, T = icub.frame_in_body("r_hand_dh_frame")
+    body2, T2 = frame_in_body(icub, "r_hand_dh_frame")
+    assert body == body2 and np.array_equal(T, T2)
+    with pytest.warns(DeprecationWarning):
+        assert np.array_equal(icub.frame_placement(q, "r_hand_dh_frame"),
+                              frame_placement(icub, q, "r_hand_dh_frame"))
+    with pytest.warns(DeprecationWarning):
+        assert np.array_equal(icub.body_placement(q, body), body_placement(icub, q, body))

@@ -22,6 +22,7 @@ from semiparam_ros.core.semiparametric import ParametricModel
 from semiparam_ros.io.bags import iter_samples, read_messages, read_topic_arrays
 from semiparam_ros.sim import scenario as scenario_module
 from semiparam_ros.sim.effects import DEFAULT_EFFECTS, NOMINAL_RMS, SENSOR_FRAME
+from semiparam_ros.sim.frames import frame_in_body
 from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics
 from semiparam_ros.sim.scenario import (
     CIRCLES,
@@ -382,7 +383,7 @@ def test_payload_adds_the_point_mass_after_pickup(bags):
     # static: at rest the force changes by exactly m·g
     z = np.zeros(4)
     rec_params = reg.urdf_parameters()
-    body, T = reg.frame_in_body("r_hand_dh_frame")
+    body, T = frame_in_body(reg, "r_hand_dh_frame")
     static = reg.regressor(q[-1], z, z)
     extra = np.zeros_like(rec_params)
     slot = reg.body_index(body)

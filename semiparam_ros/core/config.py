@@ -606,7 +606,7 @@ class EstimatorConfig:
 
     def urdf_path(self) -> Path:
         """Return the URDF path that ``robot.urdf`` names (see :func:`core.dynamics.resolve_urdf`)."""
-        from semiparam_ros.core.dynamics import resolve_urdf  # lazy: pinocchio is heavy
+        from semiparam_ros.core.urdf import resolve_urdf
 
         return resolve_urdf(self["robot.urdf"])
 

@@ -46,31 +46,44 @@ Their URDF value is 0 (the URDF's ``<dynamics damping>`` is not used: it is a si
 from __future__ import annotations
 
 import math
-import os
 import pathlib
-import site
-import sys
-import sysconfig
-import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from semiparam_ros.core.urdf import (
+    EXAMPLE_ROBOT_DATA_SCHEME,
+    EXTRA_COLUMN_KINDS,
+    PACKAGE_SCHEME,
+    TOPIC_SCHEME,
+    RegressorSpec,
+    example_robot_data_path,
+    icub_urdf_path,
+    package_file,
+    prepare_urdf,
+    resolve_urdf,
+)
 from semiparam_ros.core.validation import as_float_array
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
 __all__ = [
+    "EXAMPLE_ROBOT_DATA_SCHEME",
     "EXTRA_COLUMN_KINDS",
     "INERTIAL_PARAMETER_NAMES",
+    "PACKAGE_SCHEME",
+    "TOPIC_SCHEME",
     "BaseParameterMap",
+    "RegressorSpec",
     "RigidBodyRegressor",
     "example_robot_data_path",
     "icub_urdf_path",
     "is_physically_consistent",
+    "package_file",
     "point_mass_parameters",
     "resolve_urdf",
 ]
@@ -90,18 +103,6 @@ INERTIAL_PARAMETER_NAMES: tuple[str, ...] = (
 )
 
 _WRENCH_NAMES: tuple[str, ...] = ("fx", "fy", "fz", "tx", "ty", "tz")
-_MOVING_TYPES = ("revolute", "continuous", "prismatic")
-_OUTPUTS = ("wrench", "joint_torques")
-_ERD_PREFIX = pathlib.Path("cmeel.prefix", "share", "example-robot-data")
-_ICUB_RELATIVE = "robots/icub_description/robots/icub.urdf"
-#: Suffixes of the per-joint extra columns, in their block order.
-EXTRA_COLUMN_KINDS: tuple[str, ...] = ("viscous", "coulomb", "offset", "armature")
-#: Prefix of a ``robot.urdf`` value that names a file of the installed example-robot-data wheel.
-EXAMPLE_ROBOT_DATA_SCHEME = "example-robot-data://"
-#: ``robot.urdf`` prefix of a file inside a ROS package (``package://<package>/<path>``).
-PACKAGE_SCHEME = "package://"
-#: ``robot.urdf`` prefix naming a topic that publishes the URDF text (``topic:/robot_description``).
-TOPIC_SCHEME = "topic:"
 
 #: Relative rank tolerance of the base-parameter QR (on unit-norm columns). Structural dependencies show
 #: up at ~1e-15 relative; identifiable directions of the robots tested here are above ~1e-4.
@@ -110,147 +111,6 @@ BASE_RANK_TOLERANCE = 1e-9
 _NULL_COLUMN = 1e-10
 #: Coefficients of the base-parameter combinations smaller than this are round-off and set to zero.
 _COEFFICIENT_ZERO = 1e-10
-
-
-def icub_urdf_path() -> pathlib.Path:
-    """Return the path of the iCub URDF shipped in the ``example-robot-data`` wheel.
-
-    Returns:
-        The absolute path of ``icub.urdf``.
-
-    Raises:
-        FileNotFoundError: If no installed ``example-robot-data`` provides the file.
-    """
-    return example_robot_data_path(_ICUB_RELATIVE)
-
-
-def example_robot_data_path(relative: str) -> pathlib.Path:
-    """Return the absolute path of a file of the installed ``example-robot-data`` wheel.
-
-    The wheel installs its files under ``<site-packages>/cmeel.prefix/share/example-robot-data/``.
-
-    Args:
-        relative: Path below that folder, e.g. ``"robots/panda_description/urdf/panda.urdf"``.
-
-    Returns:
-        The absolute, resolved path.
-
-    Raises:
-        FileNotFoundError: If no installed ``example-robot-data`` provides the file.
-    """
-    candidates: list[pathlib.Path] = []
-    for key in ("purelib", "platlib"):
-        site_dir = sysconfig.get_paths().get(key)
-        if site_dir:
-            candidates.append(pathlib.Path(site_dir))
-    try:
-        candidates.extend(pathlib.Path(p) for p in site.getsitepackages())
-    except AttributeError:  # pragma: no cover - virtualenvs without getsitepackages
-        pass
-    candidates.extend(pathlib.Path(p) for p in sys.path if p)
-    # Pinocchio from PyPI lives inside the same cmeel prefix: walk up from its module as a last resort.
-    for parent in pathlib.Path(pin.__file__).resolve().parents:
-        if parent.name == "cmeel.prefix":
-            candidates.append(parent.parent)
-            break
-    seen: set[pathlib.Path] = set()
-    for base in candidates:
-        if base in seen:
-            continue
-        seen.add(base)
-        path = base / _ERD_PREFIX / relative
-        if path.is_file():
-            return path.resolve()
-    raise FileNotFoundError(
-        f"{relative} not found under {_ERD_PREFIX} in {len(seen)} site-packages/sys.path entries; "
-        "install the 'example-robot-data' wheel (requirements.txt) or give the URDF path explicitly"
-    )
-
-
-def package_file(package: str, relative: str) -> pathlib.Path:
-    """Return a file of a ROS package: its share folder from the ament index, else a pip prefix's.
-
-    Tried in order: the ament index — for each prefix of ``AMENT_PREFIX_PATH`` (a sourced ROS install or
-    colcon workspace), the package is there when ``share/ament_index/resource_index/packages/<package>``
-    exists, and its share folder is ``share/<package>`` (what ``ament_index_python`` reads, read here
-    without importing ROS packages into the core) — then ``share/<package>`` under ``sys.prefix`` and
-    under each site-packages' ``cmeel.prefix`` (where PyPI wheels such as example-robot-data put theirs).
-
-    Args:
-        package: ROS package name.
-        relative: Path below its share folder.
-
-    Returns:
-        The absolute path of the existing file.
-
-    Raises:
-        FileNotFoundError: Naming every place tried.
-    """
-    tried: list[str] = []
-    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-    if not prefixes:
-        tried.append("the ament index (AMENT_PREFIX_PATH is not set)")
-    for prefix in prefixes:
-        marker = pathlib.Path(prefix, "share", "ament_index", "resource_index", "packages", package)
-        if marker.is_file():
-            path = pathlib.Path(prefix, "share", package, relative)
-            if path.is_file():
-                return path.resolve()
-            tried.append(str(path))
-            break  # the first prefix that has the package is the one in use (ament's overlay order)
-    else:
-        if prefixes:
-            tried.append(f"the ament index (no package {package!r} in AMENT_PREFIX_PATH)")
-    bases = [pathlib.Path(sys.prefix) / "share" / package]
-    for key in ("purelib", "platlib"):
-        site_dir = sysconfig.get_paths().get(key)
-        base = pathlib.Path(site_dir) / "cmeel.prefix" / "share" / package if site_dir else None
-        if base is not None and base not in bases:
-            bases.append(base)
-    for base in bases:
-        path = base / relative
-        if path.is_file():
-            return path.resolve()
-        tried.append(str(path))
-    raise FileNotFoundError(f"package://{package}/{relative} not found; tried {'; '.join(tried)}")
-
-
-def resolve_urdf(spec: str) -> pathlib.Path:
-    """Return the URDF file that a ``robot.urdf`` value names.
-
-    Args:
-        spec: ``""`` for the iCub URDF of example-robot-data; ``"package://<package>/<path>"`` for a file
-            of a ROS package (:func:`package_file`: the ament index, then the pip prefixes);
-            ``"example-robot-data://<relative>"`` for a file of example-robot-data (the ROS package if
-            installed, else the wheel; e.g. ``example-robot-data://robots/panda_description/urdf/
-            panda.urdf``); anything else is a file path (``~`` expanded; relative paths are taken from the
-            current folder). ``"topic:<name>"`` (the URDF published on a topic) is resolved by the node.
-
-    Returns:
-        The path (not checked for existence when it is a plain file path).
-
-    Raises:
-        FileNotFoundError: If a package or example-robot-data file is named and not found.
-        ConfigurationError: For a ``topic:`` value (offline tools need a file).
-    """
-    if not spec:
-        return icub_urdf_path()
-    if spec.startswith(TOPIC_SCHEME):
-        raise ConfigurationError(f"robot.urdf = {spec!r} names a topic: only the node can read it; give "
-                                 "offline tools the URDF file (e.g. ros2 param get /robot_state_publisher "
-                                 "robot_description)")
-    if spec.startswith(PACKAGE_SCHEME):
-        package, _, relative = spec[len(PACKAGE_SCHEME):].partition("/")
-        if not package or not relative:
-            raise FileNotFoundError(f"robot.urdf = {spec!r}: expected package://<package>/<path>")
-        return package_file(package, relative)
-    if spec.startswith(EXAMPLE_ROBOT_DATA_SCHEME):
-        relative = spec[len(EXAMPLE_ROBOT_DATA_SCHEME):]
-        try:
-            return package_file("example-robot-data", relative)
-        except FileNotFoundError:
-            return example_robot_data_path(relative)
-    return pathlib.Path(spec).expanduser()
 
 
 def point_mass_parameters(mass: float, position: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -386,166 +246,44 @@ class RigidBodyRegressor:
         robot_name: The URDF's ``<robot name=…>`` ("" when unnamed).
     """
 
-    def __init__(
-        self,
-        urdf_xml: str,
-        joints: Sequence[str],
-        *,
-        ft_sensor: str | None = None,
-        locked: Mapping[str, float] | None = None,
-        gravity: Sequence[float] | np.ndarray = (0.0, 0.0, -9.81),
-        output: str = "wrench",
-        sensor_offset: bool = False,
-        friction: bool = False,
-        coulomb_velocity: float = 0.05,
-        joint_offsets: bool = False,
-        armature: bool = False,
-        source: str | None = None,
-        base_seed: int = 0,
-        base_samples: int | None = None,
-    ) -> None:
+    def __init__(self, urdf_xml: str, joints: Sequence[str] | RegressorSpec, *, source: str | None = None,
+                 **options: Any) -> None:
         """Build the regressor from URDF text (prefer :meth:`from_urdf`, which reads a file).
 
-        Args and Raises: see :meth:`from_urdf`; ``source`` is only used in messages.
+        Args:
+            urdf_xml: The URDF text.
+            joints: A :class:`~semiparam_ros.core.urdf.RegressorSpec`, or its ``joints`` with the other
+                fields as keyword ``options``.
+            source: Where the text came from (messages only).
+            **options: The other fields of :class:`~semiparam_ros.core.urdf.RegressorSpec` (with ``joints``
+                given as a sequence).
+
+        Raises:
+            ConfigurationError: See :meth:`from_urdf`.
         """
-        self._init_args: dict[str, Any] = {
-            "joints": joints,
-            "ft_sensor": ft_sensor,
-            "locked": locked,
-            "gravity": gravity,
-            "output": output,
-            "sensor_offset": sensor_offset,
-            "friction": friction,
-            "coulomb_velocity": coulomb_velocity,
-            "joint_offsets": joint_offsets,
-            "armature": armature,
-            "source": source,
-            "base_seed": base_seed,
-            "base_samples": base_samples,
-        }
+        spec = _spec(joints, options)
         self._urdf_xml = urdf_xml
         self.source = source
-        where = f" in {source}" if source else ""
-
-        if output not in _OUTPUTS:
-            raise ConfigurationError(f"output must be one of {_OUTPUTS}, got {output!r}")
-        self.output = output
-        extras = tuple(kind for kind, on in zip(
-            EXTRA_COLUMN_KINDS, (friction, friction, joint_offsets, armature), strict=True) if on)
-        if extras and output != "joint_torques":
-            raise ConfigurationError("friction, joint_offsets and armature need output='joint_torques' "
-                                     "(a wrench has sensor_offset instead)")
-        vs = float(coulomb_velocity) if not isinstance(coulomb_velocity, bool) else math.nan
-        if friction and not (math.isfinite(vs) and vs > 0.0):
-            raise ConfigurationError(
-                f"coulomb_velocity must be a finite number > 0 (rad/s), got {coulomb_velocity!r}")
-        self.extra_kinds: tuple[str, ...] = extras
-        self.coulomb_velocity = vs
-        if isinstance(joints, str) or not isinstance(joints, Sequence):
-            raise ConfigurationError(f"joints must be a sequence of joint names, got {joints!r}")
-        joint_names = tuple(joints)
-        self._init_args["joints"] = joint_names
-        if not joint_names:
-            raise ConfigurationError("joints is empty: give at least one moving joint")
-        for name in joint_names:
-            if not isinstance(name, str):
-                raise ConfigurationError(f"joint names must be strings, got {name!r}")
-        duplicates = sorted({n for n in joint_names if joint_names.count(n) > 1})
-        if duplicates:
-            raise ConfigurationError(f"joints lists {duplicates} more than once")
-
-        try:
-            root = ET.fromstring(urdf_xml)
-        except ET.ParseError as err:
-            raise ConfigurationError(f"URDF{where} is not valid XML: {err}") from err
-        if root.tag != "robot":
-            raise ConfigurationError(f"URDF{where} has root element <{root.tag}>, expected <robot>")
-        self.robot_name = str(root.get("name") or "")
-        # Only direct children: <transmission> blocks also contain <joint> elements.
-        urdf_joints = {j.get("name"): j for j in root.findall("joint")}
-        child_link = {
-            name: (child.get("link") if (child := j.find("child")) is not None else name)
-            for name, j in urdf_joints.items()
-        }
-
-        missing = [name for name in joint_names if name not in urdf_joints]
-        if missing:
-            moving = [n for n, j in urdf_joints.items() if j.get("type") in _MOVING_TYPES]
-            raise ConfigurationError(f"unknown joint {missing[0]!r}" + (f" (and {missing[1:]})" if missing[1:]
-                                     else "") + f": not a joint of the URDF{where}; its moving joints: "
-                                     f"{moving}")
-        for name in joint_names:
-            jtype = urdf_joints[name].get("type")
-            if jtype not in _MOVING_TYPES:
-                raise ConfigurationError(
-                    f"joint {name!r} has type {jtype!r}; moving joints must be one of {_MOVING_TYPES}"
-                )
-
-        if ft_sensor is None:
-            if output == "wrench":
-                raise ConfigurationError("output='wrench' needs ft_sensor (the name of the fixed sensor "
-                                         "joint)")
-        else:
-            if not isinstance(ft_sensor, str) or ft_sensor not in urdf_joints:
-                raise ConfigurationError(f"unknown sensor joint {ft_sensor!r}: not a joint of the "
-                                         f"URDF{where}")
-            if ft_sensor in joint_names:
-                raise ConfigurationError(f"sensor joint {ft_sensor!r} is also listed in joints")
-            element = urdf_joints[ft_sensor]
-            if element.get("type") != "fixed":
-                raise ConfigurationError(
-                    f"sensor joint {ft_sensor!r} has type {element.get('type')!r}; an F/T sensor must be a "
-                    "fixed joint"
-                )
-            # Split the model at the sensor: a free-flyer joint kept at the identity.
-            element.set("type", "floating")
-            for tag in ("axis", "limit", "dynamics", "mimic", "calibration", "safety_controller"):
-                for sub in element.findall(tag):
-                    element.remove(sub)
-        self.sensor_frame: str | None = ft_sensor
-
-        locked_values: dict[str, float] = {}
-        if locked is not None:
-            if not isinstance(locked, Mapping):
-                raise ConfigurationError(
-                    f"locked must be a mapping joint name -> position, got {type(locked).__name__}"
-                )
-            for name, value in locked.items():
-                if name not in urdf_joints:
-                    raise ConfigurationError(f"unknown locked joint {name!r}: not a joint of the URDF{where}")
-                if name in joint_names:
-                    raise ConfigurationError(f"joint {name!r} is both moving (joints) and locked")
-                if name == ft_sensor:
-                    raise ConfigurationError(f"the sensor joint {name!r} cannot be locked")
-                if urdf_joints[name].get("type") not in _MOVING_TYPES:
-                    raise ConfigurationError(
-                        f"locked joint {name!r} has type {urdf_joints[name].get('type')!r}: no position"
-                    )
-                try:
-                    val = float(value)
-                except (TypeError, ValueError) as err:
-                    raise ConfigurationError(
-                        f"locked position of {name!r} is not a number: {value!r}") from err
-                if not math.isfinite(val):
-                    raise ConfigurationError(f"locked position of {name!r} is not finite: {value!r}")
-                locked_values[name] = val
+        self.output = spec.output
+        self.extra_kinds: tuple[str, ...] = spec.extra_kinds
+        self.coulomb_velocity = spec.coulomb_velocity
+        joint_names, ft_sensor, output = spec.joints, spec.ft_sensor, spec.output
+        prepared = prepare_urdf(urdf_xml, spec, source)
+        self.robot_name = prepared.robot_name
+        child_link = prepared.child_link
+        locked_values = prepared.locked
+        self.sensor_frame: str | None = spec.ft_sensor
         self.locked = dict(locked_values)
-        self._init_args["locked"] = dict(locked_values)
+        self.gravity = np.array(prepared.gravity, dtype=float)
+        #: What this regressor was built from (checked; pickling rebuilds from it and the URDF text).
+        self.spec = replace(spec, locked=dict(locked_values), gravity=prepared.gravity)
 
         try:
-            g = np.asarray(gravity, dtype=float) if not isinstance(gravity, str) else np.array([np.nan])
-        except (TypeError, ValueError):
-            g = np.array([np.nan])
-        if g.shape != (3,) or not np.all(np.isfinite(g)):
-            raise ConfigurationError(f"gravity must be 3 finite numbers (m/s²), got {gravity!r}")
-        self.gravity = g.copy()
-        self._init_args["gravity"] = tuple(g.tolist())
-
-        try:
-            full = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
+            full = pin.buildModelFromXML(prepared.xml)
         except Exception as err:  # Pinocchio raises RuntimeError/ValueError with its own message
             raise ConfigurationError(
-                f"Pinocchio could not build a model from the URDF{where}: {err}") from err
+                f"Pinocchio could not build a model from the URDF{f' in {source}' if source else ''}: {err}"
+            ) from err
         q_ref = pin.neutral(full)
         for name, val in locked_values.items():
             jmodel = full.joints[full.getJointId(name)]
@@ -594,7 +332,7 @@ class RigidBodyRegressor:
         self.n_joints = len(joint_names)
         self.n_outputs = len(self.output_names)
         self.n_bodies = len(body_jids)
-        self.sensor_offset = bool(sensor_offset)
+        self.sensor_offset = bool(spec.sensor_offset)
         self._n_rigid = 10 * self.n_bodies
         self._n_offset = self.n_outputs if self.sensor_offset else 0
         self.n_params = self._n_rigid + self._n_offset + len(self.extra_kinds) * self.n_joints
@@ -626,48 +364,20 @@ class RigidBodyRegressor:
         for i, jid in enumerate(body_jids):
             self._urdf_params[10 * i : 10 * i + 10] = model.inertias[int(jid)].toDynamicParameters()
 
-        self._base = self.compute_base_parameters(seed=base_seed, n_samples=base_samples)
+        self._base = self.compute_base_parameters(seed=spec.base_seed, n_samples=spec.base_samples)
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_urdf(
-        cls,
-        urdf_path: str | pathlib.Path,
-        joints: Sequence[str],
-        *,
-        ft_sensor: str | None = None,
-        locked: Mapping[str, float] | None = None,
-        gravity: Sequence[float] | np.ndarray = (0.0, 0.0, -9.81),
-        output: str = "wrench",
-        sensor_offset: bool = False,
-        friction: bool = False,
-        coulomb_velocity: float = 0.05,
-        joint_offsets: bool = False,
-        armature: bool = False,
-        base_seed: int = 0,
-        base_samples: int | None = None,
-    ) -> RigidBodyRegressor:
+    def from_urdf(cls, urdf_path: str | pathlib.Path, joints: Sequence[str] | RegressorSpec,
+                  **options: Any) -> RigidBodyRegressor:
         """Build the regressor of a fixed-base robot from a URDF file.
 
         Args:
             urdf_path: Path of the URDF file. The base link is fixed.
-            joints: The moving joints (revolute, continuous or prismatic), in the order of q, q̇, q̈.
-            ft_sensor: Name of the fixed joint that holds the F/T sensor (iCub right arm:
-                ``"r_arm_ft_sensor"``). Required for ``output="wrench"``; with ``"joint_torques"`` it only
-                splits the bodies at the sensor.
-            locked: Position (rad or m) of joints that are not moving; every joint that is neither in
-                ``joints`` nor the sensor is locked, at 0 unless given here.
-            gravity: Gravity (3,) in m/s², in the URDF root (base) frame.
-            output: ``"wrench"`` (6 outputs: the sensor reading) or ``"joint_torques"`` (one per joint).
-            sensor_offset: Append ``n_outputs`` identity columns: constant offsets of the measurement
-                (F/T sensors drift). Their URDF value is 0.
-            friction: Append per-joint viscous and Coulomb friction columns (``output="joint_torques"``).
-            coulomb_velocity: Velocity scale v_s of the Coulomb term ``tanh(q̇ / v_s)`` (rad/s, > 0).
-            joint_offsets: Append a constant torque offset per joint (``output="joint_torques"``).
-            armature: Append a motor-armature column ``q̈_i`` per joint (``output="joint_torques"``).
-            base_seed: Seed of the random states used to find the base parameters.
-            base_samples: Number of random states used to find the base parameters (default
-                ``max(64, 3·n_params)``).
+            joints: A :class:`~semiparam_ros.core.urdf.RegressorSpec` (the joints, the sensor, locked joints,
+                gravity, output and extra columns), or its ``joints`` — the moving joints (revolute,
+                continuous or prismatic) in the order of q, q̇, q̈ — with the other fields as keywords.
+            **options: The other fields of :class:`~semiparam_ros.core.urdf.RegressorSpec`.
 
         Returns:
             The regressor.
@@ -675,27 +385,12 @@ class RigidBodyRegressor:
         Raises:
             FileNotFoundError: If ``urdf_path`` is not a file.
             ConfigurationError: For unknown or ill-typed joint/sensor names, non-finite locked positions or
-                gravity, an unknown output, or a URDF Pinocchio cannot load.
+                gravity, an unknown output or option, or a URDF Pinocchio cannot load.
         """
         path = pathlib.Path(urdf_path)
         if not path.is_file():
             raise FileNotFoundError(f"URDF file not found: {path}")
-        return cls(
-            path.read_text(encoding="utf-8"),
-            joints,
-            ft_sensor=ft_sensor,
-            locked=locked,
-            gravity=gravity,
-            output=output,
-            sensor_offset=sensor_offset,
-            friction=friction,
-            coulomb_velocity=coulomb_velocity,
-            joint_offsets=joint_offsets,
-            armature=armature,
-            source=str(path),
-            base_seed=base_seed,
-            base_samples=base_samples,
-        )
+        return cls(path.read_text(encoding="utf-8"), _spec(joints, options), source=str(path))
 
     @property
     def body_links(self) -> tuple[tuple[str, ...], ...]:
@@ -718,8 +413,8 @@ class RigidBodyRegressor:
         return self._urdf_xml
 
     def __reduce__(self) -> tuple[Any, ...]:
-        """Pickle/deepcopy by rebuilding from the URDF text and the construction arguments."""
-        return (_rebuild, (self._urdf_xml, dict(self._init_args)))
+        """Pickle/deepcopy by rebuilding from the URDF text and the spec."""
+        return (_rebuild, (self._urdf_xml, self.spec, self.source))
 
     def __repr__(self) -> str:
         return (
@@ -1076,74 +771,49 @@ class RigidBodyRegressor:
         except ValueError:
             raise ConfigurationError(f"unknown body {name!r}; bodies are {list(self.body_names)}") from None
 
-    def _frame_id(self, frame_name: str) -> int:
-        if not isinstance(frame_name, str) or not self._model.existFrame(frame_name):
-            raise ConfigurationError(f"unknown frame {frame_name!r}: not a link or joint of the URDF")
-        return int(self._model.getFrameId(frame_name))
+    @property
+    def body_joint_ids(self) -> np.ndarray:
+        """Joint id in :attr:`pinocchio_model` of each body of ``π`` (in ``body_names`` order)."""
+        return self._body_jids.copy()
+
+    def configuration(self, q: Any) -> np.ndarray:
+        """Return the Pinocchio configuration vector of joint positions q (locked joints at their positions).
+
+        Args:
+            q: Positions of ``joint_names`` (n,) [rad or m].
+
+        Returns:
+            A new (nq,) vector of :attr:`pinocchio_model`.
+
+        Raises:
+            RejectedSampleError: On a bad q.
+        """
+        self._fill(self._vector("q", q), np.zeros(self.n_joints), np.zeros(self.n_joints))
+        return self._q.copy()
 
     def frame_in_body(self, frame_name: str) -> tuple[str, np.ndarray]:
-        """Return the body a URDF frame (link or joint) is rigidly attached to, and its pose there.
+        """Place a frame on its body (deprecated: :func:`semiparam_ros.sim.frames.frame_in_body`)."""
+        from semiparam_ros.sim import frames  # lazy: the deprecated path only
 
-        Use it to place a payload: a point at ``p`` in the frame is at ``T[:3, :3] @ p + T[:3, 3]`` in
-        the body frame, whose parameter slot is :meth:`body_index`.
-
-        Args:
-            frame_name: Name of a link or joint of the URDF (e.g. ``"r_hand_dh_frame"``).
-
-        Returns:
-            (body name, 4×4 homogeneous transform of the frame in the body frame, m).
-
-        Raises:
-            ConfigurationError: If the frame is unknown or not attached to one of ``body_names``.
-        """
-        frame = self._model.frames[self._frame_id(frame_name)]
-        jid = int(frame.parentJoint)
-        hits = np.flatnonzero(self._body_jids == jid)
-        if hits.size == 0:
-            raise ConfigurationError(
-                f"frame {frame_name!r} is not attached to a body of the regressor ({list(self.body_names)})"
-            )
-        return self.body_names[int(hits[0])], frame.placement.homogeneous.copy()
+        warnings.warn("RigidBodyRegressor.frame_in_body is deprecated: use semiparam_ros.sim.frames."
+                      "frame_in_body", DeprecationWarning, stacklevel=2)
+        return frames.frame_in_body(self, frame_name)
 
     def frame_placement(self, q: Any, frame_name: str) -> np.ndarray:
-        """Return the pose of a URDF frame in the base (URDF root) frame at configuration q.
+        """Pose a frame in the base (deprecated: :func:`semiparam_ros.sim.frames.frame_placement`)."""
+        from semiparam_ros.sim import frames  # lazy: the deprecated path only
 
-        Args:
-            q: Joint positions (n,) in rad; locked joints stay at their locked positions.
-            frame_name: Name of a link or joint of the URDF.
-
-        Returns:
-            4×4 homogeneous transform (m).
-
-        Raises:
-            RejectedSampleError: On a bad q.
-            ConfigurationError: On an unknown frame.
-        """
-        fid = self._frame_id(frame_name)
-        q_arr = self._vector("q", q)
-        self._fill(q_arr, np.zeros(self.n_joints), np.zeros(self.n_joints))
-        pin.forwardKinematics(self._model, self._data, self._q)
-        return pin.updateFramePlacement(self._model, self._data, fid).homogeneous.copy()
+        warnings.warn("RigidBodyRegressor.frame_placement is deprecated: use semiparam_ros.sim.frames."
+                      "frame_placement", DeprecationWarning, stacklevel=2)
+        return frames.frame_placement(self, q, frame_name)
 
     def body_placement(self, q: Any, body_name: str) -> np.ndarray:
-        """Return the pose of a body frame (the frame its parameters are expressed in) in the base frame.
+        """Pose a body frame in the base (deprecated: :func:`semiparam_ros.sim.frames.body_placement`)."""
+        from semiparam_ros.sim import frames  # lazy: the deprecated path only
 
-        Args:
-            q: Joint positions (n,) in rad.
-            body_name: One of ``body_names``.
-
-        Returns:
-            4×4 homogeneous transform (m).
-
-        Raises:
-            RejectedSampleError: On a bad q.
-            ConfigurationError: On an unknown body.
-        """
-        jid = int(self._body_jids[self.body_index(body_name)])
-        q_arr = self._vector("q", q)
-        self._fill(q_arr, np.zeros(self.n_joints), np.zeros(self.n_joints))
-        pin.forwardKinematics(self._model, self._data, self._q)
-        return self._data.oMi[jid].homogeneous.copy()
+        warnings.warn("RigidBodyRegressor.body_placement is deprecated: use semiparam_ros.sim.frames."
+                      "body_placement", DeprecationWarning, stacklevel=2)
+        return frames.body_placement(self, q, body_name)
 
     @property
     def pinocchio_model(self) -> pin.Model:
@@ -1159,5 +829,17 @@ def _as_slice(indices: np.ndarray) -> slice | np.ndarray:
     return indices
 
 
-def _rebuild(urdf_xml: str, args: dict[str, Any]) -> RigidBodyRegressor:
-    return RigidBodyRegressor(urdf_xml, **args)
+def _rebuild(urdf_xml: str, spec: RegressorSpec, source: str | None) -> RigidBodyRegressor:
+    return RigidBodyRegressor(urdf_xml, spec, source=source)
+
+
+def _spec(joints: Sequence[str] | RegressorSpec, options: dict[str, Any]) -> RegressorSpec:
+    """Return the spec given, or the one ``joints`` and ``options`` describe."""
+    if isinstance(joints, RegressorSpec):
+        if options:
+            raise ConfigurationError(f"give a RegressorSpec or keyword options, not both ({sorted(options)})")
+        return joints
+    try:
+        return RegressorSpec(joints, **options)  # type: ignore[arg-type]  # checked in __post_init__
+    except TypeError as err:  # a misspelt option
+        raise ConfigurationError(f"unknown regressor option: {err}") from None

@@ -39,6 +39,7 @@ from semiparam_ros.core.semiparametric import (
 from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
 from semiparam_ros.core.uncertainty import NoiseScale
+from semiparam_ros.core.urdf import RegressorSpec
 from semiparam_ros.core.validation import MAX_ABS_INPUT
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
@@ -111,10 +112,8 @@ def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None,
         if not path.is_file():
             raise FileNotFoundError(f"URDF file not found: {path}")
         urdf_xml, source = path.read_text(encoding="utf-8"), str(path)
-    return RigidBodyRegressor(
-        urdf_xml,
-        config["robot.joints"],
-        source=source,
+    spec = RegressorSpec(
+        tuple(config["robot.joints"]),
         ft_sensor=config["robot.ft_sensor"] if output == "wrench" else None,
         locked=config.locked,
         gravity=tuple(config["robot.gravity"]),
@@ -125,6 +124,7 @@ def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None,
         joint_offsets=bool(config["parametric.offsets"]) and output == "joint_torques",
         armature=bool(config["parametric.armature"]) and output == "joint_torques",
     )
+    return RigidBodyRegressor(urdf_xml, spec, source=source)
 
 
 def regressor_function(regressor: RigidBodyRegressor,

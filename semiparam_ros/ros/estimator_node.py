@@ -35,11 +35,11 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.dynamics import TOPIC_SCHEME
 from semiparam_ros.core.estimator import OnlineEstimator, build_regressor, rmse_window_samples
 from semiparam_ros.core.learning_loop import Input, LearningLoop, warm_up_kernels
 from semiparam_ros.core.messages import WrenchData
 from semiparam_ros.core.model_service import ModelService
+from semiparam_ros.core.urdf import TOPIC_SCHEME
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 from semiparam_ros.io.checkpoint_writer import CheckpointWriter, warm_start
 from semiparam_ros.ros import conversions as cv

@@ -35,12 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.dynamics import (
-    RigidBodyRegressor,
-    is_physically_consistent,
-    point_mass_parameters,
-    resolve_urdf,
-)
+from semiparam_ros.core.dynamics import RigidBodyRegressor, is_physically_consistent, point_mass_parameters
+from semiparam_ros.core.urdf import resolve_urdf
 from semiparam_ros.sim.contacts import (
     ContactConfig,
     ContactEpisode,
@@ -48,6 +44,7 @@ from semiparam_ros.sim.contacts import (
     contacts_timing,
     draw_episodes,
 )
+from semiparam_ros.sim.frames import frame_in_body
 from semiparam_ros.sim.ik import ArmKinematics
 from semiparam_ros.sim.scenario import DEFAULT_START_NS
 from semiparam_ros.sim.trajectories import multisine
@@ -231,7 +228,7 @@ class ArmRobot:
 
     Attributes:
         name: Short name (``"panda"``, ``"ur5"``), the prefix of its bag names.
-        urdf: ``robot.urdf`` value (:func:`~semiparam_ros.core.dynamics.resolve_urdf`).
+        urdf: ``robot.urdf`` value (:func:`~semiparam_ros.core.urdf.resolve_urdf`).
         joints: The moving joints, in the published order; every other joint is locked at 0.
         end_effector: Frame where payloads are attached and contacts act.
         position_window: (n, 2) joint range the excitation may use (rad), inside the URDF limits.
@@ -556,7 +553,7 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     pickup = config.pickup_time
     payload_info: dict[str, Any] | None = None
     if pickup is not None:
-        body, T = reg.frame_in_body(spec.end_effector)
+        body, T = frame_in_body(reg, spec.end_effector)
         point = T[:3, :3] @ np.asarray(spec.payload_point) + T[:3, 3]
         slot = reg.body_index(body)
         params_after[10 * slot : 10 * slot + 10] += point_mass_parameters(config.payload_mass, point)

@@ -42,7 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.dynamics import RigidBodyRegressor, icub_urdf_path, point_mass_parameters
+from semiparam_ros.core.dynamics import RigidBodyRegressor, point_mass_parameters
+from semiparam_ros.core.urdf import icub_urdf_path
 from semiparam_ros.sim.contacts import (
     CONTACTS_DURATION_S,
     ContactConfig,
@@ -58,6 +59,7 @@ from semiparam_ros.sim.effects import (
     harness_wrench,
     sensor_reading,
 )
+from semiparam_ros.sim.frames import frame_in_body
 from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics, ClikResult, clik_periodic_orbit
 from semiparam_ros.sim.trajectories import (
     CartesianCircle,
@@ -545,7 +547,7 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
     pickup = config.pickup_time
     payload_info: dict[str, Any] | None = None
     if pickup is not None:
-        body, T = reg.frame_in_body(_HAND_FRAME)
+        body, T = frame_in_body(reg, _HAND_FRAME)
         point = T[:3, 3]
         slot = reg.body_index(body)
         params_after[10 * slot : 10 * slot + 10] += point_mass_parameters(config.payload_mass, point)
