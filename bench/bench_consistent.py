@@ -67,13 +67,13 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="fewer samples (a smoke run)")
     ap.add_argument("--json", type=pathlib.Path, default=RESULTS)
     args = ap.parse_args()
-    from semiparam_ros.sim.arm_writer import write_arm_recording
     from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
+    from semiparam_ros.sim.writer import write_recording
 
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp, threadpool_limits(1):
         rec = simulate_arm(ArmScenarioConfig(name="bench", robot="panda", duration=30.0, rate=200.0, seed=1))
-        panda_bag = write_arm_recording(rec, pathlib.Path(tmp) / "panda")
+        panda_bag = write_recording(rec, pathlib.Path(tmp) / "panda")
         icub = (ROOT / "config" / "icub_right_arm.yaml", ROOT / "bags" / "icub_xy")
         cases = {"icub (4 joints, wrench)": icub,
                  "panda (7 joints, torques)": (ROOT / "config" / "panda.yaml", panda_bag)}

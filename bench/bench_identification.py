@@ -29,8 +29,8 @@ from semiparam_ros.core.identification import consistent_parameters
 from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.io.bags import iter_samples
 from semiparam_ros.io.learn import learn_bags
-from semiparam_ros.sim.arm_writer import write_arm_recording
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
+from semiparam_ros.sim.writer import write_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 KUKA = ROOT.parent / "shared" / "data" / "kuka_lwr4"
@@ -70,7 +70,7 @@ def main() -> None:
     work = Path(tempfile.mkdtemp())
     rec = simulate_arm(ArmScenarioConfig(name="panda_id", robot="panda", duration=20.0, rate=200.0, seed=0))
     cfg = load_config(ROOT / "config" / "panda.yaml")
-    est, _ = learn_bags([write_arm_recording(rec, work / "panda_id")], cfg)
+    est, _ = learn_bags([write_recording(rec, work / "panda_id")], cfg)
     c = LearnedModel(est).consistent()
     other = simulate_arm(ArmScenarioConfig(name="panda_other", robot="panda", duration=20.0, rate=200.0,
                                            seed=0))

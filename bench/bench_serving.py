@@ -28,8 +28,8 @@ from threadpoolctl import threadpool_info
 from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config
 from semiparam_ros.io.learn import learn_bags
-from semiparam_ros.sim.arm_writer import write_arm_recording
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
+from semiparam_ros.sim.writer import write_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 KUKA = ROOT.parent / "shared" / "data" / "kuka_lwr4"
@@ -44,7 +44,7 @@ def main() -> None:
 
     rec = simulate_arm(ArmScenarioConfig(name="panda_excitation", robot="panda", duration=60.0, rate=1000.0,
                                          seed=0))
-    bag = write_arm_recording(rec, work / "panda_excitation")
+    bag = write_recording(rec, work / "panda_excitation")
     panda = load_config(ROOT / "config" / "panda.yaml")
     learn_runs = []
     t0 = time.perf_counter()

@@ -30,9 +30,9 @@ from semiparam_ros.core.config import load_config
 from semiparam_ros.core.messages import JointStateData
 from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.io.learn import learn_bags
-from semiparam_ros.sim.arm_writer import write_arm_recording
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.closed_loop import ArmPlant, desired_trajectory, pd_gains, run_loop
+from semiparam_ros.sim.writer import write_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_SEED = 20261126  # the reference motion's multi-sine seed (the training bag's comes from its name)
@@ -55,7 +55,7 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="closed_loop_"))
     rec = simulate_arm(ArmScenarioConfig(name="panda_excitation", robot="panda", duration=args.train_duration,
                                          rate=rate, seed=0))
-    bag = write_arm_recording(rec, work / "panda_excitation")
+    bag = write_recording(rec, work / "panda_excitation")
     config = load_config(ROOT / "config" / "panda.yaml").with_overrides({"learning_enabled": True})
     t0 = time.perf_counter()
     _, report = learn_bags([bag], config, checkpoint=work / "panda.npz")

@@ -13,8 +13,8 @@ from semiparam_ros.core.dynamics import RigidBodyRegressor, is_physically_consis
 from semiparam_ros.core.identification import consistent_parameters, excitation_report, export_urdf
 from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.io.learn import learn_bags
-from semiparam_ros.sim.arm_writer import write_arm_recording
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
+from semiparam_ros.sim.writer import write_recording
 
 pytest.importorskip("cvxpy")
 
@@ -22,7 +22,7 @@ pytest.importorskip("cvxpy")
 @pytest.fixture(scope="module")
 def learned(tmp_path_factory):
     rec = simulate_arm(ArmScenarioConfig(name="panda_id", robot="panda", duration=20.0, rate=200.0, seed=0))
-    bag = write_arm_recording(rec, tmp_path_factory.mktemp("id") / "panda_id")
+    bag = write_recording(rec, tmp_path_factory.mktemp("id") / "panda_id")
     config = load_config(REPO / "config" / "panda.yaml").with_overrides({"nonparametric.n_features": 100})
     est, _ = learn_bags([bag], config)
     return est, rec

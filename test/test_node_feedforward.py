@@ -24,9 +24,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config
 from semiparam_ros.io.learn import learn_bags
-from semiparam_ros.sim.arm_writer import write_arm_recording
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.closed_loop import ArmPlant, desired_trajectory, pd_gains, run_loop
+from semiparam_ros.sim.writer import write_recording
 
 pytestmark = pytest.mark.ros
 
@@ -38,7 +38,7 @@ D = 100
 def checkpoint(tmp_path_factory):
     root = tmp_path_factory.mktemp("ff_node")
     rec = simulate_arm(ArmScenarioConfig(name="panda_ff", robot="panda", duration=20.0, rate=200.0, seed=0))
-    bag = write_arm_recording(rec, root / "panda_ff")
+    bag = write_recording(rec, root / "panda_ff")
     config = load_config(PANDA).with_overrides({"nonparametric.n_features": D})
     learn_bags([bag], config, checkpoint=root / "panda.npz")
     return root / "panda.npz"

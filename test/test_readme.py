@@ -9,13 +9,13 @@ import numpy as np
 from ros_helpers import REPO
 
 from semiparam_ros.cli import learn as learn_cli
-from semiparam_ros.sim.arm_writer import write_arm_recording
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
+from semiparam_ros.sim.writer import write_recording
 
 
 def test_readme_python_example_runs(tmp_path, monkeypatch):
     rec = simulate_arm(ArmScenarioConfig(name="panda_log", robot="panda", duration=8.0, rate=200.0, seed=0))
-    bag = write_arm_recording(rec, tmp_path / "panda_log")
+    bag = write_recording(rec, tmp_path / "panda_log")
     assert learn_cli.main([str(bag), "--config", str(REPO / "config" / "panda.yaml"), "--set",
                            "nonparametric.n_features=100", "--checkpoint", str(tmp_path / "panda.npz"),
                            "--quiet"]) == 0

@@ -25,8 +25,8 @@ from semiparam_ros.core.messages import JointStateData
 from semiparam_ros.errors import CheckpointError, RejectedSampleError
 from semiparam_ros.io.bags import read_messages
 from semiparam_ros.io.learn import learn_bags
-from semiparam_ros.sim.arm_writer import write_arm_recording
 from semiparam_ros.sim.arms import ArmScenarioConfig, arm_regressor, simulate_arm
+from semiparam_ros.sim.writer import write_recording
 
 PANDA = REPO / "config" / "panda.yaml"
 SMALL = {"nonparametric.n_features": 100}
@@ -38,7 +38,7 @@ def panda(tmp_path_factory):
     root = tmp_path_factory.mktemp("serving")
     rec = simulate_arm(ArmScenarioConfig(name="panda_train", robot="panda", duration=20.0, rate=200.0,
                                          seed=3))
-    bag = write_arm_recording(rec, root / "panda_train")
+    bag = write_recording(rec, root / "panda_train")
     config = load_config(PANDA).with_overrides(SMALL)
     est, report = learn_bags([bag], config, checkpoint=root / "panda.npz")
     return {"root": root, "rec": rec, "bag": bag, "config": config, "est": est, "report": report,

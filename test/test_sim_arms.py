@@ -13,7 +13,6 @@ from semiparam_ros.cli.simulate import main
 from semiparam_ros.core.dynamics import is_physically_consistent, resolve_urdf
 from semiparam_ros.core.pipeline import SamplePipeline
 from semiparam_ros.io.bags import iter_samples, read_messages, read_topic_arrays
-from semiparam_ros.sim.arm_writer import write_arm_recording
 from semiparam_ros.sim.arms import (
     ARM_ROBOTS,
     ArmScenarioConfig,
@@ -24,6 +23,7 @@ from semiparam_ros.sim.arms import (
     simulate_arm,
 )
 from semiparam_ros.sim.contacts import ContactConfig
+from semiparam_ros.sim.writer import write_recording
 
 ROBOTS = ("panda", "ur5")
 #: Contacts packed into a short recording: 3 episodes in [0.5, 3.5] s.
@@ -182,7 +182,7 @@ def test_bag_reads_back_with_the_project_reader(tmp_path):
         name="ur5_bag", robot="ur5", duration=4.0, rate=100.0, payload_mass=1.5, contacts=SHORT_CONTACTS
     )
     rec = simulate_arm(config)
-    path = write_arm_recording(rec, tmp_path / "ur5_bag")
+    path = write_recording(rec, tmp_path / "ur5_bag")
     names = list(rec.joint_names)
     js = read_topic_arrays(path, "/joint_states")
     assert js.names == tuple(names) and np.array_equal(js.stamp_ns, rec.stamps)
@@ -379,7 +379,7 @@ def test_bag_feeds_the_joint_torque_pipeline(tmp_path, rate):
     """The project's replay path: every sample carries the measured q, q̇ and torques of its stamp, and the
     pipeline's q̈ estimate tracks the true q̈ (noise-dominated at 1 kHz with a 9-sample window)."""
     rec = simulate_arm(ArmScenarioConfig(name="pipe", robot="panda", duration=3.0, rate=rate))
-    path = write_arm_recording(rec, tmp_path / "pipe")
+    path = write_recording(rec, tmp_path / "pipe")
     pipeline = SamplePipeline(list(rec.joint_names), output="joint_torques")
     samples = list(iter_samples(path, pipeline))
     index = {int(s): i for i, s in enumerate(rec.stamps)}
@@ -395,3 +395,28 @@ def test_bag_feeds_the_joint_torque_pipeline(tmp_path, rate):
     # bias of a quadratic fit to a multi-sine of |q⃛| ≲ 4·(2π·1.3 Hz) over 9 samples.
     bound = 5 * 1e-3 * rate * 0.15 + 4 * (2 * np.pi * 1.3) * (9 / rate) ** 2
     assert np.sqrt(np.mean(ddq_err**2)) < bound
+
+
+def test_one_pipeline_and_one_writer_for_both_measurements(tmp_path):
+    """Both robots' configurations share RecordingConfig's fields and checks; one entry simulates either;
+    the deprecated arm writer warns and writes the same bytes as the one writer."""
+    from semiparam_ros.sim.arm_writer import write_arm_recording
+    from semiparam_ros.sim.generate import simulate_recording
+    from semiparam_ros.sim.pipeline import RecordingConfig
+    from semiparam_ros.sim.scenario import ScenarioConfig, SimulatedRecording
+
+    arm = ArmScenarioConfig(name="p", robot="panda", duration=2.0, rate=100.0, payload_mass=0.3)
+    icub = ScenarioConfig(name="i", duration=2.0, payload_mass=0.3)
+    for config in (arm, icub):
+        assert isinstance(config, RecordingConfig) and config.pickup_time == 1.0
+        for bad in ({"duration": 0.0}, {"seed": -1}, {"payload_mass": -1.0}, {"name": "a/b"},
+                    {"payload_mass": 0.3, "payload_time": 100.0}):
+            with pytest.raises(ValueError):
+                type(config)(**{**{"name": config.name}, **bad})
+    assert isinstance(simulate_recording(icub), SimulatedRecording)
+    rec = simulate_recording(arm)
+    one = write_recording(rec, tmp_path / "one" / "bag")
+    with pytest.warns(DeprecationWarning, match="write_recording"):
+        old = write_arm_recording(rec, tmp_path / "old" / "bag")
+    assert (one / "bag.mcap").read_bytes() == (old / "bag.mcap").read_bytes()
+    assert (one / "scenario.yaml").read_text() == (old / "scenario.yaml").read_text()

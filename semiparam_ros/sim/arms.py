@@ -35,18 +35,25 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.dynamics import RigidBodyRegressor, is_physically_consistent, point_mass_parameters
+from semiparam_ros.core.dynamics import RigidBodyRegressor, is_physically_consistent
 from semiparam_ros.core.urdf import resolve_urdf
 from semiparam_ros.sim.contacts import (
     ContactConfig,
     ContactEpisode,
-    contact_forces,
     contacts_timing,
-    draw_episodes,
 )
-from semiparam_ros.sim.frames import frame_in_body
 from semiparam_ros.sim.ik import ArmKinematics
-from semiparam_ros.sim.scenario import DEFAULT_START_NS
+from semiparam_ros.sim.pipeline import (
+    RecordingConfig,
+    add_payload,
+    column_rms,
+    contacts_info,
+    draw_contacts,
+    limits_info,
+    recording_seeds,
+    rigid_outputs,
+    sample_stamps,
+)
 from semiparam_ros.sim.trajectories import multisine
 
 __all__ = [
@@ -349,8 +356,8 @@ _DEFAULT_DURATION = 60.0
 
 
 @dataclass(frozen=True)
-class ArmScenarioConfig:
-    """One synthetic joint-torque recording of an arm.
+class ArmScenarioConfig(RecordingConfig):
+    """One synthetic joint-torque recording of an arm (the shared fields: :class:`RecordingConfig`).
 
     Attributes:
         name: Bag folder name.
@@ -359,60 +366,34 @@ class ArmScenarioConfig:
         rate: Joint-state rate (Hz).
         seed: Seed. The true parameters depend on (robot, seed) only; trajectory and noise also on the
             name, so that bags of one robot differ but share one physical robot.
-        payload_mass: Payload (kg); 0 for none.
-        payload_time: Pickup time (s from the start); None for the middle.
-        contacts: Contact episodes at the end effector, or None.
         perturbation: Distance of the true parameters from the URDF's; None for the URDF's exactly.
         friction_scale: Factor on the robot's friction, offsets and armature (0 removes them).
         armature: If given, the armature of every joint (kg·m²), replacing the robot's (before scaling).
         noise_scale: Factor on every noise σ (0 removes noise).
-        start_ns: First stamp (ns).
     """
 
-    name: str
-    robot: str = "panda"
     duration: float = _DEFAULT_DURATION
+    robot: str = "panda"
     rate: float = 1000.0
-    seed: int = 0
-    payload_mass: float = 0.0
-    payload_time: float | None = None
-    contacts: ContactConfig | None = None
     perturbation: ParameterPerturbation | None = field(default_factory=ParameterPerturbation)
     friction_scale: float = 1.0
     armature: float | None = None
     noise_scale: float = 1.0
-    start_ns: int = DEFAULT_START_NS
 
     def __post_init__(self) -> None:
-        if not self.name or "/" in self.name:
-            raise ValueError(f"name must be a plain folder name, got {self.name!r}")
+        self.check_common()
         if self.robot not in ARM_ROBOTS:
             raise ValueError(f"robot must be one of {sorted(ARM_ROBOTS)}, got {self.robot!r}")
-        for attr in ("duration", "rate"):
-            value = getattr(self, attr)
-            if isinstance(value, bool) or not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{attr} must be a positive number, got {value!r}")
+        if isinstance(self.rate, bool) or not (np.isfinite(self.rate) and self.rate > 0):
+            raise ValueError(f"rate must be a positive number, got {self.rate!r}")
         if self.rate > 10_000:
             raise ValueError("rates above 10 kHz are not supported")
-        for attr in ("payload_mass", "friction_scale", "noise_scale"):
+        for attr in ("friction_scale", "noise_scale"):
             value = getattr(self, attr)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{attr} must be finite and >= 0, got {value!r}")
         if self.armature is not None and not (np.isfinite(self.armature) and self.armature >= 0):
             raise ValueError(f"armature must be finite and >= 0 kg·m², got {self.armature!r}")
-        if self.payload_time is not None and not (0 <= self.payload_time <= self.duration):
-            raise ValueError(f"payload_time must be within [0, duration] = [0, {self.duration}] s")
-        if int(self.seed) < 0 or int(self.start_ns) < 0:
-            raise ValueError("seed and start_ns must be >= 0")
-        if self.contacts is not None and not isinstance(self.contacts, ContactConfig):
-            raise ValueError("contacts must be a ContactConfig or None")
-
-    @property
-    def pickup_time(self) -> float | None:
-        """Pickup time (s from the start), or None without payload."""
-        if self.payload_mass <= 0:
-            return None
-        return 0.5 * self.duration if self.payload_time is None else float(self.payload_time)
 
     def true_friction(self) -> JointFriction:
         """Return the friction of this recording (the robot's, armature replaced if given, scaled)."""
@@ -482,10 +463,6 @@ def _kinematics(robot: str) -> ArmKinematics:
     return ArmKinematics(resolve_urdf(spec.urdf), spec.joints, end_effector=spec.end_effector)
 
 
-def _rms(x: np.ndarray) -> list[float]:
-    return [float(v) for v in np.sqrt(np.mean(np.asarray(x) ** 2, axis=0))]
-
-
 def true_parameters(config: ArmScenarioConfig) -> np.ndarray:
     """Return the true rigid-body parameters of a recording's physical robot, before any payload.
 
@@ -524,8 +501,7 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     kin = _kinematics(config.robot)
     n = len(spec.joints)
     # Physical robot: (robot, seed) → true_parameters. Recording: (seed, name) → trajectory, noise, contacts.
-    rec_seq = np.random.SeedSequence([int(config.seed), zlib.crc32(config.name.encode())])
-    rng_traj, rng_joint, rng_torque, rng_contact = (np.random.default_rng(s) for s in rec_seq.spawn(4))
+    rng_traj, rng_joint, rng_torque, rng_contact = recording_seeds(config.seed, config.name)
 
     window = np.asarray(spec.position_window, dtype=np.float64)
     traj = multisine(
@@ -537,9 +513,7 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
         max_acceleration=spec.max_acceleration,
     )
     count = round(config.duration * config.rate)
-    stamps = config.start_ns + np.rint(np.arange(count, dtype=np.float64) * (1e9 / config.rate)).astype(
-        np.int64
-    )
+    stamps = sample_stamps(config.start_ns, count, config.rate)
     t = (stamps - config.start_ns) * 1e-9
     q, dq, ddq = traj.evaluate(t)
     lower, upper = reg.position_limits()
@@ -549,47 +523,24 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
 
     params_urdf = reg.urdf_parameters()
     params_before = true_parameters(config)
-    params_after = params_before.copy()
     pickup = config.pickup_time
-    payload_info: dict[str, Any] | None = None
-    if pickup is not None:
-        body, T = frame_in_body(reg, spec.end_effector)
-        point = T[:3, :3] @ np.asarray(spec.payload_point) + T[:3, 3]
-        slot = reg.body_index(body)
-        params_after[10 * slot : 10 * slot + 10] += point_mass_parameters(config.payload_mass, point)
-        payload_info = {
-            "mass_kg": float(config.payload_mass),
-            "time_s": float(pickup),
-            "stamp_ns": int(config.start_ns + round(pickup * 1e9)),
-            "frame": spec.end_effector,
-            "point_in_frame_m": list(spec.payload_point),
-            "body": body,
-            "point_in_body_m": [float(v) for v in point],
-        }
-
-    rigid = np.empty((count, n))
+    params_after, payload_info = add_payload(reg, params_before, frame=spec.end_effector,
+                                             mass=config.payload_mass, pickup_s=pickup,
+                                             start_ns=config.start_ns, point_in_frame=spec.payload_point)
     after = np.zeros(count, dtype=bool) if pickup is None else t >= pickup
-    chunk = 2000
-    for start in range(0, count, chunk):
-        stop = min(start + chunk, count)
-        phi = reg.regressor(q[start:stop], dq[start:stop], ddq[start:stop])
-        rigid[start:stop] = np.where(after[start:stop, None], phi @ params_after, phi @ params_before)
+    rigid = rigid_outputs(reg, q, dq, ddq, after, params_before, params_after, chunk=2000)
 
     friction = config.true_friction()
     tau_f = friction.torques(dq, ddq)
 
-    episodes: tuple[ContactEpisode, ...] = ()
-    force = np.zeros((count, 3))
+    episodes, force = draw_contacts(config.contacts, config.duration, t, rng_contact)
     contact_wrench = np.zeros((count, 6))
     external = np.zeros((count, n))
-    if config.contacts is not None:
-        episodes = draw_episodes(config.contacts, config.duration, rng_contact)
-        force = contact_forces(episodes, t)
-        for i in np.flatnonzero(np.any(force != 0.0, axis=1)):
-            _, J = kin.position_jacobian(q[i])
-            external[i] = -(J.T @ force[i])
-            ((R, _p),) = kin.frame_poses(q[i], [spec.end_effector])
-            contact_wrench[i, :3] = R.T @ force[i]
+    for i in np.flatnonzero(np.any(force != 0.0, axis=1)):
+        _, J = kin.position_jacobian(q[i])
+        external[i] = -(J.T @ force[i])
+        ((R, _p),) = kin.frame_poses(q[i], [spec.end_effector])
+        contact_wrench[i, :3] = R.T @ force[i]
 
     truth = rigid + tau_f + external
     noise = config.noise_scale * np.asarray(spec.torque_noise_std) * rng_torque.standard_normal((count, n))
@@ -634,30 +585,17 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
             "velocity_std_rad_per_s": config.noise_scale * spec.velocity_noise_std,
         },
         "payload": payload_info,
-        "contacts": None
-        if config.contacts is None
-        else {
-            **config.contacts.as_dict(),
-            "frame": spec.end_effector,
-            "convention": "force the environment applies to the robot at the frame origin; direction fixed "
-            "in the base frame during an episode; measured torques change by -J^T F",
-            "episodes": [e.as_dict() for e in episodes],
-        },
+        "contacts": None if config.contacts is None else contacts_info(
+            config.contacts, spec.end_effector, "force the environment applies to the robot at the frame "
+            "origin; direction fixed in the base frame during an episode; measured torques change by -J^T F",
+            episodes),
         "measured_rms_Nm": {
-            "rigid": _rms(rigid),
-            "friction": _rms(tau_f),
-            "external": _rms(external),
-            "noise": _rms(noise),
+            "rigid": column_rms(rigid),
+            "friction": column_rms(tau_f),
+            "external": column_rms(external),
+            "noise": column_rms(noise),
         },
-        "limits": {
-            "q_min_rad": [float(v) for v in q.min(axis=0)],
-            "q_max_rad": [float(v) for v in q.max(axis=0)],
-            "joint_lower_rad": [float(v) for v in lower],
-            "joint_upper_rad": [float(v) for v in upper],
-            "max_abs_dq_rad_per_s": [float(v) for v in np.abs(dq).max(axis=0)],
-            "max_abs_ddq_rad_per_s2": [float(v) for v in np.abs(ddq).max(axis=0)],
-            "min_joint_limit_margin_rad": margin,
-        },
+        "limits": limits_info(q, dq, ddq, lower, upper, margin),
     }
     return ArmRecording(
         config=config,

@@ -1,19 +1,42 @@
-"""Simulate and write a set of bags (what the ``simulate`` command runs), with a progress bar."""
+"""Simulate and write a set of bags (what the ``simulate`` command runs), with a progress bar.
+
+:func:`simulate_recording` is the one entry of the simulation pipeline (:mod:`semiparam_ros.sim.pipeline`):
+the robot and its measurement model come with the configuration; :func:`~semiparam_ros.sim.writer.
+write_recording` writes either.
+"""
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from tqdm import tqdm
 
-from semiparam_ros.sim.arm_writer import write_arm_recording
-from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
-from semiparam_ros.sim.scenario import LEAD_IN_S, ScenarioConfig, simulate
+from semiparam_ros.sim.arms import ArmRecording, ArmScenarioConfig, simulate_arm
+from semiparam_ros.sim.scenario import LEAD_IN_S, ScenarioConfig, SimulatedRecording, simulate
 from semiparam_ros.sim.writer import write_recording
 
-__all__ = ["generate"]
+__all__ = ["generate", "simulate_recording"]
+
+
+def simulate_recording(config: ScenarioConfig | ArmScenarioConfig, *,
+                       progress: Callable[[int], None] | None = None) -> SimulatedRecording | ArmRecording:
+    """Simulate one recording: the iCub's F/T sensor or an arm's joint torques, as the configuration says.
+
+    Args:
+        config: The scenario.
+        progress: Called with the count of finished samples (F/T recordings; the arms report none).
+
+    Returns:
+        The stamped true and measured signals.
+
+    Raises:
+        ValueError: If the trajectory cannot be tracked within the joint limits.
+    """
+    if isinstance(config, ArmScenarioConfig):
+        return simulate_arm(config)
+    return simulate(config, progress=progress)
 
 
 def generate(
@@ -55,23 +78,14 @@ def generate(
     for config in configs:
         if isinstance(config, ArmScenarioConfig):
             count = round(config.duration * config.rate)
-            with tqdm(total=count, desc=config.name, unit="stamp", disable=not show, leave=True) as bar:
-                arm = simulate_arm(config)
-                paths.append(
-                    write_arm_recording(
-                        arm, out / config.name, overwrite=overwrite, compress=compress, progress=bar.update
-                    )
-                )
-            continue
-        # Work units: wrench samples simulated + messages written (5 topics).
-        n_joint = round((config.duration + 2.0 * LEAD_IN_S) * config.joint_rate)  # lead-in and lead-out
-        n_wrench = round(config.duration * config.wrench_rate)
-        total = n_wrench + 2 * n_joint + (3 if config.contacts is None else 5) * n_wrench
-        with tqdm(total=total, desc=config.name, unit="msg", disable=not show, leave=True) as bar:
-            recording = simulate(config, progress=bar.update)
-            paths.append(
-                write_recording(
-                    recording, out / config.name, overwrite=overwrite, compress=compress, progress=bar.update
-                )
-            )
+            unit = "stamp"
+        else:  # wrench samples simulated + messages written (lead-in and lead-out joint states)
+            n_joint = round((config.duration + 2.0 * LEAD_IN_S) * config.joint_rate)
+            n_wrench = round(config.duration * config.wrench_rate)
+            count = n_wrench + 2 * n_joint + (3 if config.contacts is None else 5) * n_wrench
+            unit = "msg"
+        with tqdm(total=count, desc=config.name, unit=unit, disable=not show, leave=True) as bar:
+            recording = simulate_recording(config, progress=bar.update)
+            paths.append(write_recording(recording, out / config.name, overwrite=overwrite, compress=compress,
+                                         progress=bar.update))
     return paths

@@ -34,7 +34,6 @@ and the wrench are exactly consistent at every stamp.
 
 from __future__ import annotations
 
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
@@ -42,15 +41,13 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.dynamics import RigidBodyRegressor, point_mass_parameters
+from semiparam_ros.core.dynamics import RigidBodyRegressor
 from semiparam_ros.core.urdf import icub_urdf_path
 from semiparam_ros.sim.contacts import (
     CONTACTS_DURATION_S,
     ContactConfig,
     ContactEpisode,
-    contact_forces,
     contacts_timing,
-    draw_episodes,
 )
 from semiparam_ros.sim.effects import (
     DEFAULT_EFFECTS,
@@ -59,8 +56,19 @@ from semiparam_ros.sim.effects import (
     harness_wrench,
     sensor_reading,
 )
-from semiparam_ros.sim.frames import frame_in_body
 from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics, ClikResult, clik_periodic_orbit
+from semiparam_ros.sim.pipeline import (
+    DEFAULT_START_NS,
+    RecordingConfig,
+    add_payload,
+    contacts_info,
+    draw_contacts,
+    limits_info,
+    recording_seeds,
+    rigid_outputs,
+    sample_stamps,
+    wrench_rms,
+)
 from semiparam_ros.sim.trajectories import (
     CartesianCircle,
     FourierTrajectory,
@@ -117,8 +125,6 @@ PUBLISHED_JOINT_ORDER: tuple[str, ...] = (
     "r_wrist_yaw",
 )
 
-#: First stamp of every bag (2023-11-14T22:13:20Z), ns; fixed so that bags are deterministic.
-DEFAULT_START_NS = 1_700_000_000 * 10**9
 
 _HAND_FRAME = "r_hand_dh_frame"
 
@@ -218,51 +224,38 @@ LEAD_IN_S = 0.2
 
 
 @dataclass(frozen=True)
-class ScenarioConfig:
-    """One synthetic recording.
+class ScenarioConfig(RecordingConfig):
+    """One synthetic recording of the iCub arm's F/T sensor (the shared fields: :class:`RecordingConfig`).
 
     Attributes:
         name: Bag folder name (e.g. ``"icub_xy"``).
         trajectory: ``"xy"``, ``"xz"`` or ``"multisine"``.
-        duration: Length of the recording (s).
         joint_rate: Joint-state rate (Hz).
         wrench_rate: Wrench rate (Hz).
         delay: The wrench is sampled ``delay`` s after the joint-state grid (may be negative; stamps are
             the true sampling instants of each stream).
         radius: Circle radius (m).
         speed: Hand speed on the circle (m/s).
-        seed: Seed of the random multi-sine and of all noise.
-        payload_mass: Mass picked up by the hand (kg); 0 for none.
-        payload_time: Pickup time (s from the start); None for the middle of the recording.
         effects: Non-rigid effects and noise levels (already scaled).
         variability: Cycle-to-cycle variability of the circles (None or inactive: exact repetition).
         start_ns: First joint-state stamp (ns); the first wrench is ``LEAD_IN_S + delay`` later and the
             joint states continue ``LEAD_IN_S`` after the last wrench.
-        contacts: Contact episodes at the hand (:mod:`semiparam_ros.sim.contacts`), or None for none.
     """
 
-    name: str
     trajectory: str = "xy"
-    duration: float = 60.0
     joint_rate: float = 100.0
     wrench_rate: float = 100.0
     delay: float = 0.0
     radius: float = 0.10
     speed: float = 0.6
-    seed: int = 0
-    payload_mass: float = 0.0
-    payload_time: float | None = None
     effects: EffectParameters = field(default=DEFAULT_EFFECTS)
     variability: TrajectoryVariability | None = field(default=DEFAULT_VARIABILITY)
-    start_ns: int = DEFAULT_START_NS
-    contacts: ContactConfig | None = None
 
     def __post_init__(self) -> None:
-        if not self.name or "/" in self.name:
-            raise ValueError(f"name must be a plain folder name, got {self.name!r}")
+        self.check_common()
         if self.trajectory not in ("xy", "xz", "multisine"):
             raise ValueError(f"trajectory must be 'xy', 'xz' or 'multisine', got {self.trajectory!r}")
-        for attr in ("duration", "joint_rate", "wrench_rate", "radius", "speed"):
+        for attr in ("joint_rate", "wrench_rate", "radius", "speed"):
             value = getattr(self, attr)
             if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
                 raise ValueError(f"{attr} must be a number, got {value!r}")
@@ -272,25 +265,10 @@ class ScenarioConfig:
             raise ValueError("rates above 10 kHz are not supported")
         if not (np.isfinite(self.delay) and abs(self.delay) < 1.0):
             raise ValueError(f"delay must be finite and below 1 s in magnitude, got {self.delay!r}")
-        if not (np.isfinite(self.payload_mass) and self.payload_mass >= 0):
-            raise ValueError(f"payload_mass must be >= 0 kg, got {self.payload_mass!r}")
-        if self.payload_time is not None and not (0 <= self.payload_time <= self.duration):
-            raise ValueError(f"payload_time must be within [0, duration] = [0, {self.duration}] s")
-        if int(self.seed) < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed!r}")
         if int(self.start_ns) + min(0, round(self.delay * 1e9)) < 0:
             raise ValueError("start_ns + delay must be >= 0")
         if self.variability is not None and not isinstance(self.variability, TrajectoryVariability):
             raise ValueError("variability must be a TrajectoryVariability or None")
-        if self.contacts is not None and not isinstance(self.contacts, ContactConfig):
-            raise ValueError("contacts must be a ContactConfig or None")
-
-    @property
-    def pickup_time(self) -> float | None:
-        """Pickup time (s from the start), or None without payload."""
-        if self.payload_mass <= 0:
-            return None
-        return 0.5 * self.duration if self.payload_time is None else float(self.payload_time)
 
 
 @dataclass(frozen=True)
@@ -345,16 +323,6 @@ class SimulatedRecording:
     contact_episodes: tuple[ContactEpisode, ...] = ()
     contact_wrench: np.ndarray | None = None
     external_wrench: np.ndarray | None = None
-
-
-def _stamps(start_ns: int, count: int, rate: float, offset_ns: int = 0) -> np.ndarray:
-    """``start + offset + round(i·1e9/rate)`` for i < count, as int64 ns."""
-    return start_ns + offset_ns + np.rint(np.arange(count, dtype=np.float64) * (1e9 / rate)).astype(np.int64)
-
-
-def _seed_sequence(config: ScenarioConfig) -> np.random.SeedSequence:
-    """Seed sequence of a recording: the seed and the bag name (so each bag gets its own noise)."""
-    return np.random.SeedSequence([int(config.seed), zlib.crc32(config.name.encode())])
 
 
 @lru_cache(maxsize=8)
@@ -496,13 +464,6 @@ def _trajectory(
     )
 
 
-def _rms(x: np.ndarray) -> list[float]:
-    """Component-averaged RMS of the force and torque parts (N, N·m)."""
-    x = np.asarray(x)
-    comp = np.sqrt(np.mean(x * x, axis=0))
-    return [float(np.mean(comp[:3])), float(np.mean(comp[3:]))]
-
-
 def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None = None) -> SimulatedRecording:
     """Simulate one recording.
 
@@ -516,8 +477,7 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
     Raises:
         ValueError: If the circle cannot be tracked within the joint limits (radius/speed too large).
     """
-    seq = _seed_sequence(config)
-    rng_traj, rng_joint, rng_wrench = (np.random.default_rng(s) for s in seq.spawn(3))
+    rng_traj, rng_joint, rng_wrench, rng_contact = recording_seeds(config.seed, config.name)
     traj, torso_yaw, traj_info = _trajectory(config, rng_traj)
     kin = _kinematics(torso_yaw)
     reg = _regressor(torso_yaw)
@@ -526,8 +486,8 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
     n_joint = round((config.duration + 2.0 * LEAD_IN_S) * config.joint_rate)
     n_wrench = round(config.duration * config.wrench_rate)
     delay_ns = round((LEAD_IN_S + config.delay) * 1e9)
-    joint_stamps = _stamps(config.start_ns, n_joint, config.joint_rate)
-    wrench_stamps = _stamps(config.start_ns, n_wrench, config.wrench_rate, delay_ns)
+    joint_stamps = sample_stamps(config.start_ns, n_joint, config.joint_rate)
+    wrench_stamps = sample_stamps(config.start_ns, n_wrench, config.wrench_rate, delay_ns)
     t_joint = (joint_stamps - config.start_ns) * 1e-9
     t_wrench = (wrench_stamps - config.start_ns) * 1e-9
 
@@ -543,51 +503,22 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
 
     wq, wdq, wddq = traj.evaluate(t_wrench)
     params_before = reg.urdf_parameters()
-    params_after = params_before.copy()
     pickup = config.pickup_time
-    payload_info: dict[str, Any] | None = None
-    if pickup is not None:
-        body, T = frame_in_body(reg, _HAND_FRAME)
-        point = T[:3, 3]
-        slot = reg.body_index(body)
-        params_after[10 * slot : 10 * slot + 10] += point_mass_parameters(config.payload_mass, point)
-        payload_info = {
-            "mass_kg": float(config.payload_mass),
-            "time_s": float(pickup),
-            "stamp_ns": int(config.start_ns + round(pickup * 1e9)),
-            "body": body,
-            "frame": _HAND_FRAME,
-            "point_in_body_m": [float(v) for v in point],
-        }
-
-    rigid = np.empty((n_wrench, 6))
-    cables = np.empty((n_wrench, 6))
+    params_after, payload_info = add_payload(reg, params_before, frame=_HAND_FRAME, mass=config.payload_mass,
+                                             pickup_s=pickup, start_ns=config.start_ns)
     after = np.zeros(n_wrench, dtype=bool) if pickup is None else t_wrench >= pickup
-    chunk = 500
-    for start in range(0, n_wrench, chunk):
-        stop = min(start + chunk, n_wrench)
-        phi = reg.regressor(wq[start:stop], wdq[start:stop], wddq[start:stop])
-        sl_after = after[start:stop]
-        rigid[start:stop] = np.where(sl_after[:, None], phi @ params_after, phi @ params_before)
-        cables[start:stop] = harness_wrench(kin, wq[start:stop], wdq[start:stop], fx)
-        if progress is not None:
-            progress(stop - start)
+    rigid = rigid_outputs(reg, wq, wdq, wddq, after, params_before, params_after, chunk=500,
+                          progress=progress)
+    cables = harness_wrench(kin, wq, wdq, fx)
     contact_info: dict[str, Any] | None = None
-    episodes: tuple[ContactEpisode, ...] = ()
     contact_w: np.ndarray | None = None
     external: np.ndarray | None = None
+    episodes, force = draw_contacts(config.contacts, config.duration, t_wrench, rng_contact)
     if config.contacts is not None:
-        # Its own random stream (the 4th child), so that the other signals stay as without contacts.
-        rng_contact = np.random.default_rng(seq.spawn(1)[0])
-        episodes = draw_episodes(config.contacts, config.duration, rng_contact)
-        contact_w, external = hand_contact_wrenches(kin, wq, contact_forces(episodes, t_wrench))
-        contact_info = {
-            **config.contacts.as_dict(),
-            "frame": _HAND_FRAME,
-            "convention": "force the environment applies to the hand at the frame origin; direction fixed "
-            "in the root frame during an episode",
-            "episodes": [e.as_dict() for e in episodes],
-        }
+        contact_w, external = hand_contact_wrenches(kin, wq, force)
+        contact_info = contacts_info(
+            config.contacts, _HAND_FRAME, "force the environment applies to the hand at the frame origin; "
+            "direction fixed in the root frame during an episode", episodes)
     truth = sensor_reading(rigid + cables if external is None else rigid + cables + external, t_wrench, fx)
     noise = np.empty((n_wrench, 6))
     noise[:, :3] = fx.force_noise_std * rng_wrench.standard_normal((n_wrench, 3))
@@ -614,20 +545,12 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
         "payload": payload_info,
         "effects": fx.as_dict(),
         "measured_rms": {
-            "non_rigid_N_Nm": _rms(truth - rigid),
-            "harness_N_Nm": _rms(cables),
-            "noise_N_Nm": _rms(noise),
-            "rigid_N_Nm": _rms(rigid),
+            "non_rigid_N_Nm": wrench_rms(truth - rigid),
+            "harness_N_Nm": wrench_rms(cables),
+            "noise_N_Nm": wrench_rms(noise),
+            "rigid_N_Nm": wrench_rms(rigid),
         },
-        "limits": {
-            "q_min_rad": [float(v) for v in q.min(axis=0)],
-            "q_max_rad": [float(v) for v in q.max(axis=0)],
-            "joint_lower_rad": [float(v) for v in kin.lower],
-            "joint_upper_rad": [float(v) for v in kin.upper],
-            "max_abs_dq_rad_per_s": [float(v) for v in np.abs(dq).max(axis=0)],
-            "max_abs_ddq_rad_per_s2": [float(v) for v in np.abs(ddq).max(axis=0)],
-            "min_joint_limit_margin_rad": margin,
-        },
+        "limits": limits_info(q, dq, ddq, kin.lower, kin.upper, margin),
     }
     if contact_info is not None:
         info["contacts"] = contact_info
