@@ -1,5 +1,5 @@
 """Taking N messages already queued on a subscription: one executor wait per message (public API) against
-the node's ``_drain`` loop of ``sub.handle.take_message`` (the call the executor itself makes).
+the node's ``InputStreams.drain`` loop of ``sub.handle.take_message`` (the call the executor itself makes).
 
 Usage: ``PYTHONPATH=. .venv/bin/python bench/bench_drain.py [--n 500] [--repeats 7] [--json PATH]``.
 Prints the median time per message of each way and their ratio, from the same run.
@@ -60,7 +60,7 @@ def main() -> None:
         received.clear()
         _fill(pub, ns.n, received)
         t0 = time.perf_counter()
-        while len(received) < ns.n:  # the node's _drain: take until the history is empty
+        while len(received) < ns.n:  # the node's InputStreams.drain: take until the history is empty
             with sub.handle:
                 taken = sub.handle.take_message(sub.msg_type, sub.raw)
             if taken is None:

@@ -14,9 +14,9 @@ load_model``): a checkpoint in, ``model.predict(q, dq, ddq)`` out (see :mod:`sem
 
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.1.0"
+from semiparam_ros.version import __version__
 
-__all__ = ["LearnedModel", "load_model"]
+__all__ = ["LearnedModel", "__version__", "load_model"]
 
 if TYPE_CHECKING:
     from semiparam_ros.core.serving import LearnedModel, load_model

@@ -34,7 +34,7 @@ def test_launch_file_structure_and_installation():
     assert kw["name"].value == "estimator"
     # the executable is the node's console script, the executor names are the node's own
     setup = (REPO / "setup.py").read_text()
-    assert '"estimator = semiparam_ros.ros.estimator_node:main"' in setup
+    assert '"estimator = semiparam_ros.ros.run:main"' in setup
     assert '("share/" + package_name + "/launch", glob("launch/*.launch.py"))' in setup
     from semiparam_ros.ros.run import EXECUTORS
 

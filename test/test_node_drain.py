@@ -1,5 +1,5 @@
-"""The node's ``_drain`` takes queued messages through ``sub.handle.take_message`` (not public rclpy API;
-kept for the measured reason in its docstring). These tests fail if that call changes shape."""
+"""The node's ``InputStreams.drain`` takes queued messages through ``sub.handle.take_message`` (not public
+rclpy API; kept for the measured reason in its docstring). These tests fail if that call changes shape."""
 
 from __future__ import annotations
 

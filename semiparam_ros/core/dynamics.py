@@ -791,29 +791,35 @@ class RigidBodyRegressor:
         self._fill(self._vector("q", q), np.zeros(self.n_joints), np.zeros(self.n_joints))
         return self._q.copy()
 
+    # Deprecated for one release: the simulator's frame queries live in semiparam_ros.sim.frames (the core
+    # does not import the simulator, so these keep their own short bodies until they are removed).
     def frame_in_body(self, frame_name: str) -> tuple[str, np.ndarray]:
-        """Place a frame on its body (deprecated: :func:`semiparam_ros.sim.frames.frame_in_body`)."""
-        from semiparam_ros.sim import frames  # lazy: the deprecated path only
-
-        warnings.warn("RigidBodyRegressor.frame_in_body is deprecated: use semiparam_ros.sim.frames."
-                      "frame_in_body", DeprecationWarning, stacklevel=2)
-        return frames.frame_in_body(self, frame_name)
+        """Place a frame on its body (deprecated: ``semiparam_ros.sim.frames.frame_in_body``)."""
+        _deprecated("frame_in_body")
+        frame = self._model.frames[self._frame_id(frame_name)]
+        hits = np.flatnonzero(self._body_jids == int(frame.parentJoint))
+        if hits.size == 0:
+            raise ConfigurationError(f"frame {frame_name!r} is not attached to a body of the regressor")
+        return self.body_names[int(hits[0])], frame.placement.homogeneous.copy()
 
     def frame_placement(self, q: Any, frame_name: str) -> np.ndarray:
-        """Pose a frame in the base (deprecated: :func:`semiparam_ros.sim.frames.frame_placement`)."""
-        from semiparam_ros.sim import frames  # lazy: the deprecated path only
-
-        warnings.warn("RigidBodyRegressor.frame_placement is deprecated: use semiparam_ros.sim.frames."
-                      "frame_placement", DeprecationWarning, stacklevel=2)
-        return frames.frame_placement(self, q, frame_name)
+        """Pose a frame in the base (deprecated: ``semiparam_ros.sim.frames.frame_placement``)."""
+        _deprecated("frame_placement")
+        fid = self._frame_id(frame_name)
+        pin.forwardKinematics(self._model, self._data, self.configuration(q))
+        return pin.updateFramePlacement(self._model, self._data, fid).homogeneous.copy()
 
     def body_placement(self, q: Any, body_name: str) -> np.ndarray:
-        """Pose a body frame in the base (deprecated: :func:`semiparam_ros.sim.frames.body_placement`)."""
-        from semiparam_ros.sim import frames  # lazy: the deprecated path only
+        """Pose a body frame in the base (deprecated: ``semiparam_ros.sim.frames.body_placement``)."""
+        _deprecated("body_placement")
+        jid = int(self._body_jids[self.body_index(body_name)])
+        pin.forwardKinematics(self._model, self._data, self.configuration(q))
+        return self._data.oMi[jid].homogeneous.copy()
 
-        warnings.warn("RigidBodyRegressor.body_placement is deprecated: use semiparam_ros.sim.frames."
-                      "body_placement", DeprecationWarning, stacklevel=2)
-        return frames.body_placement(self, q, body_name)
+    def _frame_id(self, frame_name: str) -> int:
+        if not isinstance(frame_name, str) or not self._model.existFrame(frame_name):
+            raise ConfigurationError(f"unknown frame {frame_name!r}: not a link or joint of the URDF")
+        return int(self._model.getFrameId(frame_name))
 
     @property
     def pinocchio_model(self) -> pin.Model:
@@ -827,6 +833,11 @@ def _as_slice(indices: np.ndarray) -> slice | np.ndarray:
     if indices.size and np.array_equal(indices, np.arange(indices[0], indices[0] + indices.size)):
         return slice(int(indices[0]), int(indices[0]) + indices.size)
     return indices
+
+
+def _deprecated(name: str) -> None:
+    warnings.warn(f"RigidBodyRegressor.{name} is deprecated: use semiparam_ros.sim.frames.{name}",
+                  DeprecationWarning, stacklevel=3)
 
 
 def _rebuild(urdf_xml: str, spec: RegressorSpec, source: str | None) -> RigidBodyRegressor:

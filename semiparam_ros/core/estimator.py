@@ -934,7 +934,7 @@ def software_versions() -> dict[str, str]:
 
     import pinocchio
 
-    from semiparam_ros import __version__
+    from semiparam_ros.version import __version__
 
     return {"semiparam_ros": __version__, "python": platform.python_version(), "numpy": np.__version__,
             "pinocchio": str(pinocchio.__version__)}

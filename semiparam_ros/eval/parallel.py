@@ -8,8 +8,7 @@ learners from its arguments, so the results are the same numbers whatever ``jobs
 To send the jobs to a cluster, wrap the call in another joblib backend, e.g. Dask's
 (``from dask.distributed import Client; client = Client("scheduler:8786")`` then
 ``with joblib.parallel_config(backend="dask"): ...``) or Ray's (``from ray.util.joblib import
-register_ray; register_ray()`` then ``backend="ray"``); :func:`run_jobs` picks up the active backend
-(docs/architecture.md).
+register_ray; register_ray()`` then ``backend="ray"``); :func:`run_jobs` picks up the active backend.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The ``estimator`` node: ROS entities wired to the plain-Python learning loop.
 
 Run it with ``ros2 run semiparam_ros estimator --ros-args --params-file config/icub_right_arm.yaml`` (or
-``python -m semiparam_ros.ros.estimator_node …``; options in :mod:`semiparam_ros.ros.run`). Its topics,
+``python -m semiparam_ros.ros.run …``: the command line lives in :mod:`semiparam_ros.ros.run`). Its topics,
 services, QoS and threads are documented in docs/node.md. The work is done by parts that never import
 rclpy: :class:`~semiparam_ros.core.learning_loop.LearningLoop` (input queue, overload policy, the
 estimator offline replay uses too, so a bag gives the same numbers either way),
@@ -50,7 +50,7 @@ from semiparam_ros.ros.outputs import PARAMETERS_QOS, Outputs
 from semiparam_ros.ros.parameters import ParameterError, declare_parameters, make_parameter_validator
 from semiparam_ros.ros.save_service import SaveService
 
-__all__ = ["INPUT_QOS", "PARAMETERS_QOS", "EstimatorNode", "StartupError", "main"]
+__all__ = ["INPUT_QOS", "PARAMETERS_QOS", "EstimatorNode", "StartupError"]
 
 #: Desired states: only the latest matters; best effort accepts reliable and best-effort publishers.
 _DESIRED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -438,12 +438,7 @@ class EstimatorNode(Node):
         return False
 
 
-def main(args: list[str] | None = None) -> int:
-    """Run the node (:func:`semiparam_ros.ros.run.main`, where its command line lives)."""
-    from semiparam_ros.ros.run import main as run_main
-
-    return run_main(args)
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # the command line moved to ros/run (`ros2 run semiparam_ros estimator` unchanged)
+    print("semiparam_ros.ros.estimator_node is a module now: run `python -m semiparam_ros.ros.run` (or "
+          "`ros2 run semiparam_ros estimator`) with the same arguments", file=sys.stderr)
+    sys.exit(2)
