@@ -21,6 +21,7 @@ from pathlib import Path
 
 from semiparam_ros.cli.errors import error_exit
 from semiparam_ros.cli.evaluate import parse_overrides
+from semiparam_ros.eval.options import DEFAULT_SPLITS
 
 __all__ = ["build_parser", "main"]
 
@@ -43,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override a parameter (repeatable)")
     p.add_argument("--friction-joints", nargs="*", default=list(KUKA_FRICTION_JOINTS),
                    help="joints of the friction criterion (default: the KUKA's lwr_0, lwr_4, lwr_5, lwr_6)")
-    p.add_argument("--splits", type=int, default=10, help="test parts of the protocol (default 10)")
+    p.add_argument("--splits", type=int, default=DEFAULT_SPLITS,
+                   help="test parts of the protocol (default %(default)s)")
     p.add_argument("--no-inject", action="store_true", help="skip the external-torque measurement")
     p.add_argument("--horizons", nargs="*", default=None,
                    help="ages of the model for the horizon table [s] (0 = one step, 'frozen'); "

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from semiparam_ros.cli.errors import error_exit
 from semiparam_ros.cli.evaluate import add_config_arguments, parse_overrides
+from semiparam_ros.eval.options import DEFAULT_WINDOW_S
 
 __all__ = ["build_parser", "main"]
 
@@ -67,7 +68,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--splits", type=int, default=5, help="protocol method: test parts (default 5)")
     p.add_argument("--split-size", type=int, default=None, help="protocol method: samples per part")
-    p.add_argument("--window", type=float, default=3.0, help="protocol method: RMSE window [s] (default 3)")
+    p.add_argument("--window", type=float, default=DEFAULT_WINDOW_S,
+                   help="protocol method: RMSE window [s] (default %(default)s)")
     p.add_argument(
         "--jobs",
         type=int,

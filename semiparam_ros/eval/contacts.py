@@ -41,6 +41,7 @@ from semiparam_ros.core.estimator import OnlineEstimator
 from semiparam_ros.core.messages import JointStateData, WrenchData
 from semiparam_ros.core.rate import stream_period_s
 from semiparam_ros.eval.metrics import OutputSpec, group_rmse, window_samples, windowed_rmse
+from semiparam_ros.eval.options import DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol import Recovery, recovery
 from semiparam_ros.eval.replay import Topics, payload_pickup, read_scenario
 from semiparam_ros.io.bags import read_messages, topic_info
@@ -338,8 +339,8 @@ def _recovery_from_json(r: Mapping[str, Any]) -> Recovery:
 
 def score_run(run: ContactRun, truth: GroundTruthEpisodes, output: OutputSpec, *, threshold: float,
               warmup_s: float, strong_force: float = 10.0, window_s: float = 10.0, tolerance_s: float = 0.2,
-              recovery_window_s: float = 3.0, pre_s: float = 10.0, recovery_tolerance: float = 1.5,
-              deadline_s: float = 10.0, adopted_fraction: float = 0.2,
+              recovery_window_s: float = DEFAULT_WINDOW_S, pre_s: float = 10.0,
+              recovery_tolerance: float = 1.5, deadline_s: float = 10.0, adopted_fraction: float = 0.2,
               pickup_window_s: float = 5.0) -> GateStats:
     """Score one run against the true episodes (module docstring).
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from semiparam_ros.core.rate import stream_period_s
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse, group_rmse, window_samples, windowed_rmse
+from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 
 __all__ = [
     "AdaptationResult",
@@ -399,8 +400,9 @@ class ProtocolResult:
 
 
 def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, test_data: SampleArrays, *,
-                 output: OutputSpec, splits: int = 10, split_size: int | None = None, window_s: float = 3.0,
-                 first_s: float = 3.0, progress: bool | Progress = False,
+                 output: OutputSpec, splits: int = DEFAULT_SPLITS, split_size: int | None = None,
+                 window_s: float = DEFAULT_WINDOW_S, first_s: float = DEFAULT_FIRST_S,
+                 progress: bool | Progress = False,
                  frozen: Collection[str] = (), trained: Collection[str] = ()) -> ProtocolResult:
     """Run the paper's protocol: train every model on the whole train stream, then test-and-update.
 
@@ -564,7 +566,8 @@ class Recovery:
 
 
 def run_adaptation(models: Mapping[str, OnlineModel], stream: SampleArrays, change_s: float, *,
-                   output: OutputSpec, pretrain: SampleArrays | None = None, window_s: float = 3.0,
+                   output: OutputSpec, pretrain: SampleArrays | None = None,
+                   window_s: float = DEFAULT_WINDOW_S,
                    pre_s: float = 10.0, deadline_s: float = 10.0, tolerance: float = 1.5,
                    progress: bool | Progress = False) -> AdaptationResult:
     """Follow a stream through an abrupt change (e.g. a payload picked up) with test-then-train.

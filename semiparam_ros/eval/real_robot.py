@@ -53,6 +53,7 @@ from semiparam_ros.eval.horizon import (
     horizon_markdown,
 )
 from semiparam_ros.eval.metrics import OutputSpec
+from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol import SampleArrays, predict_only, run_protocol, test_then_train
 from semiparam_ros.eval.replay import build_models, load_samples
 from semiparam_ros.eval.report import ProtocolReport, protocol_report
@@ -257,8 +258,9 @@ def _node_predictions(model: Any, config: EstimatorConfig, data: SampleArrays, Y
 
 
 def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleArrays, *,
-                    friction_joints: Sequence[str], splits: int = 10, window_s: float = 3.0,
-                    first_s: float = 3.0, inject: bool = True, protocol: Mapping[str, Any] | None = None,
+                    friction_joints: Sequence[str], splits: int = DEFAULT_SPLITS,
+                    window_s: float = DEFAULT_WINDOW_S, first_s: float = DEFAULT_FIRST_S, inject: bool = True,
+                    protocol: Mapping[str, Any] | None = None,
                     horizons: Sequence[float | str] | None = DEFAULT_HORIZONS,
                     progress: bool = False) -> RealRobotComparison:
     """Run every model of the module docstring on a joint-torque log pair and check the acceptance.
@@ -360,7 +362,7 @@ def excitation_summary(config: EstimatorConfig, model: Any, test: SampleArrays) 
 
 
 def evaluate_logs(config: EstimatorConfig, train_path: str | Path, test_path: str | Path, *,
-                  friction_joints: Sequence[str], splits: int = 10, inject: bool = True,
+                  friction_joints: Sequence[str], splits: int = DEFAULT_SPLITS, inject: bool = True,
                   horizons: Sequence[float | str] | None = DEFAULT_HORIZONS,
                   progress: bool = False) -> RealRobotComparison:
     """Read two joint-torque bags through the node's pipeline and run :func:`compare_on_logs`.
@@ -449,7 +451,7 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
 
 def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", test: str = "measurements_3",
                    urdf: Path | None = None, overrides: Mapping[str, Any] | None = None,
-                   friction_joints: Sequence[str] = (), splits: int = 10, inject: bool = True,
+                   friction_joints: Sequence[str] = (), splits: int = DEFAULT_SPLITS, inject: bool = True,
                    horizons: Sequence[float | str] | None = DEFAULT_HORIZONS,
                    json_path: Path | None = None, markdown_path: Path | None = None,
                    figure_path: Path | None = None, progress: bool = True) -> str:

@@ -46,6 +46,7 @@ import numpy as np
 from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.eval.compare import DEFAULT_PAIRS, Comparison, compare_pair
 from semiparam_ros.eval.metrics import OutputSpec, group_rmse
+from semiparam_ros.eval.options import DEFAULT_FIRST_S
 from semiparam_ros.eval.protocol import AdaptationResult, ProtocolResult, Recovery
 
 __all__ = [
@@ -201,7 +202,7 @@ class Check:
         """Identifier ``model/reference/group/segment``, e.g. ``SP/NP/torque/regime``."""
         return f"{self.model}/{self.reference}/{self.group}/{self.segment}"
 
-    def label(self, first_s: float = 3.0) -> str:
+    def label(self, first_s: float = DEFAULT_FIRST_S) -> str:
         """Human name, e.g. ``SP force RMSE at regime / NP's``."""
         where = "at regime" if self.segment == "regime" else f"over the first {first_s:g} s"
         return f"{self.model} {self.group} RMSE {where} / {self.reference}'s"

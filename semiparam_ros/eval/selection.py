@@ -35,6 +35,7 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import build_model, build_regressor, measured_period_s
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse
+from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_WINDOW_S
 from semiparam_ros.eval.parallel import run_jobs
 from semiparam_ros.eval.protocol import SampleArrays, progress_enabled
 from semiparam_ros.eval.report import ProtocolReport
@@ -398,8 +399,8 @@ def protocol_search(
     train_n: int,
     splits: int,
     split_size: int | None = None,
-    window_s: float = 3.0,
-    first_s: float = 3.0,
+    window_s: float = DEFAULT_WINDOW_S,
+    first_s: float = DEFAULT_FIRST_S,
     n_features: int | None = None,
     grid: Mapping[str, Sequence[float]] | None = None,
     jobs: int = 1,

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from semiparam_ros.eval.compare import Comparison, format_p
 from semiparam_ros.eval.contacts import ContactReport
 from semiparam_ros.eval.metrics import GROUP_UNITS
+from semiparam_ros.eval.options import DEFAULT_FIRST_S
 from semiparam_ros.eval.report import AdaptationReport, Check, ProtocolReport
 
 __all__ = [
@@ -106,7 +107,8 @@ def components_table(report: ProtocolReport, truth: bool = False) -> str:
     return "\n".join(lines) + "\n"
 
 
-def checks_table(checks: Sequence[Check], first_s: float = 3.0, *, tie_margin: float | None = None) -> str:
+def checks_table(checks: Sequence[Check], first_s: float = DEFAULT_FIRST_S, *,
+                 tie_margin: float | None = None) -> str:
     """One row per criterion: its name, value, limit and pass/FAIL.
 
     Args:
@@ -127,7 +129,8 @@ def checks_table(checks: Sequence[Check], first_s: float = 3.0, *, tie_margin: f
     return "\n".join(lines) + "\n"
 
 
-def comparisons_table(rows: Sequence[Comparison], first_s: float = 3.0, *, level: bool = False) -> str:
+def comparisons_table(rows: Sequence[Comparison], first_s: float = DEFAULT_FIRST_S, *,
+                      level: bool = False) -> str:
     """Paired comparisons: ratio, mean difference ± s.e., wins, p-values and the verdict at 5 %.
 
     Args:
