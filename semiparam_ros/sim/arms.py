@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -46,11 +45,13 @@ from semiparam_ros.sim.ik import ArmKinematics
 from semiparam_ros.sim.pipeline import (
     RecordingConfig,
     add_payload,
+    arm_kinematics,
     column_rms,
     contacts_info,
     draw_contacts,
     limits_info,
     recording_seeds,
+    regressor_of,
     rigid_outputs,
     sample_stamps,
 )
@@ -450,17 +451,15 @@ class ArmRecording:
     info: dict[str, Any]
 
 
-@lru_cache(maxsize=4)
 def arm_regressor(robot: str) -> RigidBodyRegressor:
     """Return the joint-torque regressor of a preset robot (others locked at 0; cached, not thread-safe)."""
     spec = ARM_ROBOTS[robot]
-    return RigidBodyRegressor.from_urdf(resolve_urdf(spec.urdf), spec.joints, output="joint_torques")
+    return regressor_of(str(resolve_urdf(spec.urdf)), tuple(spec.joints), output="joint_torques")
 
 
-@lru_cache(maxsize=4)
 def _kinematics(robot: str) -> ArmKinematics:
     spec = ARM_ROBOTS[robot]
-    return ArmKinematics(resolve_urdf(spec.urdf), spec.joints, end_effector=spec.end_effector)
+    return arm_kinematics(str(resolve_urdf(spec.urdf)), tuple(spec.joints), spec.end_effector)
 
 
 def true_parameters(config: ArmScenarioConfig) -> np.ndarray:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -30,16 +31,19 @@ import numpy as np
 from semiparam_ros.core.dynamics import RigidBodyRegressor, point_mass_parameters
 from semiparam_ros.sim.contacts import ContactConfig, ContactEpisode, contact_forces, draw_episodes
 from semiparam_ros.sim.frames import frame_in_body
+from semiparam_ros.sim.ik import ArmKinematics
 
 __all__ = [
     "DEFAULT_START_NS",
     "RecordingConfig",
     "add_payload",
+    "arm_kinematics",
     "column_rms",
     "contacts_info",
     "draw_contacts",
     "limits_info",
     "recording_seeds",
+    "regressor_of",
     "rigid_outputs",
     "sample_stamps",
     "wrench_rms",
@@ -109,6 +113,21 @@ class RecordingConfig:
         if self.payload_mass <= 0:
             return None
         return 0.5 * self.duration if self.payload_time is None else float(self.payload_time)
+
+
+@lru_cache(maxsize=16)
+def arm_kinematics(urdf: str, joints: tuple[str, ...], end_effector: str,
+                   locked: tuple[tuple[str, float], ...] = ()) -> ArmKinematics:
+    """Return the (cached) kinematics of a simulated arm (URDF file, moving joints, end effector, locks)."""
+    return ArmKinematics(urdf, joints, locked=dict(locked) if locked else None, end_effector=end_effector)
+
+
+@lru_cache(maxsize=16)
+def regressor_of(urdf: str, joints: tuple[str, ...], *, output: str, ft_sensor: str | None = None,
+                 locked: tuple[tuple[str, float], ...] = ()) -> RigidBodyRegressor:
+    """Return the (cached; not thread-safe) rigid-body regressor that measures a simulated recording."""
+    return RigidBodyRegressor.from_urdf(urdf, joints, output=output, ft_sensor=ft_sensor,
+                                        **({"locked": dict(locked)} if locked else {}))
 
 
 def sample_stamps(start_ns: int, count: int, rate: float, offset_ns: int = 0) -> np.ndarray:

@@ -61,10 +61,12 @@ from semiparam_ros.sim.pipeline import (
     DEFAULT_START_NS,
     RecordingConfig,
     add_payload,
+    arm_kinematics,
     contacts_info,
     draw_contacts,
     limits_info,
     recording_seeds,
+    regressor_of,
     rigid_outputs,
     sample_stamps,
     wrench_rms,
@@ -325,18 +327,13 @@ class SimulatedRecording:
     external_wrench: np.ndarray | None = None
 
 
-@lru_cache(maxsize=8)
 def _kinematics(torso_yaw: float) -> ArmKinematics:
-    return ArmKinematics(
-        icub_urdf_path(), ARM_JOINTS, locked={"torso_yaw": torso_yaw}, end_effector=_HAND_FRAME
-    )
+    return arm_kinematics(str(icub_urdf_path()), ARM_JOINTS, _HAND_FRAME, (("torso_yaw", torso_yaw),))
 
 
-@lru_cache(maxsize=8)
 def _regressor(torso_yaw: float) -> RigidBodyRegressor:
-    return RigidBodyRegressor.from_urdf(
-        icub_urdf_path(), ARM_JOINTS, ft_sensor=SENSOR_FRAME, locked={"torso_yaw": torso_yaw}
-    )
+    return regressor_of(str(icub_urdf_path()), ARM_JOINTS, output="wrench", ft_sensor=SENSOR_FRAME,
+                        locked=(("torso_yaw", torso_yaw),))
 
 
 @lru_cache(maxsize=16)
