@@ -17,7 +17,7 @@ included in its ``node`` time, as it is in its executor).
 Usage::
 
     PYTHONPATH=$PWD .venv/bin/python bench/bench_node_overhead.py [--features 500] [--seconds 3]
-        [--repeats 3] [--compare-with DIR]
+        [--repeats 3] [--compare-with DIR] [--output FILE.json]
 """
 
 from __future__ import annotations
@@ -81,7 +81,8 @@ def measure(features: int, seconds: float, repeats: int) -> dict[str, list[float
                             (est.process_joint_state if kind == "joint_states" else est.process_wrench)(item)
                     else:
                         t0 = time.thread_time()
-                        intake = node.inputs.intake
+                        # this checkout's node takes input through node.inputs; older ones through _intake
+                        intake = node.inputs.intake if hasattr(node, "inputs") else node._intake
                         for kind, raw in messages:
                             intake(kind, raw if raw_input else deserialize_message(raw, types[kind]))
                             node._process_queued()
@@ -101,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--compare-with", type=Path, default=None, metavar="DIR")
+    parser.add_argument("--output", type=Path, default=None,
+                        help="also save the medians and samples as JSON here")
     parser.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # child mode
     args = parser.parse_args(argv)
     if args.json:
@@ -120,9 +123,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f"D = {args.features}, µs of CPU per pair (median of {args.repeats}; load average "
           f"{os.getloadavg()[0]:.1f})")
     print("| checkout | core | node | node − core |\n|---|---|---|---|")
+    summary = {}
     for code, res in results.items():
         core, node = float(np.median(res["core"])), float(np.median(res["node"]))
         print(f"| {code} | {core:.0f} | {node:.0f} | {node - core:.0f} |")
+        summary[code] = {"core_us": core, "node_us": node, "overhead_us": node - core, "samples": res}
+    if args.output is not None:
+        doc = {"features": args.features, "repeats": args.repeats, "load_average": os.getloadavg()[0],
+               "checkouts": summary}
+        args.output.write_text(json.dumps(doc, indent=1))
+        print(f"wrote {args.output}")
     return 0
 
 

@@ -24,8 +24,7 @@ from __future__ import annotations
 import collections
 import threading
 import time
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -41,8 +40,7 @@ Input = JointStateData | WrenchData
 _FUSED_COST_RATE = 0.05  # exponential-mean weight of the measured cost of a fused step (≈ 20 steps)
 
 
-@dataclass(frozen=True)
-class Stepped:
+class Stepped(NamedTuple):
     """What one input produced.
 
     Attributes:
@@ -112,8 +110,10 @@ class LearningLoop:
                 results = est.process_wrench(data, skip_learning=skip_learning)
             else:
                 results = est.process_joint_state(data, skip_learning=skip_learning)
-            if any(r.learned for r in results):
-                self.version += 1
+            for r in results:
+                if r.learned:
+                    self.version += 1
+                    break
             drop_total = est.n_dropped  # refused samples too
         if fused:
             for r in results:

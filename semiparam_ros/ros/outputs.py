@@ -78,24 +78,32 @@ class Outputs:
 
     def publish_sample(self, result: StepResult, frame: str,
                        gravity: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
-        """Publish one sample's outputs (wrench outputs in ``frame``; gravity torques at its posture)."""
-        stamp, pred, y = result.sample.stamp_ns, result.prediction, result.sample.y
+        """Publish one sample's outputs (wrench outputs in ``frame``; gravity torques at its posture).
+
+        Each output is computed only when its topic has a subscriber (at 1 kHz every array operation
+        counts).
+        """
+        stamp, pred = result.sample.stamp_ns, result.prediction
         if self.wrench and self._frame != frame:
             self._frame = frame
             self._template = cv.SerializedOutput(lambda ns, w: cv.wrench_stamped_msg(ns, frame, w), 6)
         fill = self._template.fill  # type: ignore[union-attr]
-        model = pred.total if pred.correction is None else pred.total - pred.correction  # without the tracker
-        outputs = [(self.total, pred.total), (self.external, y - pred.total), (self.model, model)]
+        if self.total.get_subscription_count():
+            self.total.publish(fill(stamp, pred.total))
+        if self.external.get_subscription_count():
+            self.external.publish(fill(stamp, result.sample.y - pred.total))
+        if self.model.get_subscription_count():  # the model alone: without the fast correction
+            self.model.publish(fill(stamp, pred.total if pred.correction is None
+                                    else pred.total - pred.correction))
         if not self.wrench:
             if self.legacy.get_subscription_count():
                 self._warn("legacy topic", "a subscriber reads predicted_joint_torques outside the node's "
                            "namespace: deprecated, use ~/predicted_joint_torques", once=True)
-                outputs.append((self.legacy, pred.total))
+                self.legacy.publish(fill(stamp, pred.total))
             if gravity is not None and self.gravity.get_subscription_count():
-                outputs.append((self.gravity, gravity(result.sample.q)))
-        outputs += [(self.parametric, pred.parametric), (self.residual, pred.residual),
-                    (self.std, result.std)]
-        for pub, value in outputs:
+                self.gravity.publish(fill(stamp, gravity(result.sample.q)))
+        for pub, value in ((self.parametric, pred.parametric), (self.residual, pred.residual),
+                           (self.std, result.std)):
             if value is not None and pub.get_subscription_count():
                 pub.publish(fill(stamp, value))
 
