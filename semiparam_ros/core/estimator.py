@@ -35,6 +35,7 @@ from semiparam_ros.core.semiparametric import (
     ParametricModel,
     Prediction,
     SemiparametricModel,
+    rigid_body_part,
 )
 from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
@@ -656,7 +657,7 @@ class OnlineEstimator:
         Raises:
             ConfigurationError: The model has no rigid-body part (``NP``).
         """
-        par = getattr(self.model, "parametric", None)
+        par = rigid_body_part(self.model)
         if par is None:
             raise ConfigurationError("the model has no rigid-body part to project")
         return par.parameters.copy(), par.rls.R.copy(), par.rls.lam

@@ -49,7 +49,10 @@ from semiparam_ros.core.rrls import RecursiveRLS
 from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
-__all__ = ["NonparametricModel", "ParametricModel", "Prediction", "PredictionContext", "SemiparametricModel"]
+__all__ = [
+    "NonparametricModel", "ParametricModel", "Prediction", "PredictionContext", "SemiparametricModel",
+    "rigid_body_part",
+]
 
 Regressor = Callable[[np.ndarray], np.ndarray]
 
@@ -691,6 +694,16 @@ class NonparametricModel(_Model):
                              f"n_outputs={self.n_outputs}")
         self.rff, self.standardizer, self.rls, self.n_samples_seen = rff, std, rls, n_seen
         self._initial_standardizer = std0
+
+
+def rigid_body_part(model: object) -> ParametricModel | None:
+    """Return a model's rigid-body learner: P itself, the parametric stage of an SP; None for NP.
+
+    >>> rigid_body_part(NonparametricModel(3, 1, n_features=4, standardizer_warmup=0)) is None
+    True
+    """
+    par = model if isinstance(model, ParametricModel) else getattr(model, "parametric", None)
+    return par if isinstance(par, ParametricModel) else None
 
 
 def _make_standardizer(n_inputs: int, standardizer: Standardizer | None, warmup: int,

@@ -51,7 +51,7 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import Model, OnlineEstimator, build_regressor
 from semiparam_ros.core.identification import ConsistentEstimate, ExcitationReport
 from semiparam_ros.core.payload import PayloadEstimate
-from semiparam_ros.core.semiparametric import ParametricModel, Prediction
+from semiparam_ros.core.semiparametric import ParametricModel, Prediction, rigid_body_part
 from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.uncertainty import predict_with_variance
 from semiparam_ros.core.validation import check_finite_array
@@ -233,9 +233,8 @@ class LearnedModel:
         Raises:
             ValueError: For a model without one (``NP``).
         """
-        model = self._model()
-        par = model if isinstance(model, ParametricModel) else getattr(model, "parametric", None)
-        if not isinstance(par, ParametricModel):
+        par = rigid_body_part(self._model())
+        if par is None:
             raise ValueError("this needs a rigid-body part: the model is nonparametric only")
         return par
 

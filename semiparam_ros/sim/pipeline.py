@@ -1,6 +1,7 @@
 """The simulation pipeline shared by every simulated robot: stamps, seeds, payload, rigid body, contacts.
 
-A recording is simulated in one order whatever is measured (:func:`semiparam_ros.sim.simulate.simulate`):
+A recording is simulated in one order whatever is measured
+(:func:`semiparam_ros.sim.generate.simulate_recording`):
 
 1. stamps on the sampling grid of each stream (:func:`sample_stamps`) and the recording's random streams
    (:func:`recording_seeds`: trajectory, joint noise, measurement noise, contacts — the same children for
@@ -127,7 +128,7 @@ def regressor_of(urdf: str, joints: tuple[str, ...], *, output: str, ft_sensor: 
                  locked: tuple[tuple[str, float], ...] = ()) -> RigidBodyRegressor:
     """Return the (cached; not thread-safe) rigid-body regressor that measures a simulated recording."""
     return RigidBodyRegressor.from_urdf(urdf, joints, output=output, ft_sensor=ft_sensor,
-                                        **({"locked": dict(locked)} if locked else {}))
+                                        locked=dict(locked) if locked else None)
 
 
 def sample_stamps(start_ns: int, count: int, rate: float, offset_ns: int = 0) -> np.ndarray:
