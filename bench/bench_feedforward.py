@@ -49,10 +49,8 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
     import rclpy
     from builtin_interfaces.msg import Duration
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from ros_harness import client, private_domain
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -65,10 +63,7 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
     cad = regressor.urdf_parameters()
     n = len(joints)
 
-    domain = 1 + (os.getpid() * 13 + (7 if learning else 0)) % 100
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
-    os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR")})
+    domain, env = private_domain(tmp, 13, 7 if learning else 0)
     log_path = tmp / f"node_{'learning' if learning else 'frozen'}_{int(consistent)}.log"
     log = open(log_path, "w")
     cmd = [sys.executable, "-m", "semiparam_ros.ros.run", "--ros-args", "--params-file",
@@ -78,11 +73,7 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
     proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
     ps = psutil.Process(proc.pid)
 
-    context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = Node("bench_feedforward", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+    context, node, executor = client(domain, "bench_feedforward")
     received: dict[int, float] = {}
     diagnostics: list[dict[str, str]] = []
     lock = threading.Lock()

@@ -120,19 +120,14 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import WrenchStamped
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from ros_harness import client, private_domain
     from std_srvs.srv import Trigger
 
     from semiparam_ros.ros.bag_player import BagPlayer
 
     load_before = os.getloadavg()[0]  # other processes competing for the 2 cores
-    domain = 1 + (os.getpid() * 17) % 100
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
-    os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR")})
+    domain, env = private_domain(tmp, 17)
     log_path = tmp / f"node_{executor}_{features}.log"
     log = open(log_path, "w")
     cmd = [sys.executable, "-m", "semiparam_ros.ros.run", "--executor", executor, "--ros-args",
@@ -149,11 +144,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     ps = psutil.Process(node_proc.pid)
     burner = (subprocess.Popen([sys.executable, "-c", "while True: pass"]) if busy else None)
 
-    context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = Node("bench_client", context=context)
-    client_executor = SingleThreadedExecutor(context=context)
-    client_executor.add_node(node)
+    context, node, client_executor = client(domain, "bench_client")
     predictions: list[tuple[int, float]] = []
     diagnostics: list[tuple[float, dict[str, str]]] = []
     lock = threading.Lock()

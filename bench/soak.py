@@ -73,30 +73,21 @@ def run(seconds: float, hz: float, window_s: float) -> dict:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import WrenchStamped
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from ros_harness import client, private_domain
     from sensor_msgs.msg import JointState
 
     q, dq, wrench = make_period(hz)
     n_period = q.shape[0]
     tmp = Path(tempfile.mkdtemp(prefix="soak_"))
-    domain = 1 + (os.getpid() * 19) % 100
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
-    os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR")})
+    domain, env = private_domain(tmp, 19)
     log = open(tmp / "node.log", "w")
     node_proc = subprocess.Popen(
         [sys.executable, "-m", "semiparam_ros.ros.run", "--ros-args", "--params-file", str(CONFIG),
          "-p", "checkpoint.path:=" + str(tmp / "soak.npz"), "-p", "checkpoint.load_on_start:=false"],
         env=env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
     ps = psutil.Process(node_proc.pid)
-    context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = Node("soak_client", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+    context, node, executor = client(domain, "soak_client")
     lock = threading.Lock()
     received: list[tuple[int, float]] = []
     diag: dict[str, str] = {}
