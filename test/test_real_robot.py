@@ -281,6 +281,7 @@ def test_joint_torque_floor_is_its_own_parameter_and_the_wrench_floors_are_uncha
                                   + [icub["nonparametric.min_scale.torque"]] * 3)
 
 
+@needs_kuka
 def test_excitation_summary_against_independent_routes():
     """The condition number of A in physical units (eigvalsh of C A C, not the SVD of R C) and the fraction
     of test samples outside the excited range (one predict_one per sample, not the stacked predict_many),
