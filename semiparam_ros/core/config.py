@@ -180,9 +180,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "largest plausible |component| of the learned output: wrench force [N] and torque [N m], "
                   "or joint effort [N m]; 0 = no bound", min=0.0, max=1e12),
     ParameterSpec("limits.glitch_ratio", "double", 50.0,
-                  "a joint state whose position or velocity increment on a learned joint exceeds this many "
-                  "times its running mean increment is a one-sample glitch, dropped as 'glitch' (a second "
-                  "such state in a row is a real change and accepted); clean logs stay below 7; 0 = off",
+                  "a joint state whose position, velocity or drift increment on a learned joint exceeds this "
+                  "many times its running mean increment and its resolution is held; dropped as 'glitch' if "
+                  "the next state comes back (a one-sample outlier), else accepted; 0 = off",
                   min=0.0, max=1e12),
     ParameterSpec("limits.glitch_time_constant", "double", 0.05,
                   "memory of the running mean increment of the glitch check [s]", min=0.0, min_exclusive=True,

@@ -11,14 +11,15 @@ and returns the :class:`~semiparam_ros.core.messages.Sample` objects they comple
    ``max_abs_output`` N / N·m for the wrench or the learned efforts — e.g. a 1e10 rad/s velocity that
    would poison the q̈ window). Only the configured joints are checked and used: extra joints, in any
    order, are ignored, so a NaN effort of an unused joint (or any effort when learning a wrench) does
-   not drop a message. Last, **glitches**: a joint state whose position or velocity increment (on a
-   configured joint) exceeds ``glitch_ratio`` times that signal's running mean increment (memory
-   ``glitch_time_constant`` s) is a one-sample outlier inside the bounds — a 99 rad/s velocity spike
-   would otherwise enter ``window`` q̈ estimates and show as a contact on as many outputs — and is
-   dropped; a second such state in a row is a real change (a start from rest, an impact) and accepted,
-   and nothing is checked across a dropout (an interval beyond three times the mean one).
-   The ratio is dimensionless and rate-independent (clean real and simulated logs stay below 7). Efforts
-   are not checked: a contact changes a torque abruptly, which no causal check tells from a glitch.
+   not drop a message. Last, **glitches** (:mod:`semiparam_ros.core.glitch`): a joint state whose
+   position or velocity increment (on a configured joint) exceeds ``glitch_ratio`` times that signal's
+   running mean increment (memory ``glitch_time_constant`` s) or resolution (its smallest non-zero
+   increment: quantized encoders) is held until the next joint state; if that one comes back, the held
+   state was a one-sample outlier inside the bounds — a 99 rad/s velocity spike would otherwise enter
+   ``window`` q̈ estimates and show as a contact on as many outputs — and is dropped; if it goes on (a
+   start from rest, a fast move, a step that stays) the held state is accepted, one joint state late.
+   The ratio is dimensionless and rate-independent. Efforts are not checked: a contact changes a torque
+   abruptly, which no causal check tells from a glitch.
 2. **Acceleration.** Accepted joint velocities feed the estimator of
    :mod:`semiparam_ros.core.acceleration`, which decides each joint-state stamp once: q̈ (rad/s²) or
    none (warm-up). With the default Savitzky–Golay estimator the decision comes ``window // 2`` joint
@@ -54,6 +55,7 @@ import numpy as np
 from numba import njit
 
 from semiparam_ros.core.acceleration import AccelerationConfig, AccelerationEstimator, make_estimator
+from semiparam_ros.core.glitch import ACCEPT_SUSPECT, SUSPECT, GlitchCheck
 from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
 from semiparam_ros.core.validation import check_range
 from semiparam_ros.errors import ConfigurationError
@@ -125,7 +127,8 @@ DROP_WRENCH_IGNORED = "wrench_ignored"
 """Wrench received while learning joint torques (not used)."""
 DROP_GLITCH = "glitch"
 """JointState whose position or velocity jumped ``glitch_ratio`` times beyond its running mean increment
-(a one-sample outlier inside the plausibility bounds; the next state is compared with the last accepted)."""
+and resolution, and the next state came back: a one-sample outlier inside the plausibility bounds
+(:mod:`semiparam_ros.core.glitch`)."""
 
 DROP_REASONS = (
     DROP_JOINT_STATE_ZERO_STAMP,
@@ -152,35 +155,6 @@ DROP_REASONS = (
 _NAME_CACHE_SIZE = 16
 _NAME_CACHE_BYTES = 1 << 20  # the name cache holds at most about this much name text (bounded memory)
 _NO_BOUND = sys.float_info.max  # "no bound": still rejects inf (and NaN) in the one-pass check
-_GLITCH_WARMUP = 5  # accepted increments before the glitch check starts (the running mean settles)
-_GLITCH_FLOOR_Q = 1e-6  # rad: floor of the mean position increment (exactly still joints)
-_GLITCH_FLOOR_DQ = 1e-4  # rad/s: floor of the mean velocity increment
-_GLITCH_GAP = 3.0  # an interval this many times the mean one is a dropout: no check across it
-
-
-@njit(cache=True, nogil=True)
-def _glitch_step(x: np.ndarray, ref: np.ndarray, scale: np.ndarray, floor: np.ndarray, ratio: float,
-                 alpha: float, check: bool, clip: bool) -> bool:
-    """One glitch-check step on ``x = [q, q̇]`` against the last accepted ``ref``.
-
-    With ``check``: a glitch if any ``|x − ref| > ratio · max(scale, floor)`` (state untouched, True).
-    Otherwise the running mean increments ``scale += alpha (r − scale)`` (``r`` clipped to
-    ``ratio · max(scale, floor)`` once ``clip``) and ``ref = x``; returns False.
-    """
-    m = x.shape[0]
-    if check:
-        for i in range(m):
-            if abs(x[i] - ref[i]) > ratio * max(scale[i], floor[i]):
-                return True
-    for i in range(m):
-        r = abs(x[i] - ref[i])
-        if clip:
-            r = min(r, ratio * max(scale[i], floor[i]))
-        scale[i] += alpha * (r - scale[i])
-        ref[i] = x[i]
-    return False
-
-
 @njit(cache=True, nogil=True)
 def _within(values: np.ndarray, bound: float) -> bool:
     """Return whether every ``|v| ≤ bound`` (NaN fails, inf fails a finite bound), in one pass."""
@@ -302,12 +276,9 @@ class SamplePipeline:
         self._max_dq = _bound("max_abs_velocity", max_abs_velocity)
         self._max_out = _bound("max_abs_output", max_abs_output)
         self._torques = output == "joint_torques"
-        self._glitch_ratio = 0.0 if not glitch_ratio else check_range("glitch_ratio", glitch_ratio, 0.0,
-                                                                      lo_inclusive=False)
-        self._glitch_tau_ns = 1e9 * check_range("glitch_time_constant (s)", glitch_time_constant, 0.0,
-                                                lo_inclusive=False)
-        n = len(joints)
-        self._glitch_floor = np.concatenate([np.full(n, _GLITCH_FLOOR_Q), np.full(n, _GLITCH_FLOOR_DQ)])
+        check_range("glitch_time_constant (s)", glitch_time_constant, 0.0, lo_inclusive=False)
+        self._glitch = None if not glitch_ratio else GlitchCheck(len(joints), ratio=glitch_ratio,
+                                                                 time_constant_s=glitch_time_constant)
         frozen = np.zeros(3)
         frozen.flags.writeable = False
         _within(frozen, 1.0)  # compile/load both signatures (messages hold read-only arrays) up front
@@ -370,39 +341,10 @@ class SamplePipeline:
         self._undecided: deque[_JointEntry] = deque()
         self._decided_until: int | None = None
         self._wrenches: deque[WrenchData] = deque()
-        # glitch check: [q, q̇] of the last accepted joint state, running mean |increment|, counters
-        self._glitch_ref: np.ndarray | None = None
-        self._glitch_scale = np.zeros(2 * len(self.joints))
-        self._glitch_seen = 0
-        self._glitch_run = 0
-        self._glitch_dt = 0.0  # running mean interval between accepted joint states [ns]
-
-    def _is_glitch(self, stamp: int, q: np.ndarray, dq: np.ndarray) -> bool:
-        """Check a screened joint state against the running increments; update them if it is accepted."""
-        x = np.concatenate((q, dq))
-        ref = self._glitch_ref
-        if ref is None:
-            self._glitch_ref = x
-            return False
-        assert self._last_js_stamp is not None  # set with the reference
-        dt = stamp - self._last_js_stamp
-        mean_dt = self._glitch_dt
-        # the running mean interval, each interval counted at most as a dropout's threshold
-        self._glitch_dt = (float(dt) if mean_dt == 0.0
-                           else mean_dt + 0.1 * (min(dt, _GLITCH_GAP * mean_dt) - mean_dt))
-        if mean_dt and dt > _GLITCH_GAP * mean_dt:  # after a dropout the signals moved on: a new reference
-            self._glitch_ref = x
-            self._glitch_run = 0
-            return False
-        alpha = 1.0 - math.exp(-dt / self._glitch_tau_ns)
-        check = self._glitch_seen >= _GLITCH_WARMUP and self._glitch_run == 0
-        if _glitch_step(x, ref, self._glitch_scale, self._glitch_floor, self._glitch_ratio,
-                        1.0 if self._glitch_seen == 0 else alpha, check, self._glitch_seen >= _GLITCH_WARMUP):
-            self._glitch_run += 1
-            return True
-        self._glitch_run = 0
-        self._glitch_seen += 1
-        return False
+        if self._glitch is not None:
+            self._glitch.reset()
+        #: A joint state the glitch check holds until the next one decides it: (stamp, q, q̇, effort).
+        self._held: tuple[int, np.ndarray, np.ndarray, np.ndarray | None] | None = None
 
     def _drop(self, reason: str) -> list[Sample]:
         self.drops[reason] += 1
@@ -482,10 +424,26 @@ class SamplePipeline:
             finite = np.isfinite(q).all() and np.isfinite(dq).all()
             finite = finite and (effort is None or np.isfinite(effort).all())
             return self._drop(DROP_NONFINITE_JOINT_STATE if not finite else DROP_IMPLAUSIBLE_VALUE)
-        if self._glitch_ratio and self._is_glitch(stamp, q, dq):
-            return self._drop(DROP_GLITCH)
+        samples: list[Sample] = []
+        if self._glitch is not None:
+            held, verdict = self._glitch.offer(stamp, np.concatenate((q, dq)))
+            if held is not None:
+                assert self._held is not None  # the check holds what the pipeline holds
+                if held == ACCEPT_SUSPECT:
+                    samples.extend(self._accept_joint_state(*self._held))
+                else:
+                    self.drops[DROP_GLITCH] += 1
+                self._held = None
+            if verdict == SUSPECT:
+                self._last_js_stamp = stamp  # later messages must still come after it
+                self._held = (stamp, q, dq, effort)
+                return samples
+        samples.extend(self._accept_joint_state(stamp, q, dq, effort))
+        return samples
 
-        # accepted: from here on the message changes the state
+    def _accept_joint_state(self, stamp: int, q: np.ndarray, dq: np.ndarray, effort: np.ndarray | None
+                            ) -> list[Sample]:
+        """Take a screened joint state: buffer it, feed the q̈ estimator, return the samples it completes."""
         self._last_js_stamp = stamp
         q.flags.writeable = False  # fresh arrays shared by the samples of this joint state
         dq.flags.writeable = False
@@ -493,6 +451,7 @@ class SamplePipeline:
         self._entries.append(entry)
         self._undecided.append(entry)
         samples: list[Sample] = []
+        torques = self._torques
         for ref_stamp, ddq in self._estimator.update_trusted(stamp, dq):
             decided = self._undecided.popleft()
             if decided.stamp != ref_stamp:  # pragma: no cover - estimator contract violated

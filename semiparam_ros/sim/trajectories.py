@@ -9,6 +9,8 @@ precision: a rigid-body model fed the true q̈ reproduces the true wrench exactl
 
 * :class:`FourierTrajectory` — the series itself, fitted to one sampled period (the converged closed-loop
   inverse-kinematics orbit of :mod:`semiparam_ros.sim.ik`) or drawn at random (:func:`multisine`).
+* :class:`PointToPoint` — moves between random targets at the velocity limits, with rests (not periodic;
+  piecewise-constant q̈).
 * :class:`CartesianCircle` — the hand's reference path: a circle of radius r (m) travelled at constant speed
   v (m/s) in the XY (transverse) or XZ (sagittal) plane of the robot's root frame.
 """
@@ -23,6 +25,7 @@ __all__ = [
     "CartesianCircle",
     "FourierTrajectory",
     "ModulatedOrbit",
+    "PointToPoint",
     "SlowSignal",
     "multisine",
 ]
@@ -438,4 +441,119 @@ class ModulatedOrbit:
             q += c * D
             dq += dc * D + c * Dp * dphi_
             ddq += ddc * D + 2.0 * dc * Dp * dphi_ + c * (Dpp * dphi_**2 + Dp * ddphi_)
+        return q, dq, ddq
+
+
+@dataclass(frozen=True)
+class PointToPoint:
+    """Point-to-point moves with rests: synchronised trapezoidal velocity profiles, closed-form q, q̇, q̈.
+
+    Move i goes from ``waypoints[i]`` to ``waypoints[i + 1]`` in ``durations[i]`` seconds, every joint on
+    the same normalised profile s(τ) ∈ [0, 1]: constant acceleration for the first ``ramp`` fraction of
+    the move, constant velocity, constant deceleration for the last ``ramp`` fraction (acceleration steps,
+    the hardest case for a glitch check: q̈ jumps from 0 to its peak in one sample). The arm then rests
+    ``rests[i]`` seconds (q̇ = q̈ = 0). Before the first move and after the last the arm is at rest.
+
+    Attributes:
+        waypoints: ``(M + 1, n)`` joint positions [rad].
+        durations: ``(M,)`` move durations [s] (> 0).
+        rests: ``(M,)`` rests after each move [s] (≥ 0).
+        ramp: Acceleration (and deceleration) fraction of a move, in (0, 0.5].
+        start: Rest before the first move [s] (≥ 0).
+    """
+
+    waypoints: np.ndarray
+    durations: np.ndarray
+    rests: np.ndarray
+    ramp: float = 0.25
+    start: float = 0.5
+
+    def __post_init__(self) -> None:
+        way = np.asarray(self.waypoints, dtype=np.float64)
+        dur = np.asarray(self.durations, dtype=np.float64).reshape(-1)
+        rest = np.asarray(self.rests, dtype=np.float64).reshape(-1)
+        if way.ndim != 2 or way.shape[0] != dur.size + 1 or rest.shape != dur.shape:
+            raise ValueError("waypoints must be (M + 1, n) with M durations and M rests")
+        if not (np.all(np.isfinite(way)) and np.all(dur > 0) and np.all(rest >= 0)
+                and np.all(np.isfinite(rest))):
+            raise ValueError("waypoints finite, durations > 0 and rests >= 0 required")
+        if not (0.0 < self.ramp <= 0.5) or not (self.start >= 0):
+            raise ValueError(f"ramp must be in (0, 0.5] and start >= 0, got {self.ramp}, {self.start}")
+        object.__setattr__(self, "waypoints", way)
+        object.__setattr__(self, "durations", dur)
+        object.__setattr__(self, "rests", rest)
+
+    @classmethod
+    def random(cls, lower: np.ndarray, upper: np.ndarray, velocity_limits: np.ndarray, *, seed: int,
+               moves: int = 20, speed: float = 1.0, ramp: float = 0.25, margin: float = 0.1,
+               rest_range: tuple[float, float] = (0.2, 1.5)) -> PointToPoint:
+        """Random moves inside the joint limits whose fastest joint reaches ``speed`` × its velocity limit.
+
+        Args:
+            lower: Lower joint limits (n,) [rad].
+            upper: Upper joint limits (n,) [rad].
+            velocity_limits: |q̇| limits (n,) [rad/s] (a URDF's ``<limit velocity=…>``).
+            seed: Seed of the targets and rests (deterministic).
+            moves: Number of moves M.
+            speed: Fraction of the velocity limit the leading joint of each move reaches, in (0, 1].
+            ramp: Acceleration fraction of each move (peak q̈ = peak q̇ / (ramp · duration)).
+            margin: Fraction of each joint's range kept free at both ends.
+            rest_range: Rest after each move, uniform in this range [s].
+
+        Returns:
+            The trajectory.
+
+        Raises:
+            ValueError: On inconsistent limits or parameters.
+        """
+        lower = np.asarray(lower, dtype=np.float64).reshape(-1)
+        upper = np.asarray(upper, dtype=np.float64).reshape(-1)
+        vlim = np.asarray(velocity_limits, dtype=np.float64).reshape(-1)
+        if not (lower.shape == upper.shape == vlim.shape and np.all(upper > lower) and np.all(vlim > 0)):
+            raise ValueError("lower, upper, velocity_limits: one shape, upper > lower, limits > 0")
+        if not (0.0 < speed <= 1.0 and 0 <= margin < 0.5 and moves >= 1):
+            raise ValueError("speed in (0, 1], margin in [0, 0.5), moves >= 1 required")
+        rng = np.random.default_rng(seed)
+        lo = lower + margin * (upper - lower)
+        hi = upper - margin * (upper - lower)
+        way = rng.uniform(lo, hi, (moves + 1, lower.size))
+        # peak of the normalised profile: 1 / ((1 − ramp) T); the leading joint reaches speed · its limit
+        dist = np.abs(np.diff(way, axis=0))
+        durations = np.max(dist / (speed * vlim), axis=1) / (1.0 - ramp)
+        rests = rng.uniform(*rest_range, moves)
+        return cls(way, durations, rests, ramp=ramp)
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints n."""
+        return int(self.waypoints.shape[1])
+
+    @property
+    def duration(self) -> float:
+        """Total duration [s]: the first rest, every move and the rest after it."""
+        return float(self.start + self.durations.sum() + self.rests.sum())
+
+    def __call__(self, t: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return q [rad], q̇ [rad/s], q̈ [rad/s²] at times t [s], each of shape ``(len(t), n)``."""
+        times = _times(t)
+        rho = self.ramp
+        begins = self.start + np.concatenate(([0.0], np.cumsum(self.durations + self.rests)[:-1]))
+        i = np.clip(np.searchsorted(begins, times, side="right") - 1, 0, self.durations.size - 1)
+        T = self.durations[i]
+        tau = np.clip((times - begins[i]) / T, 0.0, 1.0)
+        moving = (times >= begins[i]) & (times - begins[i] < T)
+        peak = 1.0 / (1.0 - rho)  # ds/dτ at cruise
+        acc = peak / rho  # d²s/dτ² while ramping
+        s = np.where(tau < rho, 0.5 * acc * tau**2,
+                     np.where(tau <= 1.0 - rho, 0.5 * acc * rho**2 + peak * (tau - rho),
+                              1.0 - 0.5 * acc * (1.0 - tau) ** 2))
+        ds = np.where(tau < rho, acc * tau, np.where(tau <= 1.0 - rho, peak, acc * (1.0 - tau)))
+        dds = np.where(tau < rho, acc, np.where(tau <= 1.0 - rho, 0.0, -acc))
+        ds, dds = ds * moving, dds * moving
+        start = np.where((times < begins[0])[:, None], self.waypoints[0], self.waypoints[i])
+        delta = self.waypoints[i + 1] - self.waypoints[i]
+        s = np.where(times < begins[0], 0.0, s)
+        q = start + s[:, None] * delta
+        dq = (ds / T)[:, None] * delta
+        ddq = (dds / T**2)[:, None] * delta
         return q, dq, ddq
