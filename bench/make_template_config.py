@@ -22,7 +22,7 @@ lines = """# semiparam_ros estimator: template for any fixed-base URDF arm with 
 # sensor_msgs/JointState messages (any order, extra joints ignored); JointState.effort is the target.
 # The rigid-body stage starts from the URDF (RNEA with its inertias) and learns per-joint friction and
 # offsets (parametric.prior, .friction, .offsets); q̈ comes from a 80 ms window at the measured rate.
-estimator:
+/**:
   ros__parameters:
     robot:
       urdf: "path/to/your_robot.urdf"

@@ -3,29 +3,26 @@
     ros2 launch semiparam_ros estimator.launch.py params_file:=/path/to/my_arm.yaml namespace:=arm \
         joint_states:=/my_arm/joint_states wrench:=/my_arm/ft use_sim_time:=false
 
-Arguments: ``params_file`` (a ROS 2 parameter file; default the installed ``config/icub_right_arm.yaml``,
-the paper's arm: give your robot's, e.g. a copy of ``config/template.yaml``), ``namespace`` (of the node
+Arguments: ``params_file`` (required: your robot's ROS 2 parameter file keyed ``/**:``, e.g. a copy of
+``config/template.yaml``; the paper's iCub is ``config/icub_right_arm.yaml``), ``namespace`` (of the node
 and its ``~/`` topics), ``joint_states`` and ``wrench`` (the input topics, remapped), ``use_sim_time``,
 ``executor`` (``events`` or ``single_threaded``).
 """
 
 from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
-from launch_ros.substitutions import FindPackageShare
 
 from launch import LaunchDescription
 
 
 def generate_launch_description() -> LaunchDescription:
     """Declare the arguments and the ``estimator`` node."""
-    default_params = PathJoinSubstitution([FindPackageShare("semiparam_ros"), "config",
-                                           "icub_right_arm.yaml"])
     return LaunchDescription([
-        DeclareLaunchArgument("params_file", default_value=default_params,
-                              description="ROS 2 parameter file of the estimator (robot.urdf, robot.joints, "
-                                          "robot.output, ...)"),
+        DeclareLaunchArgument("params_file",
+                              description="ROS 2 parameter file of the estimator, keyed '/**:' (robot.urdf, "
+                                          "robot.joints, robot.output, ...)"),
         DeclareLaunchArgument("namespace", default_value="", description="namespace of the node"),
         DeclareLaunchArgument("joint_states", default_value="joint_states",
                               description="sensor_msgs/JointState input topic"),

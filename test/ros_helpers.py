@@ -24,10 +24,11 @@ import numpy as np
 import rclpy
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
+from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
@@ -245,6 +246,13 @@ class TestClient:
         for name, value in values.items():
             request.parameters.append(ParameterMsg(name=name, value=_parameter_value(value)))
         return list(self.call(SetParameters, f"{node}/set_parameters", request, timeout).results)
+
+    def get_parameters(self, node: str, names: list[str], timeout: float = 30.0) -> dict[str, Any]:
+        """Read parameters of a running node over its ``get_parameters`` service (values by name)."""
+        request = GetParameters.Request(names=names)
+        values = self.call(GetParameters, f"{node}/get_parameters", request, timeout).values
+        return {name: Parameter.from_parameter_msg(ParameterMsg(name=name, value=v)).value
+                for name, v in zip(names, values, strict=True)}
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)

@@ -107,7 +107,7 @@ def test_load_errors_name_the_file(tmp_path):
         load_config(bad)
     other = tmp_path / "other.yaml"
     other.write_text("some_node:\n  ros__parameters: {}\n")
-    with pytest.raises(ValueError, match="no 'estimator: ros__parameters:'"):
+    with pytest.raises(ValueError, match=r"no '/\*\*: ros__parameters:' \(or 'estimator:'\)"):
         load_config(other)
     wrong = tmp_path / "wrong.yaml"
     wrong.write_text("/**:\n  ros__parameters:\n    parametric:\n      lam: -2.0\n    use_sim_time: true\n")

@@ -27,6 +27,11 @@ def test_launch_file_structure_and_installation():
     declared = {c.args[0].value for c in ast.walk(tree) if isinstance(c, ast.Call)
                 and getattr(c.func, "id", None) == "DeclareLaunchArgument"}
     assert declared == ARGUMENTS
+    # no default robot: the parameter file is required (a default would run the iCub on a user's topics)
+    params = next(c for c in ast.walk(tree) if isinstance(c, ast.Call) and c.args
+                  and getattr(c.func, "id", None) == "DeclareLaunchArgument"
+                  and c.args[0].value == "params_file")
+    assert "default_value" not in {k.arg for k in params.keywords}
     node = next(c for c in ast.walk(tree)
                 if isinstance(c, ast.Call) and getattr(c.func, "id", None) == "Node")
     kw = {k.arg: k.value for k in node.keywords}

@@ -9,6 +9,7 @@ from geometry_msgs.msg import WrenchStamped
 from ros_helpers import (
     CONFIG,
     LATCHED_QOS,
+    REPO,
     TOPICS,
     NodeProcess,
     TestClient,
@@ -16,6 +17,7 @@ from ros_helpers import (
     make_ros_env,
     source_bag,
     wait_quiet,
+    wait_until,
 )
 from std_msgs.msg import Float64MultiArray
 
@@ -160,3 +162,48 @@ def test_missing_or_unparseable_parameter_file_is_one_line_and_exit_2(ros_env, t
         proc.stop()
         lines = [line for line in out.splitlines() if line.strip()]
         assert len(lines) == 1 and lines[0].startswith("[estimator] FATAL:") and str(path) in lines[0], out
+
+
+def test_a_shipped_parameter_file_applies_under_a_namespace_and_another_name(ros_env, tmp_path):
+    """The shipped files are keyed '/**': a node '/arm/kuka_estimator' reads them (read back over ROS);
+    a file keyed 'estimator:' does not reach it, and the node says so instead of starting on the defaults;
+    without robot.urdf it does not start either."""
+    shipped = REPO / "config" / "panda.yaml"
+    assert shipped.read_text().count("\n/**:\n") == 1
+    node = NodeProcess(ros_env, ["checkpoint.path:=''"], params_file=shipped, tag="ns",
+                       extra_args=["-r", "__ns:=/arm", "-r", "__node:=kuka_estimator"])
+    client = TestClient(ros_env)
+    try:
+        wanted = load_config(shipped)
+        names = ["robot.urdf", "robot.joints", "robot.output", "nonparametric.n_features"]
+        assert wait_until(lambda: client.node.count_subscribers("/arm/kuka_estimator/desired_state") > 0
+                          or not node.alive(), timeout=120), node.output()
+        got = client.get_parameters("/arm/kuka_estimator", names)
+        assert got["robot.urdf"] == wanted["robot.urdf"]
+        assert list(got["robot.joints"]) == wanted["robot.joints"]
+        assert got["robot.output"] == "joint_torques" and got["nonparametric.n_features"] == 500
+    finally:
+        client.close()
+        assert node.stop() == 0, node.output()
+
+    old_style = tmp_path / "my_kuka.yaml"
+    old_style.write_text(shipped.read_text().replace("\n/**:\n", "\nestimator:\n"))
+    no_urdf = tmp_path / "no_urdf.yaml"
+    no_urdf.write_text(shipped.read_text().replace('urdf: "example-robot-data://', 'frame_id: "'))
+    assert "urdf:" not in no_urdf.read_text().split("robot:")[1].split("\n    topics")[0]
+    cases = {
+        "mismatch": (old_style, ["-r", "__ns:=/arm"],
+                     ["no parameter file applies to this node, /arm/estimator", str(old_style), "'estimator'",
+                      "'/**:'"]),
+        "no_urdf": (no_urdf, [], ["robot.urdf is not set"]),
+    }
+    procs = {name: NodeProcess(ros_env, params_file=path, extra_args=args, tag=name)
+             for name, (path, args, _) in cases.items()}
+    for name, (_, _, needles) in cases.items():
+        proc = procs[name]
+        code = proc.wait(timeout=120)
+        out = proc.output()
+        proc.stop()
+        assert code == 2, (name, out)
+        assert all(n in out for n in needles), (name, out)
+        assert "Traceback" not in out, out

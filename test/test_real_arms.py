@@ -212,7 +212,7 @@ def test_template_lists_every_parameter_with_its_default(tmp_path):
     from semiparam_ros.core.config import PARAMETERS
 
     text = (ROOT / "config" / "template.yaml").read_text()
-    body = text[text.index("estimator:"):]
+    body = text[text.index("/**:"):]
     lines = [re.sub(r"^(\s*)# (\w+:.*)$", r"\1\2", line) for line in body.splitlines()
              if not re.match(r"^\s*#   ", line)]
     (tmp_path / "t.yaml").write_text("\n".join(lines) + "\n")
@@ -224,7 +224,7 @@ def test_template_lists_every_parameter_with_its_default(tmp_path):
             out.update(flatten(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
         return out
 
-    flat = flatten(yaml.safe_load((tmp_path / "t.yaml").read_text())["estimator"]["ros__parameters"])
+    flat = flatten(yaml.safe_load((tmp_path / "t.yaml").read_text())["/**"]["ros__parameters"])
     assert set(flat) == {p.name for p in PARAMETERS}
     blank = {"robot.ft_sensor", "robot.frame_id", "robot.urdf", "robot.joints", "robot.output"}
     for p in PARAMETERS:

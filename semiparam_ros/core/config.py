@@ -1,8 +1,10 @@
 """Estimator configuration: one parameter table shared by the ROS node and the offline tools.
 
-Configuration is data: one YAML file per robot in the ROS 2 parameter-file form::
+Configuration is data: one YAML file per robot in the ROS 2 parameter-file form, keyed ``/**`` so that
+it applies to the node under any namespace and name (a key ``estimator:`` would match ``/estimator``
+only)::
 
-    estimator:
+    /**:
       ros__parameters:
         robot:
           joints: [r_shoulder_pitch, ...]
@@ -663,7 +665,7 @@ def _parameters_block(document: Any, node_name: str, path: Path) -> Mapping[str,
         block = document.get(key)
         if isinstance(block, Mapping) and isinstance(block.get("ros__parameters"), Mapping):
             return block["ros__parameters"]
-    raise ConfigurationError(f"{path}: no '{node_name}: ros__parameters:' (or '/**') block found")
+    raise ConfigurationError(f"{path}: no '/**: ros__parameters:' (or '{node_name}:') block found")
 
 
 _ROS_ONLY = frozenset({"use_sim_time"})
@@ -698,14 +700,14 @@ def load_config(path: str | Path, node_name: str = "estimator") -> EstimatorConf
         raise ConfigurationError(f"{path}: {err}") from err
 
 
-def write_config(config: EstimatorConfig, path: str | Path, node_name: str = "estimator",
+def write_config(config: EstimatorConfig, path: str | Path, node_name: str = "/**",
                  header: str = "") -> None:
     """Write a configuration as a ROS 2 parameter file that the node and the tools accept.
 
     Args:
         config: Configuration to write.
         path: Destination YAML file (parent directories are created).
-        node_name: Node name of the parameter block.
+        node_name: Key of the parameter block (default ``/**``: any node, any namespace).
         header: Optional comment lines put at the top of the file.
 
     Raises:

@@ -23,7 +23,7 @@ import functools
 import math
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -47,6 +47,7 @@ from semiparam_ros.ros.description import DescriptionTimeoutError, wait_for_desc
 from semiparam_ros.ros.diagnostics import NodeStatistics, diagnostic_array, estimator_statistics
 from semiparam_ros.ros.inputs import GONE, INPUT_QOS, InputStreams, ThrottledWarnings, take
 from semiparam_ros.ros.outputs import PARAMETERS_QOS, Outputs
+from semiparam_ros.ros.parameter_files import parameter_files, unmatched_files_message
 from semiparam_ros.ros.parameters import ParameterError, declare_parameters, make_parameter_validator
 from semiparam_ros.ros.save_service import SaveService
 
@@ -62,6 +63,9 @@ _CATCH_UP_PERIOD_S = 1e-4  # the backlog timer fires at every executor turn whil
 _SAVE_TIMEOUT_S = 5.0  # ~/save waits this long for the checkpoint thread, then replies failure
 
 _Callback = TypeVar("_Callback", bound=Callable[..., Any])
+_NO_URDF = ("robot.urdf is not set: give your robot's URDF (a file path, package://…, "
+            "example-robot-data://… or topic:/robot_description) in a parameter file keyed '/**:', as "
+            "config/template.yaml (the paper's iCub: config/icub_right_arm.yaml)")
 
 
 def _quiet_at_shutdown(method: _Callback) -> _Callback:
@@ -87,17 +91,22 @@ class EstimatorNode(Node):
     """ROS 2 node running :class:`OnlineEstimator` on live topics (docs/node.md).
 
     Args:
-        node_name: Node name (parameters are read from this name's block of the parameter file).
+        node_name: Node name (parameters are read from the blocks of the parameter files whose keys match
+            the fully qualified name: ``/**`` as the shipped files, or the name itself).
         deferred: Only declare the parameters; :meth:`_build` makes the rest (the lifecycle node's
             configure, :mod:`semiparam_ros.ros.lifecycle_node`).
+        params_files: The ``--params-file`` files of the process's command line (``main`` passes them;
+            those of ``cli_args`` are found there): when none has a key for this node, it does not start.
         **kwargs: Passed to :class:`rclpy.node.Node` (e.g. ``context``, ``parameter_overrides``).
 
     Raises:
-        StartupError: If a parameter is invalid or the checkpoint to warm start from is incompatible; the
-            node is destroyed before raising.
+        StartupError: If no parameter file given applies to the node (the message names their keys and
+            the node's name), ``robot.urdf`` is not set, a parameter is invalid or the checkpoint to warm
+            start from is incompatible; the node is destroyed before raising.
     """
 
-    def __init__(self, node_name: str = "estimator", *, deferred: bool = False, **kwargs: Any) -> None:
+    def __init__(self, node_name: str = "estimator", *, deferred: bool = False,
+                 params_files: Sequence[Path] = (), **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         self._active = True  # whether inputs are taken and outputs published (lifecycle: while active)
         self._checkpoints: CheckpointWriter | None = None
@@ -106,7 +115,13 @@ class EstimatorNode(Node):
         #: Whether the final checkpoint (at shutdown) was written, or none was due; ``main`` exits 1 if not.
         self.final_checkpoint_ok = True
         try:
+            files = [*params_files, *parameter_files(kwargs.get("cli_args") or ())]
+            unmatched = unmatched_files_message(files, self.get_fully_qualified_name())
+            if unmatched is not None:
+                raise StartupError(unmatched)
             self.config: EstimatorConfig = declare_parameters(self)
+            if not self.config["robot.urdf"]:
+                raise StartupError(_NO_URDF)
             if not deferred:
                 self._build()
         except BaseException as err:

@@ -16,11 +16,13 @@ from typing import Any
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
+from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from threadpoolctl import threadpool_limits
 
 from semiparam_ros.core.config import describe_parameters
 from semiparam_ros.ros.estimator_node import EstimatorNode, StartupError
+from semiparam_ros.ros.parameter_files import command_line_assignments, parameter_files
 
 __all__ = ["EXECUTORS", "main", "parse_node_args", "spin"]
 
@@ -111,6 +113,9 @@ def main(args: list[str] | None = None) -> int:
     if options.print_defaults:
         print(describe_parameters())
         return 0
+    files = parameter_files(argv)
+    # rcl lets a '/**' block of a parameter file beat '-p': the command line is given back to win
+    overrides = [Parameter(name, value=value) for name, value in command_line_assignments(argv).items()]
     stop = threading.Event()
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     _stop_on_signals(stop)
@@ -124,9 +129,9 @@ def main(args: list[str] | None = None) -> int:
             if options.lifecycle:
                 from semiparam_ros.ros.lifecycle_node import LifecycleEstimatorNode
 
-                node = LifecycleEstimatorNode()
+                node = LifecycleEstimatorNode(params_files=files, parameter_overrides=overrides)
             else:
-                node = EstimatorNode()
+                node = EstimatorNode(params_files=files, parameter_overrides=overrides)
             # Everything built so far (modules, compiled kernels, the model: ≈ 130 000 tracked objects)
             # lives as long as the process: out of the collector's reach, a full collection takes
             # ≈ 0.5 ms instead of ≈ 100 ms (a latency spike every few minutes at 1 kHz).
