@@ -338,3 +338,103 @@ def test_payload_tare_and_pickup_over_dds(ros_env, checkpoint):
     finally:
         client.close()
         node.stop()
+
+
+def _jtc_cubic_accelerations(t, p, v):
+    """q̈ at each point of the controller's cubic spline through (t, p, v): the segment starting there
+    (the last point: the end of the last segment); coefficients as the controller computes them."""
+    a = np.zeros_like(p)
+    for k in range(len(t) - 1):
+        T = t[k + 1] - t[k]
+        a2 = (-3 * p[k] + 3 * p[k + 1] - 2 * v[k] * T - v[k + 1] * T) / T**2
+        a3 = (2 * p[k] - 2 * p[k + 1] + v[k] * T + v[k + 1] * T) / T**3
+        a[k] = 2 * a2
+        if k == len(t) - 2:
+            a[k + 1] = 2 * a2 + 6 * a3 * T
+    return a
+
+
+def _multi_point(names, t, p, v=None, a=None):
+    msg = JointTrajectory()
+    msg.joint_names = list(names)
+    for k in range(len(t)):
+        sec, nsec = divmod(round(t[k] * 1e9), 10**9)
+        point = JointTrajectoryPoint(positions=p[k].tolist(), time_from_start=Duration(sec=sec, nanosec=nsec))
+        if v is not None:
+            point.velocities = v[k].tolist()
+        if a is not None:
+            point.accelerations = a[k].tolist()
+        msg.points.append(point)
+    return msg
+
+
+def test_trajectory_with_effort_over_dds(ros_env, checkpoint, tmp_path):
+    """~/trajectory → ~/trajectory_with_effort: each point's effort is load_model(...).predict at the point
+    (missing accelerations from the controller's cubic, missing velocities from its linear segments), in the
+    message's joint order; bad trajectories are counted by reason and never published."""
+    model = load_model(checkpoint)
+    joints = model.joints
+    ckpt = tmp_path / "copy.npz"
+    ckpt.write_bytes(checkpoint.read_bytes())
+    node = _node(ros_env, ckpt, "learning_enabled:=false", "parametric.consistent:=false")
+    client = TestClient(ros_env)
+    rng = np.random.default_rng(3)
+    perm = rng.permutation(7)
+    names = [joints[i] for i in perm]
+    m = 60
+    # a smooth motion sampled at uneven points, times in whole ns as the message carries them (the cubic's
+    # q̈ cancels terms ~40× larger than itself: a rounded time moves it by 1e-6 N·m)
+    t = np.round(np.cumsum(rng.uniform(0.05, 0.2, m)) * 1e9) / 1e9
+    w, phase = rng.uniform(0.5, 2.0, 7), rng.uniform(0, 2 * np.pi, 7)
+    p = 0.8 * np.sin(np.outer(t, w) + phase) + np.r_[0, 0, 0, -1.5, 0, 1.0, 0]
+    v = 0.8 * w * np.cos(np.outer(t, w) + phase)
+    a = -0.8 * w**2 * np.sin(np.outer(t, w) + phase)
+    good = [(p, v, a, "full"), (p, v, None, "cubic"), (p, None, None, "linear")]
+    try:
+        out = client.collect(JointTrajectory, "/estimator/trajectory_with_effort")
+        diagnostics = client.collect(DiagnosticArray, "/diagnostics")
+        pub = client.node.create_publisher(JointTrajectory, "/estimator/trajectory", 10)
+        deadline = time.monotonic() + 60
+        while client.node.count_subscribers("/estimator/trajectory") == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        for pk, vk, ak, _ in good:
+            pub.publish(_multi_point(names, t, pk[:, perm], None if vk is None else vk[:, perm],
+                                     None if ak is None else ak[:, perm]))
+        ragged = _multi_point(names, t[:3], p[:3, perm], v[:3, perm])
+        ragged.points[1].velocities = [0.0] * 6
+        nan = _multi_point(names, t[:3], p[:3, perm])
+        nan.points[2].positions[0] = float("nan")
+        bad = {"unknown_joint": _multi_point([*names[:-1], "gripper"], t[:3], p[:3]),
+               "missing_joint": _multi_point([*names[:-1], names[0]], t[:3], p[:3]),
+               "wrong_length": ragged, "non_finite": nan,
+               "unordered_time": _multi_point(names, t[:3][::-1], p[:3, perm]),
+               "no_point": _multi_point(names, t[:0], p[:0])}
+        for msg in bad.values():
+            pub.publish(msg)
+        assert out.wait_for(lambda got: len(got) >= len(good), timeout=30.0), node.output()
+        assert diagnostics.wait_for(lambda d: all(diagnostic_values(d[-1]).get(f"trajectory.drops.{r}") == "1"
+                                                  for r in bad), timeout=10.0), node.output()
+        time.sleep(0.5)
+        diag = diagnostic_values(diagnostics.snapshot()[-1])
+    finally:
+        client.close()
+        code = node.stop()
+    assert code == 0, node.output()
+    got = out.snapshot()
+    assert len(got) == len(good)  # the bad ones were never published
+    for msg, (pk, vk, ak, kind) in zip(got, good, strict=True):
+        if kind == "cubic":
+            ak = _jtc_cubic_accelerations(t, pk, vk)
+        elif kind == "linear":
+            vk = np.vstack([np.diff(pk, axis=0) / np.diff(t)[:, None], np.zeros((1, 7))])
+            ak = np.zeros_like(pk)
+        expected = model.predict(pk, vk, ak, consistent=False)[0]
+        effort = np.array([pt.effort for pt in msg.points])
+        assert list(msg.joint_names) == names and len(msg.points) == m
+        scale = 1 + np.abs(expected).max()
+        np.testing.assert_allclose(effort, expected[:, perm], rtol=0, atol=1e-9 * scale, err_msg=kind)
+        np.testing.assert_array_equal(np.array([pt.positions for pt in msg.points]), pk[:, perm])
+        assert all(len(pt.accelerations) == (7 if kind == "full" else 0) for pt in msg.points)
+    assert diag["trajectory.published"] == str(len(good)) and diag["trajectory.points"] == str(len(good) * m)
+    assert diag["trajectory.fallback_points"] == "0"

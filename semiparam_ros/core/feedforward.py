@@ -38,7 +38,7 @@ Example:
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,10 +47,13 @@ from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.core.validation import MAX_ABS_INPUT
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
-__all__ = ["DROP_REASONS", "DesiredState", "FeedForward", "FeedForwardCommand", "TrajectoryPoint"]
+__all__ = ["DROP_REASONS", "TRAJECTORY_DROP_REASONS", "DesiredState", "FeedForward", "FeedForwardCommand",
+           "TrajectoryEffort", "TrajectoryPoint", "controller_derivatives"]
 
 #: Reasons a desired state is dropped (counted under ``feedforward.drops.<reason>``).
 DROP_REASONS = ("unknown_joint", "missing_joint", "wrong_length", "non_finite", "no_point")
+#: Reasons a whole trajectory is dropped (counted under ``trajectory.drops.<reason>``).
+TRAJECTORY_DROP_REASONS = (*DROP_REASONS, "unordered_time")
 
 
 @dataclass(frozen=True)
@@ -83,6 +86,74 @@ class DesiredState:
     stamp_ns: int
     names: tuple[str, ...]
     points: tuple[TrajectoryPoint, ...]
+
+
+@dataclass(frozen=True)
+class TrajectoryEffort:
+    """Efforts of every point of a trajectory, in the trajectory's joint order.
+
+    Attributes:
+        effort: (m, n) feed-forward torques [N·m] (finite), row k for point k, columns as ``names``.
+        fallback: (m,) whether point k got the rigid-body part (model not ready, or σ above ``max_std``).
+        velocities: (m, n) the velocities used [rad/s] (the points', or the controller's interpolation).
+        accelerations: (m, n) the accelerations used [rad/s²] (likewise).
+    """
+
+    effort: np.ndarray
+    fallback: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+
+
+def controller_derivatives(times_s: np.ndarray, positions: np.ndarray, velocities: np.ndarray | None,
+                           accelerations: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Velocities and accelerations at the points as ``joint_trajectory_controller`` interpolates them.
+
+    The controller interpolates linearly between points that carry positions only, with a cubic between
+    points that carry positions and velocities, with a quintic when accelerations are given too. At a
+    point it samples the segment that starts there (the last point: the segment that ends there). So:
+
+    * accelerations given: used as they are;
+    * velocities without accelerations: the cubic of the segment from point k to k + 1 (duration T,
+      Δ = p₁ − p₀) has q̈(0) = (6Δ − (4v₀ + 2v₁)T)/T² at its start and q̈(T) = (−6Δ + (2v₀ + 4v₁)T)/T²
+      at its end;
+    * positions only: q̇ = Δ/T of the segment that starts at the point (zero at the last point: the
+      controller holds it), q̈ = 0.
+
+    A single point without derivatives gets zeros.
+
+    Args:
+        times_s: (m,) times of the points [s], strictly increasing.
+        positions: (m, n) [rad].
+        velocities: (m, n) [rad/s] or None.
+        accelerations: (m, n) [rad/s²] or None (ignored without velocities: the controller needs both).
+
+    Returns:
+        ``(q̇, q̈)``, each (m, n).
+
+    >>> t = np.array([0.0, 1.0])
+    >>> v, a = controller_derivatives(t, np.array([[0.0], [1.0]]), np.array([[0.0], [0.0]]), None)
+    >>> a.ravel().tolist()  # the cubic rest-to-rest: q̈ = 6Δ/T² at the start, −6Δ/T² at the end
+    [6.0, -6.0]
+    >>> controller_derivatives(t, np.array([[0.0], [1.0]]), None, None)[0].ravel().tolist()
+    [1.0, 0.0]
+    """
+    m, n = positions.shape
+    if velocities is None:
+        v = np.zeros((m, n))
+        if m > 1:
+            v[:-1] = np.diff(positions, axis=0) / np.diff(times_s)[:, None]
+        return v, np.zeros((m, n))
+    if accelerations is not None:
+        return velocities, accelerations
+    a = np.zeros((m, n))
+    if m > 1:
+        T = np.diff(times_s)[:, None]
+        delta = np.diff(positions, axis=0)
+        v0, v1 = velocities[:-1], velocities[1:]
+        a[:-1] = (6.0 * delta - (4.0 * v0 + 2.0 * v1) * T) / T**2
+        a[-1] = ((-6.0 * delta[-1] + (2.0 * v0[-1] + 4.0 * v1[-1]) * T[-1]) / T[-1] ** 2)
+    return velocities, a
 
 
 @dataclass(frozen=True)
@@ -145,6 +216,11 @@ class FeedForward:
                                        "missing_velocities": 0, "missing_accelerations": 0,
                                        **{f"drops.{r}": 0 for r in DROP_REASONS}}
         self.last_error: str | None = None
+        #: Trajectories answered, points that fell back to the rigid-body part, drops by reason.
+        self.trajectory_counts: dict[str, int] = {"published": 0, "points": 0, "fallback_points": 0,
+                                                  "interpolated_velocities": 0,
+                                                  "interpolated_accelerations": 0,
+                                                  **{f"drops.{r}": 0 for r in TRAJECTORY_DROP_REASONS}}
 
     def fallback_message(self, reason: str | None) -> str:
         """Say why a command fell back to the rigid-body part (``FeedForwardCommand.reason``)."""
@@ -156,20 +232,22 @@ class FeedForward:
         self.counts[f"drops.{reason}"] += 1
         self.last_error = message
 
-    def _index(self, names: tuple[str, ...]) -> np.ndarray | None:
-        """Position in ``names`` of each model joint, or None (counted) when the names do not fit."""
+    def _index(self, names: tuple[str, ...], drop: Callable[[str, str], None] | None = None
+               ) -> np.ndarray | None:
+        """Position in ``names`` of each model joint, or None (counted by ``drop``) when they do not fit."""
         index = self._index_cache.get(names)
         if index is not None:
             return index
+        drop = drop or self._drop
         unknown = [n for n in names if n not in self._model_joints]
         if unknown:
-            self._drop("unknown_joint", f"unknown joint(s) {unknown} (the model's joints: "
-                                        f"{list(self._model_joints)})")
+            drop("unknown_joint", f"unknown joint(s) {unknown} (the model's joints: "
+                                  f"{list(self._model_joints)})")
             return None
         missing = [j for j in self._model_joints if j not in names]
         if missing or len(set(names)) != len(names):
-            self._drop("missing_joint", f"the desired state lacks joint(s) {missing} or repeats names: "
-                                        f"{list(names)}")
+            drop("missing_joint", f"the desired state lacks joint(s) {missing} or repeats names: "
+                                  f"{list(names)}")
             return None
         index = np.array([names.index(j) for j in self._model_joints])
         if len(self._index_cache) < 16:  # a controller sends one name list; a bound against floods
@@ -250,3 +328,92 @@ class FeedForward:
         out = self._out_index
         return FeedForwardCommand(stamp, q[out], dq[out], ddq[out], tau[out], parts.std[out],
                                   "model" if reason is None else "rigid_body", reason)
+
+    def _trajectory_drop(self, reason: str, message: str) -> None:
+        self.trajectory_counts[f"drops.{reason}"] += 1
+        self.last_error = message
+
+    def trajectory(self, desired: DesiredState) -> TrajectoryEffort | None:
+        """Return the efforts of every point of a trajectory, or None when it is dropped (counted).
+
+        Each point's effort is the model at its positions, velocities and accelerations; missing
+        derivatives come from the interpolation ``joint_trajectory_controller`` uses between the points
+        (:func:`controller_derivatives`). All points are evaluated in one vectorised call. Where the
+        model is not ready or a point's σ exceeds ``max_std``, that point gets the rigid-body part.
+
+        Args:
+            desired: The trajectory (every point with the same fields; ``time_from_start`` increasing).
+
+        Returns:
+            The efforts in the trajectory's joint order, or None (see :attr:`last_error` and
+            ``trajectory_counts['drops.<reason>']``).
+
+        >>> import numpy as np
+        >>> from semiparam_ros.core.config import EstimatorConfig
+        >>> from semiparam_ros.core.estimator import OnlineEstimator
+        >>> from semiparam_ros.core.serving import LearnedModel
+        >>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": "joint_torques"})
+        >>> est = OnlineEstimator(cfg)
+        >>> ff = FeedForward(LearnedModel(est))
+        >>> points = tuple(TrajectoryPoint(k * 10**8, np.full(4, 0.1 * k), np.zeros(4)) for k in range(3))
+        >>> out = ff.trajectory(DesiredState(0, ff.joints, points))
+        >>> out.effort.shape, out.fallback.tolist()  # nothing learned: the rigid-body part everywhere
+        ((3, 4), [True, True, True])
+        >>> ff.trajectory(DesiredState(0, ff.joints, points[::-1])) is None, ff.last_error
+        (True, 'time_from_start must increase from point to point')
+        """
+        index = self._index(desired.names, self._trajectory_drop)
+        if index is None:
+            return None
+        points = desired.points
+        if not points:
+            self._trajectory_drop("no_point", "the trajectory has no point")
+            return None
+        n = len(desired.names)
+        try:
+            P = np.array([p.positions for p in points], dtype=np.float64)
+            V = np.array([p.velocities for p in points], dtype=np.float64)
+            A = np.array([p.accelerations for p in points], dtype=np.float64)
+        except ValueError:  # ragged: points with different lengths
+            P = V = A = np.zeros((0, 0))
+        if P.shape != (len(points), n) or V.shape[1:] not in ((0,), (n,)) or A.shape[1:] not in ((0,), (n,)):
+            self._trajectory_drop("wrong_length", f"every point must have {n} positions and 0 or {n} "
+                                                  f"velocities and accelerations, all points alike")
+            return None
+        if not all(np.abs(a).max(initial=0.0) <= MAX_ABS_INPUT for a in (P, V, A)):
+            self._trajectory_drop("non_finite", "a point holds NaN, inf or absurdly large values")
+            return None
+        times = np.array([p.time_from_start_ns for p in points], dtype=np.int64)
+        if np.any(np.diff(times) <= 0):
+            self._trajectory_drop("unordered_time", "time_from_start must increase from point to point")
+            return None
+        counts = self.trajectory_counts
+        if V.shape[1] == 0:
+            counts["interpolated_velocities"] += 1
+        if A.shape[1] == 0:
+            counts["interpolated_accelerations"] += 1
+        V, A = controller_derivatives(1e-9 * times.astype(np.float64), P, V if V.shape[1] else None,
+                                      A if A.shape[1] and V.shape[1] else None)
+        try:
+            parts = self.model.predict_parts(P[:, index], V[:, index], A[:, index])
+        except RejectedSampleError as err:
+            self._trajectory_drop("non_finite", f"the model refused a point: {err}")
+            return None
+        std = np.atleast_2d(parts.std)
+        if not self.model.ready:
+            fallback = np.ones(len(points), dtype=bool)
+        elif self.max_std > 0.0:
+            fallback = np.any(std > self.max_std, axis=1)
+        else:
+            fallback = np.zeros(len(points), dtype=bool)
+        tau = np.where(fallback[:, None], np.atleast_2d(parts.rigid_body), np.atleast_2d(parts.total))
+        if not np.isfinite(tau).all():
+            self._trajectory_drop("non_finite", "the model's prediction is not finite")
+            return None
+        effort = np.empty_like(tau)
+        effort[:, index] = tau  # back to the trajectory's joint order
+        counts["published"] += 1
+        counts["points"] += len(points)
+        counts["fallback_points"] += int(fallback.sum())
+        return TrajectoryEffort(effort, fallback, V, A)
+

@@ -29,7 +29,7 @@ import numpy as np
 
 from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.feedforward import DesiredState, FeedForward, FeedForwardCommand
+from semiparam_ros.core.feedforward import DesiredState, FeedForward, FeedForwardCommand, TrajectoryEffort
 from semiparam_ros.core.identification import ConsistentEstimate, ProjectionWorker, export_urdf
 from semiparam_ros.core.payload import PayloadEstimate
 from semiparam_ros.core.serving import LearnedModel
@@ -128,6 +128,13 @@ class ModelService:
         with self.loop.lock:
             return ff.compute(desired, now_ns)
 
+    def trajectory(self, desired: DesiredState) -> TrajectoryEffort | None:
+        """Return every point's effort of a trajectory (None: dropped, see ``feedforward.last_error``)."""
+        ff = self.feedforward
+        assert ff is not None, "the feed-forward is served in joint-torque mode only"
+        with self.loop.lock:
+            return ff.trajectory(desired)
+
     def record_age(self, age_ms: float) -> None:
         """Record the age [ms] of an answered desired state (stamp → answer), for this period's statistics."""
         if len(self.latency_ms) < _MAX_LATENCIES:
@@ -186,6 +193,7 @@ class ModelService:
         if ff is None:
             return {}
         stats: dict[str, object] = {f"feedforward.{key}": count for key, count in ff.counts.items()}
+        stats.update({f"trajectory.{key}": count for key, count in ff.trajectory_counts.items()})
         stats["feedforward.ready"] = self.serving.ready
         worker = self.projection
         if worker is not None:

@@ -164,6 +164,21 @@ def desired_state_from_msg(msg: Any) -> DesiredState:
                         tuple(points))
 
 
+def fill_trajectory_effort(msg: Any, effort: np.ndarray) -> Any:
+    """Write each point's effort [N·m] into a ``trajectory_msgs/JointTrajectory`` (in place; returned).
+
+    Args:
+        msg: The trajectory the efforts were computed for (joint order of ``msg.joint_names``).
+        effort: (len(points), len(joint_names)) finite efforts.
+
+    Returns:
+        ``msg``, every other field unchanged (the controller interpolates as it would have).
+    """
+    for point, row in zip(msg.points, effort, strict=True):
+        point.effort = row
+    return msg
+
+
 def link_inertia_msgs(estimate: ConsistentEstimate, stamp_ns: int) -> list[InertiaStamped]:
     """One ``geometry_msgs/InertiaStamped`` per identified link (the consistent estimate).
 

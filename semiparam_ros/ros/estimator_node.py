@@ -56,6 +56,9 @@ __all__ = ["INPUT_QOS", "PARAMETERS_QOS", "EstimatorNode", "StartupError"]
 #: Desired states: only the latest matters; best effort accepts reliable and best-effort publishers.
 _DESIRED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                           durability=DurabilityPolicy.VOLATILE)
+#: Trajectories to fill with efforts: each one counts (reliable, a few queued).
+_TRAJECTORY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                             reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 _LOG_THROTTLE_S = 5.0
 _BATCH = 50  # queued messages processed per turn of the executor (≈ 10–20 ms of learning at most)
 _SHUTDOWN_BUDGET_S = 10.0  # time allowed to learn the queue at shutdown (1000 messages take ≈ 0.2 s)
@@ -177,6 +180,8 @@ class EstimatorNode(Node):
                                    n_joints=len(self._joints))
         self._desired_sub = None if self._output == "wrench" else self.create_subscription(
             JointTrajectory, "~/desired_state", self._on_desired_state, _DESIRED_QOS)
+        if self._output != "wrench":
+            self.create_subscription(JointTrajectory, "~/trajectory", self._on_trajectory, _TRAJECTORY_QOS)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(Trigger, "~/payload/tare", self._on_payload_tare)
         self.add_on_set_parameters_callback(make_parameter_validator(lambda: self.config))
@@ -398,6 +403,29 @@ class EstimatorNode(Node):
             service.record_age(1e-6 * (self.get_clock().now().nanoseconds - desired.stamp_ns))
         if command.reason is not None:
             self._warn(f"feedforward {command.reason}", lambda: ff.fallback_message(command.reason))
+
+    @_quiet_at_shutdown
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        """Publish the trajectory with every point's effort from the served model (core.feedforward)."""
+        service = self._service
+        assert service is not None and service.feedforward is not None  # joint-torque mode only
+        ff = service.feedforward
+        if not self._active:
+            return
+        try:
+            desired = cv.desired_state_from_msg(msg)
+        except RejectedSampleError as err:
+            ff.trajectory_counts["drops.non_finite"] += 1
+            ff.last_error = text = str(err)
+            return self._warn("trajectory", lambda: f"trajectory dropped: {text}")
+        filled = service.trajectory(desired)
+        if filled is None:
+            return self._warn("trajectory", lambda: f"trajectory dropped: {ff.last_error}")
+        self.outputs.trajectory.publish(cv.fill_trajectory_effort(msg, filled.effort))
+        if filled.fallback.any():
+            n, m = int(filled.fallback.sum()), len(filled.fallback)
+            self._warn("trajectory fallback", lambda: f"{n} of {m} trajectory points got the rigid-body part "
+                                                      "(model not ready or σ above feedforward.max_std)")
 
     # ================================================================== shutdown
     def _stop_threads(self, *, save: bool) -> None:

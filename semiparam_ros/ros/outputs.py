@@ -18,6 +18,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory
 
 from semiparam_ros.core.estimator import StepResult
 from semiparam_ros.core.feedforward import FeedForwardCommand
@@ -68,6 +69,7 @@ class Outputs:
             self.ff_commands = pub(Float64MultiArray, "~/feedforward_commands", _FF_QOS)
             self.ff = pub(JointState, "~/feedforward", _FF_QOS)
             self.ff_std = pub(JointState, "~/feedforward/std", _FF_QOS)
+            self.trajectory = pub(JointTrajectory, "~/trajectory_with_effort", _FF_QOS)
         self.parameters = pub(Float64MultiArray, "~/inertial_parameters", PARAMETERS_QOS)
         self.payload = pub(InertiaStamped, "~/payload", PARAMETERS_QOS)
         self.payload_std = pub(InertiaStamped, "~/payload/std", PARAMETERS_QOS)
