@@ -21,7 +21,7 @@ ICUB = ROOT / "config" / "icub_right_arm.yaml"
 
 def test_shipped_config_sets_every_parameter_and_is_valid():
     document = yaml.safe_load(ICUB.read_text())
-    block = document["estimator"]["ros__parameters"]
+    block = document["/**"]["ros__parameters"]
 
     def flatten(tree, prefix=""):
         for key, value in tree.items():

@@ -51,7 +51,8 @@ def test_oversized_messages_leave_nothing_behind_in_the_node(tmp_path, monkeypat
     big.position = big.velocity = big.effort = [0.0] * OVERSIZED_NAMES
     oversized = bytes(serialize_message(big))
     assert len(oversized) > 600_000
-    with in_process_node(tmp_path, monkeypatch, **{"robot.output": "joint_torques",
+    # overload.max_delay 0: every valid sample is learned however long the calls took (a loaded machine)
+    with in_process_node(tmp_path, monkeypatch, **{"robot.output": "joint_torques", "overload.max_delay": 0.0,
                                                    "nonparametric.n_features": 50}) as node:
         valid = [_valid(k) for k in range(400)]
         tracemalloc.start(1)
@@ -62,7 +63,7 @@ def test_oversized_messages_leave_nothing_behind_in_the_node(tmp_path, monkeypat
         finally:
             tracemalloc.stop()
         drops = node._stats.snapshot()
-        assert node.estimator.n_samples_learned > 200  # the valid stream went on between them
+        assert node.estimator.n_samples_learned > 250  # the valid stream went on between them
     print(f"retained by the node: {ten / 1024:.1f} kB after 10 oversized messages, "
           f"{hundred / 1024:.1f} kB after 100 more")
     assert drops["drops.conversion_error"] == 110, drops
