@@ -36,6 +36,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import OnlineEstimator, build_regressor, rmse_window_samples
+from semiparam_ros.core.feedforward import DesiredState, FeedForward
 from semiparam_ros.core.learning_loop import Input, LearningLoop, warm_up_kernels
 from semiparam_ros.core.messages import WrenchData
 from semiparam_ros.core.model_service import ModelService
@@ -381,20 +382,30 @@ class EstimatorNode(Node):
         if taken is not None and taken is not GONE:
             self._on_desired_state(taken)
 
-    @_quiet_at_shutdown
-    def _on_desired_state(self, msg: JointTrajectory) -> None:
-        """Answer a desired state at once with the model's torques (see core.feedforward)."""
+    def _desired(self, msg: JointTrajectory, counts: dict[str, int], what: str
+                 ) -> tuple[ModelService, FeedForward, DesiredState] | None:
+        """Convert a controller's trajectory (None while inactive, or counted and warned when refused)."""
         service = self._service
         assert service is not None and service.feedforward is not None  # joint-torque mode only
         ff = service.feedforward
         if not self._active:
-            return
+            return None
         try:
-            desired = cv.desired_state_from_msg(msg)
+            return service, ff, cv.desired_state_from_msg(msg)
         except RejectedSampleError as err:
-            ff.counts["drops.non_finite"] += 1
+            counts["drops.non_finite"] += 1
             ff.last_error = text = str(err)
-            return self._warn("desired state", lambda: f"desired state dropped: {text}")
+            self._warn(what, lambda: f"{what} dropped: {text}")
+            return None
+
+    @_quiet_at_shutdown
+    def _on_desired_state(self, msg: JointTrajectory) -> None:
+        """Answer a desired state at once with the model's torques (see core.feedforward)."""
+        assert self._service is not None and self._service.feedforward is not None  # joint-torque mode only
+        converted = self._desired(msg, self._service.feedforward.counts, "desired state")
+        if converted is None:
+            return
+        service, ff, desired = converted
         command = service.answer(desired, self.get_clock().now().nanoseconds)
         if command is None:
             return self._warn("desired state", lambda: f"desired state dropped: {ff.last_error}")
@@ -407,17 +418,11 @@ class EstimatorNode(Node):
     @_quiet_at_shutdown
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         """Publish the trajectory with every point's effort from the served model (core.feedforward)."""
-        service = self._service
-        assert service is not None and service.feedforward is not None  # joint-torque mode only
-        ff = service.feedforward
-        if not self._active:
+        assert self._service is not None and self._service.feedforward is not None  # joint-torque mode only
+        converted = self._desired(msg, self._service.feedforward.trajectory_counts, "trajectory")
+        if converted is None:
             return
-        try:
-            desired = cv.desired_state_from_msg(msg)
-        except RejectedSampleError as err:
-            ff.trajectory_counts["drops.non_finite"] += 1
-            ff.last_error = text = str(err)
-            return self._warn("trajectory", lambda: f"trajectory dropped: {text}")
+        service, ff, desired = converted
         filled = service.trajectory(desired)
         if filled is None:
             return self._warn("trajectory", lambda: f"trajectory dropped: {ff.last_error}")

@@ -26,7 +26,7 @@ parameter given with ``-p`` on the command line. :func:`command_line_assignments
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,25 @@ _END = "--"
 _FLAG = "--params-file"
 
 
+def _ros_options(argv: Sequence[str], flags: tuple[str, ...]) -> Iterator[tuple[str, str]]:
+    """Yield ``(flag, value)`` for each of ``flags`` in the ``--ros-args`` sections, in order.
+
+    Both forms count: ``flag value`` and ``flag=value``.
+    """
+    inside = False
+    args = list(argv)
+    for i, arg in enumerate(args):
+        if arg == _ROS_ARGS:
+            inside = True
+        elif arg == _END:
+            inside = False
+        elif inside and arg in flags and i + 1 < len(args):
+            yield arg, args[i + 1]
+        elif inside and "=" in arg and arg.split("=", 1)[0] in flags:
+            flag, value = arg.split("=", 1)
+            yield flag, value
+
+
 def parameter_files(argv: Sequence[str]) -> list[Path]:
     """Return the ``--params-file`` paths of the ``--ros-args`` sections of a command line, in order.
 
@@ -49,19 +68,7 @@ def parameter_files(argv: Sequence[str]) -> list[Path]:
     Returns:
         The paths (none when there is no ``--ros-args`` section).
     """
-    files: list[Path] = []
-    inside = False
-    args = list(argv)
-    for i, arg in enumerate(args):
-        if arg == _ROS_ARGS:
-            inside = True
-        elif arg == _END:
-            inside = False
-        elif inside and arg == _FLAG and i + 1 < len(args):
-            files.append(Path(args[i + 1]))
-        elif inside and arg.startswith(_FLAG + "="):
-            files.append(Path(arg[len(_FLAG) + 1:]))
-    return files
+    return [Path(value) for _, value in _ros_options(argv, (_FLAG,))]
 
 
 def command_line_assignments(argv: Sequence[str]) -> dict[str, Any]:
@@ -78,21 +85,14 @@ def command_line_assignments(argv: Sequence[str]) -> dict[str, Any]:
         Parameter names to values; a later assignment of a name replaces an earlier one.
     """
     out: dict[str, Any] = {}
-    inside = False
-    args = list(argv)
-    for i, arg in enumerate(args):
-        if arg == _ROS_ARGS:
-            inside = True
-        elif arg == _END:
-            inside = False
-        elif inside and arg in ("-p", "--param") and i + 1 < len(args):
-            name, sep, text = args[i + 1].partition(":=")
-            if not sep or ":" in name:
-                continue
-            try:
-                out[name] = yaml.safe_load(text) if text else ""
-            except yaml.YAMLError:
-                out[name] = text  # rcl refuses it with its own message
+    for _, rule in _ros_options(argv, ("-p", "--param")):
+        name, sep, text = rule.partition(":=")
+        if not sep or ":" in name:
+            continue
+        try:
+            out[name] = yaml.safe_load(text) if text else ""
+        except yaml.YAMLError:
+            out[name] = text  # rcl refuses it with its own message
     return out
 
 
