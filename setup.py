@@ -32,6 +32,7 @@ setup(
             "simulate = semiparam_ros.cli.simulate:main",
             "evaluate = semiparam_ros.cli.evaluate:main",
             "learn = semiparam_ros.cli.learn:main",
+            "learn-fleet = semiparam_ros.cli.learn_fleet:main",
             "export_urdf = semiparam_ros.cli.export_urdf:main",
             "tune = semiparam_ros.cli.tune:main",
             "real_robots = semiparam_ros.cli.real_robots:main",

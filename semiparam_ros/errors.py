@@ -14,6 +14,7 @@ from __future__ import annotations
 __all__ = [
     "BagError",
     "CheckpointError",
+    "ClusterError",
     "ConfigurationError",
     "RejectedSampleError",
     "SemiparamError",
@@ -45,4 +46,12 @@ class BagError(SemiparamError, ValueError):
     Raised for a missing path, a corrupt MCAP file that yields no message, a missing topic, a topic that
     carries an unexpected message type, or an output folder that exists already. The message names the
     path and, where relevant, the topic; the underlying library error is chained as ``__cause__``.
+    """
+
+
+class ClusterError(SemiparamError, ValueError):
+    """A Dask cluster cannot be used, or jobs on it failed.
+
+    Raised for an unreachable scheduler, workers without the package, or failed jobs; the message names the
+    scheduler, the workers, or each failed job and the worker it ran on.
     """

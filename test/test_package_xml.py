@@ -35,7 +35,8 @@ KEY_OF = {
 }
 #: Import name → pip distribution, for libraries without a rosdep key.
 PIP_ONLY = {"threadpoolctl": "threadpoolctl", "zstandard": "zstandard", "lz4": "lz4",
-            "example_robot_data": "example-robot-data", "mcap": "mcap", "mcap_ros2": "mcap-ros2-support"}
+            "example_robot_data": "example-robot-data", "mcap": "mcap", "mcap_ros2": "mcap-ros2-support",
+            "distributed": "distributed", "cloudpickle": "cloudpickle"}
 #: Keys needed without a Python import of ours: the launch file's packages; rclpy.lifecycle's messages.
 NOT_IMPORTED = {"launch", "launch_ros", "lifecycle_msgs"}
 LOCAL = {"semiparam_ros", "ros_helpers", "reference_rrls", "__future__", "docs"}  # docs: docs/tools

@@ -137,6 +137,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "component) as CSV here")
     p.add_argument("--per-sample-plot", type=Path, metavar="FILE.png",
                    help="measured vs each model's prediction over time, one panel per joint/axis")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="models run in parallel on this machine (default 1; -1: all cores); same numbers")
+    p.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="run one job per model on a Dask cluster: a scheduler address (tcp://host:8786) or "
+                        "local:N (same numbers as the serial run; docs/scale.md)")
     p = sub.add_parser("payload", help="the payload scenario: each learner with and without forgetting")
     p.add_argument("bag", type=Path, help="bag with a payload pickup")
     p.add_argument("--train", type=Path, help="optional bag every learner is trained on first")
@@ -218,7 +223,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                                 per_sample=args.per_sample, per_sample_plot=args.per_sample_plot)
             horizons = None if args.horizons is None else (args.horizons or DEFAULT_HORIZONS)
             text = evaluate_paper(args.train, args.test, cfg, topics=topics, models=args.models,
-                                  options=options, horizons=horizons, paths=paths, progress=progress)
+                                  options=options, horizons=horizons, paths=paths, progress=progress,
+                                  jobs=args.jobs, cluster=args.cluster)
     except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created
         return error_exit("evaluate", err)
     print(text, end="")

@@ -5,6 +5,7 @@
     tune --train bags/generated/icub_xy --n-features 500 --holdout 0.2 --out results/tuned.yaml
     tune --train bags/generated/icub_xy --method protocol --models NP SP SPJ --train-n 5000 --splits 5 \
         --split-size 1000 --lam-np 0.001 0.01 --sigma 4 6 --jobs -1 --json results/select.json
+    tune --train robot_a/log_1 robot_b/log_1 --validate robot_c/log_1 --config arm.yaml --cluster local:2
 
 Prints the grid (best first) and writes a ROS 2 parameter file — the input configuration with the selected
 values — that the node (``--params-file``) and ``evaluate --config`` accept. Works for every
@@ -34,7 +35,14 @@ def build_parser() -> argparse.ArgumentParser:
         "and nonparametric.sigma for a given D, by hold-out or by the paper's protocol "
         "within the training bag.",
     )
-    p.add_argument("--train", type=Path, required=True, help="training bag (its last part is held out)")
+    p.add_argument("--train", type=Path, nargs="+", required=True,
+                   help="training bag (its last part is held out); with --validate: the bags learned")
+    p.add_argument("--validate", type=Path, nargs="+", default=None,
+                   help="select by held-out motion: score every grid point on these other bags (one step, "
+                        "0.1 s, 1 s, 10 s and frozen as served) after learning --train")
+    p.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="run the grid points on a Dask cluster: a scheduler address (tcp://host:8786) or "
+                        "local:N for N worker processes here (same numbers as --jobs 1; docs/scale.md)")
     add_config_arguments(p)  # --config, --set (applied before tuning), topics
     p.add_argument("--n-features", type=int, default=None, help="D (default: nonparametric.n_features)")
     p.add_argument("--holdout", type=float, default=0.2, help="held-out fraction at the end (default 0.2)")
@@ -130,6 +138,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             split_size=args.split_size,
             window_s=args.window,
             jobs=args.jobs,
+            validate=args.validate,
+            cluster=args.cluster,
         )
     except (ValueError, OSError) as err:  # e.g. a bad value or an output folder that cannot be created
         return error_exit("tune", err)

@@ -208,6 +208,22 @@ class HorizonReport:
     n_inside: int
     sample_period_s: float
 
+    @classmethod
+    def merge(cls, parts: Sequence[HorizonReport]) -> HorizonReport:
+        """One report of the models of several reports on the same streams and horizons, in their order.
+
+        Raises:
+            ValueError: If the reports' horizons or scored samples differ.
+        """
+        first = parts[0]
+        if any(p.horizons != first.horizons or p.n_scored != first.n_scored for p in parts):
+            raise ValueError("reports merged must share their horizons and scored samples")
+        return cls(first.horizons, first.components,
+                   {m: v for p in parts for m, v in p.rmse.items()},
+                   {m: v for p in parts for m, v in p.rmse_inside.items()},
+                   {m: v for p in parts for m, v in p.rmse_outside.items()},
+                   first.n_scored, first.n_inside, first.sample_period_s)
+
     def mean(self, model: str, horizon: str, subset: str = "all") -> float:
         """Mean over the components of the RMSE of ``model`` at ``horizon`` (subset all/inside/outside)."""
         table = {"all": self.rmse, "inside": self.rmse_inside, "outside": self.rmse_outside}[subset]

@@ -1,14 +1,11 @@
-"""Independent offline jobs (grid points, replicates) on every core, through joblib.
+"""Independent offline jobs (grid points, models, robots) on every core, or on a Dask cluster.
 
 :func:`run_jobs` calls ``fn(*args)`` for every argument tuple and returns the results in order. With
 ``jobs == 1`` it is a plain loop in this process; otherwise joblib's default process backend (loky) runs
-them. Every job runs with one BLAS thread in either case (``threadpoolctl``), and builds its own seeded
-learners from its arguments, so the results are the same numbers whatever ``jobs`` is.
-
-To send the jobs to a cluster, wrap the call in another joblib backend, e.g. Dask's
-(``from dask.distributed import Client; client = Client("scheduler:8786")`` then
-``with joblib.parallel_config(backend="dask"): ...``) or Ray's (``from ray.util.joblib import
-register_ray; register_ray()`` then ``backend="ray"``); :func:`run_jobs` picks up the active backend.
+them; with ``cluster`` (a Dask scheduler address or ``local:N``) the workers of that cluster do
+(:mod:`semiparam_ros.eval.cluster`). Every job runs with one BLAS thread in each case (``threadpoolctl``),
+and builds its own seeded learners from its arguments, so the results are the same numbers whatever runs
+them.
 """
 
 from __future__ import annotations
@@ -41,22 +38,33 @@ def run_jobs(
     jobs: int = 1,
     progress: bool = False,
     unit: str = "job",
+    cluster: str | None = None,
+    labels: Sequence[str] | None = None,
 ) -> list[T]:
     """Run ``fn(*a)`` for each ``a`` in ``args``; results in the order of ``args``.
 
     Args:
         fn: A module-level function (picklable for the process backend).
         args: One argument tuple per job.
-        jobs: Workers (1 = serial in this process; -1 or 0 = all cores).
-        progress: Progress bar on stderr (serial runs; joblib reports nothing in parallel).
+        jobs: Workers (1 = serial in this process; -1 or 0 = all cores); ignored with ``cluster``.
+        progress: Progress on stderr (a bar for serial runs, a line per finished job on a cluster; joblib
+            reports nothing).
         unit: Unit name for the bar.
+        cluster: A Dask scheduler address or ``local:N`` (:func:`~semiparam_ros.eval.cluster.connect`).
+        labels: What each job is, for the cluster's progress lines and errors.
 
     Returns:
         The results.
 
     Raises:
-        ValueError: If ``jobs < -1``. Whatever ``fn`` raises is re-raised.
+        ValueError: If ``jobs < -1``. Whatever ``fn`` raises is re-raised (on a cluster: every failure
+            together, as a :class:`~semiparam_ros.errors.ClusterError` naming each job and its worker).
     """
+    if cluster is not None:
+        from semiparam_ros.eval.cluster import connect, run_on_cluster
+
+        with connect(cluster) as client:
+            return run_on_cluster(client, fn, args, labels=labels, progress=progress, unit=unit)
     n = resolve_jobs(jobs)
     if n == 1 or len(args) <= 1:
         items: Any = args

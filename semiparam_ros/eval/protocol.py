@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable, Collection, Iterable, Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -322,6 +322,22 @@ class ProtocolResult:
     first_s: float
     output: OutputSpec
     stamps_ns: np.ndarray | None = None
+
+    @classmethod
+    def merge(cls, parts: Sequence[ProtocolResult]) -> ProtocolResult:
+        """One result of the models of several runs on the same streams (e.g. one model per job).
+
+        Raises:
+            ValueError: If the runs' test splits differ or a model name repeats.
+        """
+        first = parts[0]
+        kinds = tuple(k for p in parts for k in p.kinds)
+        if any(p.bounds != first.bounds for p in parts) or len(set(kinds)) != len(kinds):
+            raise ValueError("results merged must share their test splits and name each model once")
+        return replace(first, kinds=kinds,
+                       predictions={k: p.predictions[k] for p in parts for k in p.kinds},
+                       update_ns={k: p.update_ns[k] for p in parts for k in p.kinds},
+                       train_ns={k: p.train_ns[k] for p in parts for k in p.kinds})
 
     @property
     def samples_test(self) -> int:

@@ -22,8 +22,10 @@ import yaml
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator import build_model, build_pipeline, build_regressor, measured_period_s
 from semiparam_ros.eval.diagnostics import FrozenParametricSP
+from semiparam_ros.eval.horizon import HorizonReport, evaluate_horizons
 from semiparam_ros.eval.metrics import OutputSpec
 from semiparam_ros.eval.options import DEFAULT_WINDOW_S, ProtocolOptions, Variant
+from semiparam_ros.eval.parallel import run_jobs
 from semiparam_ros.eval.protocol import (
     AdaptationResult,
     ProtocolResult,
@@ -205,6 +207,7 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
                   topics: Topics | None = None, kinds: Sequence[str] = KINDS,
                   options: ProtocolOptions | None = None,
                   horizons: Sequence[float | str] | None = None, progress: bool = False,
+                  jobs: int = 1, cluster: str | None = None,
                   **option_fields: Any) -> tuple[ProtocolResult, dict[str, Any]]:
     """Run the paper's protocol on two bags (and, if asked, the error by the age of the model).
 
@@ -221,6 +224,9 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
             :func:`~semiparam_ros.eval.horizon.evaluate_horizons`, run on the trained learners, the CAD
             model and persistence over the whole test stream; ``None``: not run.
         progress: Show a progress bar (only when stderr is a terminal).
+        jobs: Models run in parallel on this machine (1: one after the other; -1: all cores).
+        cluster: A Dask scheduler address or ``local:N`` running one job per model instead of ``jobs``;
+            the numbers are those of the serial run.
         **option_fields: Fields of :class:`~semiparam_ros.eval.options.ProtocolOptions` given one by one
             (``splits=…``), replacing those of ``options``.
 
@@ -242,11 +248,15 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         if test_skip >= len(test_data):
             raise ValueError(f"test_skip = {test_skip} leaves no test sample (the bag has {len(test_data)})")
         test_data = test_data.slice(test_skip, len(test_data))
-    models = build_models(config, kinds, n_train=len(train_data),
-                          sample_period_s=measured_period_s(train_data.stamps_ns))
-    result = run_protocol(models, train_data, test_data, output=OutputSpec.from_config(config),
-                          splits=opts.splits, split_size=opts.split_size, window_s=opts.window_s,
-                          first_s=opts.first_s, progress=progress)
+    if jobs == 1 and cluster is None:
+        result, models_report = _protocol_of(config, tuple(kinds), train_data, test_data, opts, horizons,
+                                             progress)
+    else:  # one job per model: the same numbers, each model built and trained where it runs
+        parts = run_jobs(_protocol_of, [(config, (k,), train_data, test_data, opts, horizons)
+                                        for k in kinds], jobs=jobs, cluster=cluster, unit="model",
+                         labels=[f"{k} on {Path(test_path).name}" for k in kinds], progress=progress)
+        result = ProtocolResult.merge([p[0] for p in parts])
+        models_report = None if horizons is None else HorizonReport.merge([p[1] for p in parts])
     info = {
         "train_bag": str(train_path), "test_bag": str(test_path),
         "joint_states_topic": topics.joint_states, "wrench_topic": topics.wrench,
@@ -257,15 +267,33 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
     }
     if horizons is not None:
         from semiparam_ros.eval.baselines import Persistence, cad_model
-        from semiparam_ros.eval.horizon import evaluate_horizons
         from semiparam_ros.eval.protocol import train
 
-        chosen: dict[str, Any] = {"CAD": cad_model(config), **models}  # the protocol trained the learners
-        chosen["persistence"] = Persistence(test_data.n_outputs)
-        train(chosen["persistence"], train_data)
-        info["horizons"] = evaluate_horizons(chosen, train_data, test_data, horizons=horizons, fixed=("CAD",),
-                                             components=OutputSpec.from_config(config).components)
+        persistence = Persistence(test_data.n_outputs)
+        train(persistence, train_data)
+        components = OutputSpec.from_config(config).components
+        cad = evaluate_horizons({"CAD": cad_model(config)}, train_data, test_data, horizons=horizons,
+                                fixed=("CAD",), components=components)
+        held = evaluate_horizons({"persistence": persistence}, train_data, test_data, horizons=horizons,
+                                 components=components)
+        assert models_report is not None
+        info["horizons"] = HorizonReport.merge([cad, models_report, held])
     return result, info
+
+
+def _protocol_of(config: EstimatorConfig, kinds: tuple[str, ...], train_data: SampleArrays,
+                 test_data: SampleArrays, opts: ProtocolOptions, horizons: Sequence[float | str] | None,
+                 progress: bool = False) -> tuple[ProtocolResult, HorizonReport | None]:
+    """Run the protocol for fresh learners of ``kinds`` (and their errors by age), as one job."""
+    models = build_models(config, kinds, n_train=len(train_data),
+                          sample_period_s=measured_period_s(train_data.stamps_ns))
+    result = run_protocol(models, train_data, test_data, output=OutputSpec.from_config(config),
+                          splits=opts.splits, split_size=opts.split_size, window_s=opts.window_s,
+                          first_s=opts.first_s, progress=progress)
+    report = None if horizons is None else evaluate_horizons(
+        models, train_data, test_data, horizons=horizons,
+        components=OutputSpec.from_config(config).components)  # the protocol trained the learners
+    return result, report
 
 
 def read_scenario(bag: str | Path, what: str, hint: str = "") -> tuple[Path, Mapping[str, Any] | None]:

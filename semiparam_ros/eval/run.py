@@ -24,7 +24,7 @@ from semiparam_ros.eval.options import DEFAULT_WINDOW_S, ProtocolOptions
 from semiparam_ros.eval.per_sample import per_sample_figure, write_per_sample
 from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags, load_samples
 from semiparam_ros.eval.report import adaptation_report, protocol_report, write_json
-from semiparam_ros.eval.selection import TUNED_KEYS, grid_table, holdout_search, protocol_search
+from semiparam_ros.eval.selection import TUNED_KEYS, Selection, grid_table, holdout_search, protocol_search
 from semiparam_ros.eval.tables import (
     adaptation_table,
     checks_table,
@@ -33,6 +33,7 @@ from semiparam_ros.eval.tables import (
     contacts_table,
     protocol_table,
 )
+from semiparam_ros.eval.validation import VALIDATION_HORIZONS, validation_search
 from semiparam_ros.io.bags import recovery_notes
 
 __all__ = [
@@ -137,7 +138,7 @@ def _finish(report: Any, text: str, paths: ReportPaths) -> str:
 def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: Topics | None = None,
                    models: Sequence[str] | None = None, options: ProtocolOptions | None = None,
                    horizons: Sequence[float | str] | None = None, paths: ReportPaths | None = None,
-                   progress: bool = True) -> str:
+                   progress: bool = True, jobs: int = 1, cluster: str | None = None) -> str:
     """Run the paper's protocol: learners from zero, trained on ``train``, test-then-train on ``test``.
 
     Args:
@@ -152,6 +153,8 @@ def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: 
             :mod:`semiparam_ros.eval.horizon`), written under ``"horizons"`` in the JSON.
         paths: Where to write the report, tables and figures (default: nowhere).
         progress: Show a progress bar (only when stderr is a terminal).
+        jobs: Models run in parallel on this machine (the numbers do not depend on it).
+        cluster: A Dask scheduler address or ``local:N``: one job per model there.
 
     Returns:
         The text to print (markdown tables).
@@ -163,7 +166,8 @@ def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: 
     paths = paths or ReportPaths()
     with recovery_notes() as recovered:
         result, info = evaluate_bags(train, test, config, topics=topics, kinds=models or KINDS,
-                                     options=options, horizons=horizons, progress=progress)
+                                     options=options, horizons=horizons, progress=progress, jobs=jobs,
+                                     cluster=cluster)
     if recovered:  # a truncated or damaged bag was read as far as possible: the report says what was lost
         info["recovered_bags"] = recovered
     horizon = info.pop("horizons", None)
@@ -293,7 +297,7 @@ def run_evaluate(*, train: Path | None, test: Path | None, payload: Path | None,
 
 def run_tune(
     *,
-    train: Path,
+    train: Path | Sequence[Path],
     config: Path | None,
     overrides: Mapping[str, Any] | None = None,
     joint_states_topic: str | None = None,
@@ -313,11 +317,13 @@ def run_tune(
     split_size: int | None = None,
     window_s: float = DEFAULT_WINDOW_S,
     jobs: int = 1,
+    validate: Sequence[Path] | None = None,
+    cluster: str | None = None,
 ) -> str:
     """Select hyperparameters on a training bag and write the tuned parameter file.
 
     Args:
-        train: Training bag.
+        train: Training bag (several with ``validate``: learned in this order).
         config: Parameter file (``None``: the shipped one).
         overrides: Parameter overrides applied before tuning.
         joint_states_topic: JointState topic (default from the configuration).
@@ -339,6 +345,9 @@ def run_tune(
         split_size: Protocol method: samples per part.
         window_s: Protocol method: sliding window [s].
         jobs: Parallel jobs (-1: all cores); the numbers do not depend on it.
+        validate: Validation bags: select by held-out motion (:mod:`semiparam_ros.eval.validation`; the
+            method is then ``"validate"``) instead of ``method``.
+        cluster: A Dask scheduler address or ``local:N`` that runs the grid points instead of ``jobs``.
 
     Returns:
         The text to print (the grid and the selection).
@@ -348,6 +357,14 @@ def run_tune(
     """
     cfg = load_evaluation_config(config, overrides)
     topics = Topics.from_config(cfg, joint_states_topic, wrench_topic)
+    trains = [Path(train)] if isinstance(train, str | Path) else [Path(t) for t in train]
+    if validate:
+        return _run_validation(cfg, trains, list(validate), topics, kind=kind, n_features=n_features,
+                               grid=grid, jobs=jobs, cluster=cluster, progress=progress, out=out,
+                               json_path=json_path)
+    if len(trains) != 1:
+        raise ConfigurationError(f"{method} selection takes one training bag (several need --validate)")
+    train = trains[0]
     data, drops = load_samples(train, cfg, topics, limit=limit)
     if method == "holdout":
         selections = {
@@ -360,6 +377,7 @@ def run_tune(
                 grid=grid,
                 jobs=jobs,
                 progress=progress,
+                cluster=cluster,
             )
         }
         doc: dict[str, Any] = {}
@@ -377,6 +395,7 @@ def run_tune(
             grid=grid,
             jobs=jobs,
             progress=progress,
+            cluster=cluster,
         )
         doc = {
             "first_s": reports[0].first_s,
@@ -390,38 +409,44 @@ def run_tune(
         }
     else:
         raise ConfigurationError(f"method must be 'holdout' or 'protocol', got {method!r}")
+    text = "".join(
+        f"{method} search of {k} on {train}: {sel.n_train} samples learned, {sel.n_test} scored, "
+        f"D = {sel.config['nonparametric.n_features']}\n\n" + grid_table(sel) + "\n"
+        for k, sel in selections.items())
+    return text + _write_selection(selections, kind, method, str(train), out, json_path, {
+        "drops": drops, "holdout": holdout if method == "holdout" else None, **doc})
+
+
+def _write_selection(selections: Mapping[str, Selection], kind: str, method: str, source: str,
+                     out: Path | None, json_path: Path | None, extra: Mapping[str, Any]) -> str:
+    """Say what was selected for ``kind``; write the tuned parameter file and the JSON when asked."""
     chosen = selections[kind]
-    text = ""
-    for k, sel in selections.items():
-        text += (
-            f"{method} search of {k} on {train}: {sel.n_train} samples learned, {sel.n_test} scored, "
-            f"D = {sel.config['nonparametric.n_features']}\n\n" + grid_table(sel) + "\n"
-        )
     values = ", ".join(f"{k} = {chosen.best.values[k]:g}" for k in TUNED_KEYS)
     base = "n/a" if chosen.default is None else f"{chosen.default.score:.4f}"
-    text += (
-        f"selected for {kind}: {values} (score {chosen.best.score:.4f}; the configuration's values: {base})\n"
-    )
+    text = (f"selected for {kind}: {values} (score {chosen.best.score:.4f}; the configuration's values: "
+            f"{base})\n")
     if out is not None:
-        write_config(
-            chosen.config,
-            out,
-            header=(
-                f"semiparam_ros estimator parameters tuned by `tune --method {method}` ({kind}) on {train}\n"
-                f"score {chosen.best.score:.4f} (base configuration {base})"
-            ),
-        )
+        write_config(chosen.config, out, header=(
+            f"semiparam_ros estimator parameters tuned by `tune --method {method}` ({kind}) on {source}\n"
+            f"score {chosen.best.score:.4f} (base configuration {base})"))
         text += f"wrote {out}\n"
     if json_path is not None:
-        write_json(
-            {
-                "method": method,
-                "kind": kind,
-                "drops": drops,
-                "holdout": holdout if method == "holdout" else None,
-                "selections": {k: s.to_json() for k, s in selections.items()},
-                **doc,
-            },
-            json_path,
-        )
+        write_json({"method": method, "kind": kind, **extra,
+                    "selections": {k: s.to_json() for k, s in selections.items()}}, json_path)
     return text
+
+
+def _run_validation(cfg: EstimatorConfig, train: list[Path], validate: list[Path], topics: Topics, *,
+                    kind: str, n_features: int | None, grid: Mapping[str, Sequence[float]] | None, jobs: int,
+                    cluster: str | None, progress: bool, out: Path | None, json_path: Path | None) -> str:
+    """``tune --train A… --validate B…``: selection by held-out motion (eval/validation.py)."""
+    selection = validation_search(cfg, train, validate, topics=topics, kind=kind, n_features=n_features,
+                                  grid=grid, jobs=jobs, cluster=cluster, progress=progress)
+    source = f"{', '.join(map(str, train))} (validated on {', '.join(map(str, validate))})"
+    d = selection.config["nonparametric.n_features"]
+    text = (f"validate search of {kind}: learned {source}, D = {d}; "
+            f"score = normalized RMSE over the horizons {', '.join(f'{h:g} s' for h in VALIDATION_HORIZONS)} "
+            f"and frozen as served\n\n" + grid_table(selection) + "\n")
+    return text + _write_selection({kind: selection}, kind, "validate", source, out, json_path, {
+        "train": [str(t) for t in train], "validate": [str(v) for v in validate],
+        "horizons": [*VALIDATION_HORIZONS, "frozen"]})

@@ -51,8 +51,10 @@ __all__ = [
     "grid_table",
     "holdout_error",
     "holdout_search",
+    "learner_config",
     "protocol_search",
     "score_reports",
+    "selection_of",
     "split_holdout",
 ]
 
@@ -199,10 +201,19 @@ def grid_axes(
     return axes
 
 
-def _learner_config(
+def learner_config(
     config: EstimatorConfig, kind: str, n_features: int | None
 ) -> tuple[EstimatorConfig, str]:
-    """Return the configuration and build kind of a learner: ``SPJ`` is SP with the joint combination."""
+    """Return the configuration and build kind of a learner: ``SPJ`` is SP with the joint combination.
+
+    Args:
+        config: The base configuration.
+        kind: ``P``, ``NP``, ``SP`` or ``SPJ``.
+        n_features: D, or None for the configuration's.
+
+    Returns:
+        ``(configuration, kind to build)``.
+    """
     if kind == "SPJ":
         config = config.with_overrides({"semiparametric.combination": "joint"})
         kind = "SP"
@@ -269,6 +280,7 @@ def holdout_search(
     grid: Mapping[str, Sequence[float]] | None = None,
     jobs: int = 1,
     progress: bool = False,
+    cluster: str | None = None,
 ) -> Selection:
     """Grid search by hold-out (``tune``).
 
@@ -282,6 +294,7 @@ def holdout_search(
         grid: Values per tuned key (missing keys: :data:`DEFAULT_GRID`).
         jobs: Parallel jobs (1 = serial, sharing one :class:`CachedRegressor`; -1 = all cores).
         progress: Progress bar on stderr (only when it is a terminal; serial runs).
+        cluster: A Dask scheduler address or ``local:N`` instead of ``jobs`` (the same numbers).
 
     Returns:
         The :class:`Selection`.
@@ -290,27 +303,31 @@ def holdout_search(
         ValueError: On an unknown grid key, an invalid value, too few samples, or ``"SPJ"`` with unequal
             forgetting factors.
     """
-    base, build_kind = _learner_config(config, kind, n_features)
+    base, build_kind = learner_config(config, kind, n_features)
     axes = grid_axes(base, grid)
     train, held_out = split_holdout(data, holdout)
     configs = [
         base.with_overrides(dict(zip(TUNED_KEYS, values, strict=True)))
         for values in itertools.product(*(axes[k] for k in TUNED_KEYS))
     ]
-    regressor = CachedRegressor(build_regressor(base)) if build_kind != "NP" and jobs == 1 else None
+    serial = jobs == 1 and cluster is None
+    regressor = CachedRegressor(build_regressor(base)) if build_kind != "NP" and serial else None
     points = run_jobs(
         _holdout_job,
         [(c, train, held_out, build_kind, regressor) for c in configs],
         jobs=jobs,
         progress=progress_enabled(progress),
         unit="point",
+        cluster=cluster,
+        labels=[", ".join(f"{k} = {c[k]:g}" for k in TUNED_KEYS) for c in configs],
     )
-    return _selection(kind, "holdout", base, points, len(train), len(held_out))
+    return selection_of(kind, "holdout", base, points, len(train), len(held_out))
 
 
-def _selection(
+def selection_of(
     kind: str, method: str, base: EstimatorConfig, points: Sequence[GridPoint], n_train: int, n_test: int
 ) -> Selection:
+    """Rank scored grid points into a :class:`Selection` (the base configuration's own point named)."""
     ranked = _ranked(points)
     default_values = {k: float(base[k]) for k in TUNED_KEYS}
     default = next(
@@ -405,6 +422,7 @@ def protocol_search(
     grid: Mapping[str, Sequence[float]] | None = None,
     jobs: int = 1,
     progress: bool = False,
+    cluster: str | None = None,
 ) -> tuple[dict[str, Selection], list[ProtocolReport]]:
     """Grid search by the paper's protocol within one stream, every learner in each run.
 
@@ -421,6 +439,7 @@ def protocol_search(
         grid: Values per tuned key (missing keys: only the configuration's value — unlike the hold-out).
         jobs: Parallel jobs (-1 = all cores).
         progress: Progress bar over grid points (only on a terminal).
+        cluster: A Dask scheduler address or ``local:N`` instead of ``jobs`` (the same numbers).
 
     Returns:
         ``(selections by kind, the reports of the runs in grid order)``.
@@ -447,12 +466,14 @@ def protocol_search(
         jobs=jobs,
         progress=progress_enabled(progress),
         unit="point",
+        cluster=cluster,
+        labels=[", ".join(f"{k} = {c[k]:g}" for k in TUNED_KEYS) for c in configs],
     )
     n_test = reports[0].samples_test
     selections = {}
     for kind in kinds:
-        learner_base, _ = _learner_config(base, kind, None)
-        selections[kind] = _selection(
+        learner_base, _ = learner_config(base, kind, None)
+        selections[kind] = selection_of(
             kind, "protocol", learner_base, score_reports(reports, kind), len(train), n_test
         )
     return selections, reports
