@@ -99,7 +99,7 @@ def test_an_unreachable_scheduler_is_exit_2_naming_it_within_seconds(tmp_path):
     assert done.returncode == 2, done.stderr
     assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in done.stderr
     assert "Traceback" not in done.stderr
-    assert elapsed < 60  # the connection gives up after 10 s (plus the interpreter's start)
+    assert elapsed < 30  # a refused address fails at once; a silent one after 10 s (plus the start-up)
 
 
 def _arm_bag(root: Path, robot: str, seed: int) -> Path:

@@ -80,6 +80,7 @@ def connect(address: str, *, timeout_s: float = CONNECT_TIMEOUT_S) -> Iterator[A
                                dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
     else:
+        _probe(address, timeout_s)
         try:
             client = Client(address, timeout=timeout_s)
         except (OSError, TimeoutError, ValueError) as err:
@@ -92,6 +93,22 @@ def connect(address: str, *, timeout_s: float = CONNECT_TIMEOUT_S) -> Iterator[A
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _probe(address: str, timeout_s: float) -> None:
+    """Fail at once on a refused TCP address (Dask would retry it until its timeout)."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    if parts.scheme != "tcp" or not parts.hostname or parts.port is None:
+        return  # another protocol: Dask's own connection decides
+    try:
+        with socket.create_connection((parts.hostname, parts.port), timeout=timeout_s):
+            pass
+    except OSError as err:
+        raise ClusterError(f"cannot reach the Dask scheduler at {address} within {timeout_s:g} s: {err}"
+                           ) from None
 
 
 def _check_workers(client: Any, address: str, timeout_s: float) -> None:
