@@ -37,6 +37,7 @@ from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.parallel import run_jobs
 from semiparam_ros.eval.replay import Topics, load_samples
+from semiparam_ros.eval.validation import served_error
 from semiparam_ros.io.learn import learn_bags
 
 __all__ = ["FleetRow", "Robot", "discover_robots", "fleet_markdown", "learn_fleet"]
@@ -122,9 +123,8 @@ def _learn_robot(robot: Robot) -> tuple[FleetRow, bytes | None]:
                    learned=report.learned, drops=report.drops)
     if held_out is not None:
         test, _ = load_samples(held_out, config, Topics.from_config(config))
-        n = len(config["robot.joints"])
-        tau, _ = LearnedModel(est).predict(test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:])
-        row.frozen_rmse = float(np.mean(np.sqrt(np.mean((tau - test.Y) ** 2, axis=0))))
+        err = served_error(LearnedModel(est), test)
+        row.frozen_rmse = float(np.mean(np.sqrt(np.mean(err**2, axis=0))))
     return row, data
 
 

@@ -30,7 +30,7 @@ from semiparam_ros.core.serving import LearnedModel
 from semiparam_ros.eval.horizon import evaluate_horizons
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse
 from semiparam_ros.eval.parallel import run_jobs
-from semiparam_ros.eval.protocol import progress_enabled
+from semiparam_ros.eval.protocol import SampleArrays, progress_enabled
 from semiparam_ros.eval.replay import Topics, load_samples
 from semiparam_ros.eval.selection import (
     TUNED_KEYS,
@@ -42,10 +42,25 @@ from semiparam_ros.eval.selection import (
 )
 from semiparam_ros.io.learn import learn_bags
 
-__all__ = ["VALIDATION_HORIZONS", "validation_error", "validation_search"]
+__all__ = ["VALIDATION_HORIZONS", "served_error", "validation_error", "validation_search"]
 
 #: The ages of the model scored by the delay line [s] (0: one step); the frozen model is scored as served.
 VALIDATION_HORIZONS: tuple[float, ...] = (0.0, 0.1, 1.0, 10.0)
+
+
+def served_error(model: LearnedModel, data: SampleArrays) -> np.ndarray:
+    """Return the frozen model's errors as served (``LearnedModel.predict``) at a stream's states, (N, t).
+
+    Args:
+        model: The learned model.
+        data: The stream (``X = [q, q̇, q̈]`` in the model's joint order, ``Y`` measured).
+
+    Returns:
+        Predicted − measured [N·m, or N and N·m].
+    """
+    n = len(model.joints)
+    tau, _ = model.predict(data.X[:, :n], data.X[:, n:2 * n], data.X[:, 2 * n:])
+    return np.asarray(tau) - data.Y
 
 
 def _normalized(err: np.ndarray, Y: np.ndarray) -> float:
@@ -73,13 +88,11 @@ def validation_error(config: EstimatorConfig, train: Sequence[str | Path], valid
     est, _ = learn_bags(train, config, joint_states_topic=topics.joint_states, wrench_topic=topics.wrench)
     served = LearnedModel(est)
     output = OutputSpec.from_config(config)
-    n = len(config["robot.joints"])
     scores: list[float] = []
     frozen: dict[str, list[float]] = {g: [] for g in output.groups}
     for bag in validate:
         data, _ = load_samples(bag, config, topics)
-        tau, _ = served.predict(data.X[:, :n], data.X[:, n:2 * n], data.X[:, 2 * n:])
-        err = tau - data.Y
+        err = served_error(served, data)
         scores.append(_normalized(err, data.Y))
         rmse = component_rmse(err)
         for g, spec in output.groups.items():
