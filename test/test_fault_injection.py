@@ -5,9 +5,10 @@ receives a valid 200 Hz JointState stream from this process; in between, each fa
 docs/reliability.md is injected over the same topic. After each, and at the end, the suite asserts what
 the table promises: the node is alive, the fault is counted under its reason (and no counter jumps by
 more than the messages sent), every published prediction is finite, the velocity glitch leaves no
-external torque beyond 3× the median, and the oversized messages are refused and counted. What the node
-keeps after them is measured exactly in test_node_memory.py (tracemalloc): the process RSS printed here
-also counts the middleware's receive buffers (62–70 MB on some runs), so it is reported, not bounded.
+external torque beyond 3× the median (at least 0.05 N·m; a leak is 100+ N·m), and the oversized
+messages are refused and counted. What the node keeps after them is measured exactly in
+test_node_memory.py (tracemalloc): the process RSS printed here also counts the middleware's receive
+buffers (62–70 MB on some runs), so it is reported, not bounded.
 Under ``CI`` the oversized case sends 20 messages instead of 100.
 """
 
@@ -152,7 +153,12 @@ def test_every_fault_class_is_survived_counted_and_bounded(tmp_path, monkeypatch
         implausible = faulty(velocity=(0, 1e6))
         inject("implausible_value", [implausible])
 
-        # the velocity glitch inside the bound: dropped as a glitch, no output error beyond 3× the median
+        # the velocity glitch inside the bound: dropped as a glitch, it does not reach the outputs. Measured
+        # here with the check off (limits.glitch_ratio 0), a leaked glitch shows 104–145 N·m of external
+        # torque; dropped, at most 0.015 N·m. On this noise-free stream the median is ≈ 0.0015 N·m and the
+        # transients the faults before it leave (0.005–0.034 N·m) can reach 3× it around the glitch (2 of 5
+        # fresh-clone runs, with either glitch rule): the bound is 3× the median but never below 0.05 N·m,
+        # still 2000× under a leak
         glitch = faulty(velocity=(3, 99.0))
         inject("glitch", [glitch])
         glitch_ns = stamp_ns(glitch)
@@ -162,7 +168,8 @@ def test_every_fault_class_is_survived_counted_and_bounded(tmp_path, monkeypatch
         recent = stamps[stamps > glitch_ns - 3 * 10**9]
         median = np.median([ext[s] for s in recent])
         near = [ext[s] for s in recent if abs(s - glitch_ns) <= 10**8]  # ±20 samples
-        assert len(near) > 10 and max(near) <= 3.0 * median, (max(near), median)
+        print(f"external torque around the glitch: max {max(near):.4f} N·m, median {median:.4f} N·m")
+        assert len(near) > 10 and max(near) <= max(3.0 * median, 0.05), (max(near), median)
 
         # oversized messages: refused from the header, memory bounded
         big = JointState()
