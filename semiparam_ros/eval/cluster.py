@@ -178,13 +178,15 @@ def run_on_cluster(client: Any, fn: Callable[..., T], args: Sequence[tuple[Any, 
     start = time.perf_counter()
     for done, future in enumerate(as_completed(futures), start=1):
         i = futures[future]
+        status = "done"
         try:
             results[i] = future.result()
         except ClusterError as err:
             failures.append(str(err))
+            status = "failed"
         if progress:
-            print(f"[{done}/{len(args)} {unit}s, {time.perf_counter() - start:.0f} s] {labels[i]} "
-                  f"{'failed' if results[i] is None and failures else 'done'}", file=sys.stderr, flush=True)
+            print(f"[{done}/{len(args)} {unit}s, {time.perf_counter() - start:.0f} s] {labels[i]} {status}",
+                  file=sys.stderr, flush=True)
     if failures:
         raise ClusterError(f"{len(failures)} of {len(args)} {unit}s failed:\n" + "\n".join(failures))
     return results
