@@ -53,7 +53,7 @@ def simulated(rate: float, sigma_v: float, seed: int = 0) -> dict[float, float]:
 
 
 def kuka(root: Path) -> tuple[dict[float, float], dict[float, float], float]:
-    from semiparam_ros.core.dynamics import RigidBodyRegressor
+    from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
     from semiparam_ros.io.bags import read_topic_arrays
 
     joints = [f"lwr_{i}_joint" for i in range(7)]

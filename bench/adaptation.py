@@ -1,6 +1,6 @@
 """Adaptation, contact gate and uncertainty calibration of the online estimator, measured on bags.
 
-Runs :class:`~semiparam_ros.core.estimator.OnlineEstimator` (the node's data path) over a bag with
+Runs :class:`~semiparam_ros.core.estimator.online.OnlineEstimator` (the node's data path) over a bag with
 configuration overrides, optionally adds contact episodes (a force at the F/T reading, known onset and
 duration) to the measured wrench, and reports per run:
 
@@ -29,9 +29,9 @@ import numpy as np
 
 from semiparam_ros.cli.evaluate import parse_overrides
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.gate import Verdict
-from semiparam_ros.core.messages import WrenchData
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.gate import Verdict
+from semiparam_ros.core.stream.messages import WrenchData
 from semiparam_ros.io.bags import read_messages
 
 ROOT = Path(__file__).resolve().parents[1]

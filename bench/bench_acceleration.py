@@ -1,7 +1,7 @@
 """Causal low-delay q̈ (Kalman: constant jerk or snap) against the centred Savitzky–Golay (issue 15, item 3).
 
-Every estimate comes from the streaming estimators of ``semiparam_ros.core.acceleration`` (the node's code).
-Two errors per estimator, both as RMS of (estimate − reference) relative to the RMS of the reference:
+Every estimate comes from the streaming estimators of ``semiparam_ros.core.stream.acceleration`` (the node's
+code). Two errors per estimator, both as RMS of (estimate − reference) relative to the RMS of the reference:
 - *own stamp*: the estimate against the reference at the stamp it refers to (what learning sees);
 - *newest stamp*: the estimate against the reference at the newest joint state received when it was
   emitted (what a consumer that needs q̈ *now* gets: for S-G the delay turns into error).
@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import butter, filtfilt
 
-from semiparam_ros.core.acceleration import AccelerationConfig, make_estimator
+from semiparam_ros.core.stream.acceleration import AccelerationConfig, make_estimator
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
@@ -141,7 +141,7 @@ def kuka_arrays(root: Path, log: str):
 # ------------------------------------------------------------------------------------------------ SP
 def sp_errors(config, train_msgs, test_msgs) -> dict:
     """Test-then-train SP over the train messages then the test messages (pipeline restarted between)."""
-    from semiparam_ros.core.estimator import OnlineEstimator
+    from semiparam_ros.core.estimator.online import OnlineEstimator
 
     est = OnlineEstimator(config, kind="SP")
     for m in train_msgs:
@@ -169,7 +169,7 @@ def sp_errors(config, train_msgs, test_msgs) -> dict:
 
 
 def messages_from_recording(rec):
-    from semiparam_ros.core.messages import JointStateData
+    from semiparam_ros.core.stream.messages import JointStateData
 
     names = tuple(rec.joint_names)
     return [JointStateData(int(s), names, q, dq, tau) for s, q, dq, tau in

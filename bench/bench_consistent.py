@@ -25,8 +25,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.messages import Sample
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.eval.replay import load_samples
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

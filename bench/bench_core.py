@@ -58,9 +58,9 @@ from sklearn.kernel_approximation import RBFSampler
 from sklearn.linear_model import Ridge
 from threadpoolctl import threadpool_limits
 
-from semiparam_ros.core.features import Standardizer
-from semiparam_ros.core.rrls import RecursiveRLS
-from semiparam_ros.core.semiparametric import NonparametricModel
+from semiparam_ros.core.learners.features import Standardizer
+from semiparam_ros.core.learners.rrls import RecursiveRLS
+from semiparam_ros.core.learners.semiparametric import NonparametricModel
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "test"))
 from reference_rrls import ReferenceQRRLS
@@ -242,7 +242,8 @@ def bench_size(D: int, quick: bool, rng: np.random.Generator) -> dict[str, objec
 
 
 def load_old_rrls(rev: str, tmp: pathlib.Path) -> type[RecursiveRLS]:
-    """``RecursiveRLS`` of ``core/rrls.py`` and ``core/_kernels.py`` at ``rev`` (Python side and kernels).
+    """``RecursiveRLS`` of ``core/learners/rrls.py`` and ``core/learners/_kernels.py`` at ``rev`` (Python side
+    and kernels).
 
     Both modules are extracted with ``git show`` into ``tmp`` and imported under other names (the old
     ``rrls.py`` with its kernel import pointing at the old kernels), so old and new run in the same
@@ -254,9 +255,9 @@ def load_old_rrls(rev: str, tmp: pathlib.Path) -> type[RecursiveRLS]:
         return subprocess.run(["git", "-C", str(root), "show", f"{rev}:{path}"],
                               check=True, capture_output=True, text=True).stdout
 
-    (tmp / "_old_kernels.py").write_text(show("semiparam_ros/core/_kernels.py"))
-    rrls_src = show("semiparam_ros/core/rrls.py")
-    marker = "from semiparam_ros.core._kernels import"
+    (tmp / "_old_kernels.py").write_text(show("semiparam_ros/core/learners/_kernels.py"))
+    rrls_src = show("semiparam_ros/core/learners/rrls.py")
+    marker = "from semiparam_ros.core.learners._kernels import"
     if marker not in rrls_src:
         raise RuntimeError("rrls.py no longer imports the kernels as expected")
     (tmp / "_old_rrls.py").write_text(rrls_src.replace(marker, "from _old_kernels import"))

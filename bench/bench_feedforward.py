@@ -55,7 +55,7 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.core.estimator import build_regressor
+    from semiparam_ros.core.estimator.build import build_regressor
 
     config = load_config(CONFIG)
     joints = list(config["robot.joints"])

@@ -12,7 +12,7 @@ Streams (every one clean: a drop is a false drop):
 Then the same simulated streams with 20 one-sample spikes each (10 velocity spikes of ±(2–20) rad/s, 10
 position spikes of ±(0.05–0.5) rad, at random moving or resting states): the fraction dropped.
 
-The *old* rule is ``core/pipeline.py`` at ``--baseline`` (the commit before the hold-and-decide rule),
+The *old* rule is ``core/stream/pipeline.py`` at ``--baseline`` (the commit before the hold-and-decide rule),
 extracted with ``git show`` and imported beside the current one. Usage::
 
     .venv/bin/python bench/bench_glitch.py [--baseline REV] [--json PATH]
@@ -32,8 +32,8 @@ from dataclasses import replace
 
 import numpy as np
 
-import semiparam_ros.core.pipeline as new_pipeline
-from semiparam_ros.core.messages import JointStateData
+import semiparam_ros.core.stream.pipeline as new_pipeline
+from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.sim.arms import ARM_ROBOTS, arm_regressor
 from semiparam_ros.sim.encoders import encoder_readings
 from semiparam_ros.sim.trajectories import PointToPoint
@@ -46,8 +46,8 @@ DEFAULT_BASELINE = "619064a"  # the last commit with the drop-at-once rule
 
 
 def load_baseline(rev: str, tmp: pathlib.Path) -> types.ModuleType:
-    """Import ``core/pipeline.py`` at ``rev`` as ``_old_pipeline``."""
-    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:semiparam_ros/core/pipeline.py"],
+    """Import ``core/stream/pipeline.py`` at ``rev`` as ``_old_pipeline``."""
+    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:semiparam_ros/core/stream/pipeline.py"],
                          check=True, capture_output=True, text=True).stdout
     path = tmp / "_old_pipeline.py"
     path.write_text(src)

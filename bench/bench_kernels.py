@@ -35,8 +35,8 @@ from collections.abc import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-import semiparam_ros.core._kernels as new_kernels
-from semiparam_ros.core.rrls import RecursiveRLS
+import semiparam_ros.core.learners._kernels as new_kernels
+from semiparam_ros.core.learners.rrls import RecursiveRLS
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results" / "bench_kernels.json"
@@ -44,9 +44,14 @@ T_OUT = 6
 
 
 def load_old(rev: str, tmp: pathlib.Path) -> types.ModuleType:
-    """``core/_kernels.py`` at ``rev``, extracted to ``tmp`` and imported as ``_old_kernels``."""
-    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:semiparam_ros/core/_kernels.py"],
-                            check=True, capture_output=True, text=True).stdout
+    """``core/learners/_kernels.py`` at ``rev``, extracted to ``tmp`` and imported as ``_old_kernels``."""
+    for where in ("core/learners/_kernels.py", "core/_kernels.py"):  # its place since, and before, the rooms
+        shown = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:semiparam_ros/{where}"],
+                               capture_output=True, text=True)
+        if shown.returncode == 0:
+            break
+    shown.check_returncode()
+    source = shown.stdout
     path = tmp / "_old_kernels.py"
     path.write_text(source)
     spec = importlib.util.spec_from_file_location("_old_kernels", path)

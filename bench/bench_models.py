@@ -6,7 +6,7 @@ then the update) of:
 * ``P``          — rigid-body RRLS on the 17 base parameters (6 rows per sample);
 * ``NP``         — random features of the 12-d standardized x + RRLS with 6 outputs;
 * ``SP cascade`` — the paper's: P, then a random-feature RRLS of the residual on the 18-d ``[x, ŷ]``;
-* ``SP joint``   — :class:`~semiparam_ros.core.semiparametric_joint.JointSemiparametricModel`: a
+* ``SP joint``   — :class:`~semiparam_ros.core.learners.joint.JointSemiparametricModel`: a
   random-feature RRLS over the 6 + 6·17 = 108 columns ``[y, Φ rows]`` plus a 17-d RRLS fed with its
   rotated-out rows.
 
@@ -33,7 +33,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import build_model, build_regressor
+from semiparam_ros.core.estimator.build import build_model, build_regressor
 
 RESULTS = pathlib.Path(__file__).resolve().parent / "results" / "bench_models.json"
 MODELS = (("P", "P", "cascade"), ("NP", "NP", "cascade"), ("SP cascade", "SP", "cascade"),

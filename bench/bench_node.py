@@ -59,8 +59,8 @@ def make_bag(path: Path, *, seconds: float, hz: float = 1000.0, seed: int = 0) -
         Number of pairs written.
     """
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.core.estimator import build_regressor
-    from semiparam_ros.core.messages import JointStateData, WrenchData
+    from semiparam_ros.core.estimator.build import build_regressor
+    from semiparam_ros.core.stream.messages import JointStateData, WrenchData
     from semiparam_ros.io.bags import BagWriter
 
     config = load_config(CONFIG)

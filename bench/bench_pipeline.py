@@ -7,10 +7,11 @@ what the node does per millisecond at 1 kHz. Two stamp patterns:
 * ``uniform``  — exactly 1 ms apart (simulated bags);
 * ``jittered`` — 1 ms ± 50 µs uniform jitter (a real driver's stamps: no two windows share a spacing).
 
-The *old* implementation is the committed version of ``core/acceleration.py`` and ``core/pipeline.py`` at
-``--baseline`` (default: the commit before this benchmark's changes), extracted with ``git show`` to a
-temporary directory and imported next to the current one, so both run in the same process on the same
-messages. The samples of both are compared (stamps equal, q̈ relative difference reported).
+The *old* implementation is the committed version of ``core/stream/acceleration.py`` and
+``core/stream/pipeline.py`` at ``--baseline`` (default: the commit before this benchmark's changes), extracted
+with ``git show`` to a temporary directory and imported next to the current one, so both run in the same
+process on the same messages. The samples of both are compared (stamps equal, q̈ relative difference
+reported).
 
 Also timed: ``estimator.update`` alone (Savitzky–Golay, window 9, polyorder 2, 4 joints) old vs new.
 Timings are medians over repeats of the mean per call of back-to-back blocks (short blocks, so that
@@ -38,9 +39,9 @@ from collections.abc import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-import semiparam_ros.core.acceleration as new_acceleration
-import semiparam_ros.core.pipeline as new_pipeline
-from semiparam_ros.core.messages import JointStateData, WrenchData
+import semiparam_ros.core.stream.acceleration as new_acceleration
+import semiparam_ros.core.stream.pipeline as new_pipeline
+from semiparam_ros.core.stream.messages import JointStateData, WrenchData
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results" / "bench_pipeline.json"
@@ -62,7 +63,7 @@ def load_baseline(rev: str, tmp: pathlib.Path) -> types.ModuleType:
             ["git", "-C", str(ROOT), "show", f"{rev}:semiparam_ros/core/{name}.py"],
             check=True, capture_output=True, text=True,
         ).stdout
-        source = source.replace("semiparam_ros.core.acceleration", "_old_acceleration")
+        source = source.replace("semiparam_ros.core.stream.acceleration", "_old_acceleration")
         path = tmp / f"_old_{name}.py"
         path.write_text(source)
         spec = importlib.util.spec_from_file_location(f"_old_{name}", path)

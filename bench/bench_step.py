@@ -39,10 +39,10 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 import semiparam_ros
-import semiparam_ros.core.rrls as rrls
+import semiparam_ros.core.learners.rrls as rrls
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.messages import JointStateData
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.eval.replay import Topics
 from semiparam_ros.io.bags import read_messages
 

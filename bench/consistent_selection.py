@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.rate import measured_period_s
+from semiparam_ros.core.stream.rate import measured_period_s
 from semiparam_ros.eval.protocol import train
 from semiparam_ros.eval.replay import build_models, load_samples
 

@@ -2,7 +2,8 @@
 
 15 contacts (0.2–3 s, 5–30 N, random directions, seed 7) added to the measured wrench of a 120 s payload
 log (pickup at 60 s), run through OnlineEstimator with the gate on and off; detection = any component of
-``~/external_wrench`` beyond 5 σ (core/episodes.py), after the 10 s warm-up. Prints one JSON line per run.
+``~/external_wrench`` beyond 5 σ (core/stream/episodes.py), after the 10 s warm-up. Prints one JSON line per
+run.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD .venv/bin/python bench/contact_episodes.py BAG
 """
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from adaptation import run
 
-from semiparam_ros.core.episodes import flag_samples, score_episodes
+from semiparam_ros.core.stream.episodes import flag_samples, score_episodes
 
 STARTS = (14, 19, 24, 29, 34, 39, 44, 49, 54, 75, 82, 89, 96, 103, 110)
 

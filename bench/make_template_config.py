@@ -15,7 +15,7 @@ from semiparam_ros.core.config import PARAMETERS
 lines = """# semiparam_ros estimator: template for any fixed-base URDF arm with joint-torque sensing.
 # Only the three uncommented values are needed; every other parameter has a robot- and rate-independent
 # default, listed (commented) below with its meaning and range. Units: rad, rad/s, rad/s^2, N, N·m, s.
-#   evaluate --train log_a --test log_b --config config/template.yaml
+#   evaluate paper --train log_a --test log_b --config config/template.yaml
 #   ros2 run semiparam_ros estimator --ros-args --params-file config/template.yaml
 # robot.urdf: a file path (relative paths from the folder the command runs in; ~ expanded) or
 # "example-robot-data://<path in that package>". The joint names are those of the URDF and of the

@@ -40,7 +40,7 @@ PERIOD_S = 60.0  # the stream repeats (every frequency is a multiple of 1/60 Hz)
 def make_period(hz: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One 60 s period of (q rad, q̇ rad/s, wrench N and N·m) sampled at ``hz`` (bench_node's motion)."""
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.core.estimator import build_regressor
+    from semiparam_ros.core.estimator.build import build_regressor
 
     regressor = build_regressor(load_config(CONFIG))
     rng = np.random.default_rng(seed)

@@ -40,8 +40,8 @@ from semiparam_ros.cli.simulate import main as simulate
 from semiparam_ros.eval.parallel import run_jobs
 from semiparam_ros.eval.replay import evaluate_bags
 from docs.tools.replicates import replicate_summary, replicates_markdown
-from semiparam_ros.eval.report import protocol_report, write_json
-from semiparam_ros.eval.run import load_evaluation_config
+from semiparam_ros.report.paper import protocol_report, write_json
+from semiparam_ros.report.run import load_evaluation_config
 
 config_path, out, jobs = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
 rest = sys.argv[4:]

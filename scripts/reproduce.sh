@@ -8,11 +8,11 @@
 #
 # Steps: (1) generate the paper-preset bags (XY and XZ circles, wrench at 10 Hz, 10 000 samples each)
 # with the simulator if bags/generated/ does not hold them yet; (2) `evaluate` on them: P, NP, SP (the
-# paper's cascade) and SPJ (the joint semiparametric fit, core/semiparametric_joint.py) from zero, trained
+# paper's cascade) and SPJ (the joint semiparametric fit, core/learners/joint.py) from zero, trained
 # on all of XY, test-then-train on 10 sequential parts of XZ; (3) `evaluate payload` on the committed
 # payload bag: SP and SPJ with and without forgetting around the pickup; (4) the results page, the words of
 # docs/templates/results.md.in filled with the numbers of the JSON reports (semiparam_ros/eval/pages.py).
-# Hyperparameter selection on the training bag goes through `tune` (semiparam_ros/eval/selection.py), whose
+# Hyperparameter selection on the training bag goes through `tune` (semiparam_ros/tune/selection.py), whose
 # grid points run in parallel with joblib. Deterministic: the simulator and the random features are seeded.
 # Takes about 10 minutes on 2 cores.
 set -euo pipefail

@@ -321,8 +321,8 @@ def offline_replay(bag: Path, n_messages: int, overrides: dict[str, Any] | None 
                    messages: Iterable[Any] | None = None) -> OfflineReplay:
     """Feed the first ``n_messages`` of the bag's /joint_states and /wrench (log-time order) to the core."""
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.core.estimator import OnlineEstimator
-    from semiparam_ros.core.messages import JointStateData
+    from semiparam_ros.core.estimator.online import OnlineEstimator
+    from semiparam_ros.core.stream.messages import JointStateData
     from semiparam_ros.io.bags import read_messages
 
     est = OnlineEstimator(load_config(CONFIG).with_overrides(overrides or {}))
@@ -364,8 +364,8 @@ def wait_quiet(collector: Collector, predicate: Callable[[list[Any]], bool], tim
 def write_torque_bag(path: Path, n: int, hz: float = 100.0) -> None:
     """Joint states with efforts = the URDF rigid-body joint torques (N·m) of a smooth motion."""
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.core.estimator import build_regressor
-    from semiparam_ros.core.messages import JointStateData
+    from semiparam_ros.core.estimator.build import build_regressor
+    from semiparam_ros.core.stream.messages import JointStateData
     from semiparam_ros.io.bags import BagWriter
 
     regressor = build_regressor(load_config(CONFIG).with_overrides({"robot.output": "joint_torques"}))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.signal as ss
 
-from semiparam_ros.core.acceleration import (
+from semiparam_ros.core.stream.acceleration import (
     AccelerationConfig,
     FiniteDifferenceEstimator,
     SavitzkyGolayEstimator,

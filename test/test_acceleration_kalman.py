@@ -15,7 +15,9 @@ import pytest
 import scipy.linalg as sla
 import scipy.signal as ss
 
-from semiparam_ros.core.acceleration import (
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.estimator.build import build_pipeline
+from semiparam_ros.core.stream.acceleration import (
     KALMAN_PRIOR_VARIANCE,
     KALMAN_SETTLE,
     KALMAN_STATES,
@@ -27,8 +29,6 @@ from semiparam_ros.core.acceleration import (
     kalman_step_reference,
     make_estimator,
 )
-from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import build_pipeline
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
 EPS = np.finfo(float).eps
@@ -330,8 +330,8 @@ def test_white_noise_gain_is_the_steady_state_filters_and_grows_like_bandwidth_t
 def test_pipeline_emits_each_joint_torque_sample_with_its_own_joint_state():
     """Through the SamplePipeline (joint-torque output): no sample waits for later joint states, the warm-up
     is counted as 'acceleration_warmup', and q̈ equals the standalone estimator's."""
-    from semiparam_ros.core.messages import JointStateData
-    from semiparam_ros.core.pipeline import DROP_ACCELERATION_WARMUP
+    from semiparam_ros.core.stream.messages import JointStateData
+    from semiparam_ros.core.stream.pipeline import DROP_ACCELERATION_WARMUP
 
     cfg = EstimatorConfig.defaults().with_overrides({
         "robot.output": "joint_torques", "acceleration.method": "kalman", "acceleration.bandwidth_hz": 8.0,

@@ -7,7 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from semiparam_ros.core.acceleration import (
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.estimator.build import build_pipeline
+from semiparam_ros.core.stream.acceleration import (
     RATE_SAMPLES,
     AccelerationConfig,
     RateAdaptiveEstimator,
@@ -15,8 +17,6 @@ from semiparam_ros.core.acceleration import (
     make_estimator,
     samples_for_window,
 )
-from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import build_pipeline
 
 T0 = 7 * 10**9
 WINDOW_S = 0.08  # the parameter's default

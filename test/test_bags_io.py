@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from semiparam_ros.core.messages import JointStateData, WrenchData, stamp_to_ns
-from semiparam_ros.core.pipeline import SamplePipeline
+from semiparam_ros.core.stream.messages import JointStateData, WrenchData, stamp_to_ns
+from semiparam_ros.core.stream.pipeline import SamplePipeline
 from semiparam_ros.io.bags import (
     JOINT_STATE_TYPE,
     JOINT_TRAJECTORY_TYPE,

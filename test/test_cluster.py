@@ -23,12 +23,12 @@ from threadpoolctl import threadpool_limits
 from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config, write_config
 from semiparam_ros.eval.cluster import connect, run_on_cluster
-from semiparam_ros.eval.fleet import learn_fleet
 from semiparam_ros.eval.replay import Topics, evaluate_bags, load_samples
-from semiparam_ros.eval.validation import validation_error, validation_search
-from semiparam_ros.io.learn import learn_bags
+from semiparam_ros.service.learn import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording
+from semiparam_ros.tune.fleet import learn_fleet
+from semiparam_ros.tune.validation import validation_error, validation_search
 
 pytestmark = pytest.mark.slow
 

@@ -10,8 +10,14 @@ from scipy import stats
 
 from semiparam_ros.eval.compare import compare_pair
 from semiparam_ros.eval.metrics import OutputSpec
-from semiparam_ros.eval.report import GroupStats, ModelStats, ProtocolReport, SegmentStats, paired_comparisons
-from semiparam_ros.eval.tables import comparisons_table
+from semiparam_ros.report.paper import (
+    GroupStats,
+    ModelStats,
+    ProtocolReport,
+    SegmentStats,
+    paired_comparisons,
+)
+from semiparam_ros.report.tables import comparisons_table
 
 
 def sign_test_p(wins: int, n: int) -> float:

@@ -117,9 +117,9 @@ def test_load_errors_name_the_file(tmp_path):
 
 def test_build_pipeline_applies_acceleration_and_limit_parameters():
     """Shipped values reach the pipeline; 0 means "never restart" / "no bound"."""
-    from semiparam_ros.core import pipeline as pl
-    from semiparam_ros.core.estimator import build_pipeline
-    from semiparam_ros.core.messages import JointStateData, WrenchData
+    from semiparam_ros.core.estimator.build import build_pipeline
+    from semiparam_ros.core.stream import pipeline as pl
+    from semiparam_ros.core.stream.messages import JointStateData, WrenchData
 
     config = load_config(ICUB)
     assert (config["acceleration.polyorder"], config["acceleration.max_gap_s"]) == (2, 0.1)

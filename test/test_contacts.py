@@ -23,9 +23,10 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator, build_model, build_pipeline
-from semiparam_ros.core.gate import Verdict
-from semiparam_ros.core.messages import JointStateData, WrenchData
+from semiparam_ros.core.estimator.build import build_model, build_pipeline
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.gate import Verdict
+from semiparam_ros.core.stream.messages import JointStateData, WrenchData
 from semiparam_ros.io.bags import read_messages
 
 ROOT = Path(__file__).resolve().parents[1]

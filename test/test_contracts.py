@@ -10,8 +10,8 @@ import pytest
 
 import semiparam_ros
 from semiparam_ros.core.config import PARAMETERS, EstimatorConfig, structural_values
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.learner import Learner
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.learners.contract import Learner
 from semiparam_ros.errors import CheckpointError
 
 PACKAGE = Path(semiparam_ros.__file__).parent

@@ -1,4 +1,4 @@
-"""Tests of semiparam_ros.core.dynamics against Pinocchio's RNEA on independently built models."""
+"""Tests of semiparam_ros.core.rigid_body.dynamics against Pinocchio's RNEA on independently built models."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from semiparam_ros.core.dynamics import (
+from semiparam_ros.core.rigid_body.dynamics import (
     INERTIAL_PARAMETER_NAMES,
     RigidBodyRegressor,
     icub_urdf_path,
@@ -522,7 +522,7 @@ def test_one_spec_builds_the_same_regressor_as_the_keywords_and_pickles(icub, ic
     rebuilds from the spec, a misspelt option is a ConfigurationError naming it."""
     import copy
 
-    from semiparam_ros.core.urdf import RegressorSpec
+    from semiparam_ros.core.rigid_body.urdf import RegressorSpec
 
     spec = RegressorSpec(ICUB_JOINTS, ft_sensor=ICUB_SENSOR)
     by_spec = RigidBodyRegressor(icub_text, spec)
@@ -533,19 +533,8 @@ def test_one_spec_builds_the_same_regressor_as_the_keywords_and_pickles(icub, ic
     assert clone.spec == by_spec.spec
     assert np.array_equal(clone.regressor(q, dq, ddq), icub.regressor(q, dq, ddq))
     with pytest.raises(ConfigurationError, match="ft_sensr"):
-        RigidBodyRegressor(icub_text, ICUB_JOINTS, ft_sensr=ICUB_SENSOR)
+        RigidBodyRegressor.from_urdf(icub_urdf_path(), ICUB_JOINTS, ft_sensr=ICUB_SENSOR)
     with pytest.raises(ConfigurationError, match="not both"):
-        RigidBodyRegressor(icub_text, spec, output="wrench")
-
-
-def test_deprecated_frame_queries_warn_and_agree_with_sim_frames(icub):
-    q = np.full(len(ICUB_JOINTS), 0.2)
-    with pytest.warns(DeprecationWarning, match="sim.frames"):
-        body, T = icub.frame_in_body("r_hand_dh_frame")
-    body2, T2 = frame_in_body(icub, "r_hand_dh_frame")
-    assert body == body2 and np.array_equal(T, T2)
-    with pytest.warns(DeprecationWarning):
-        assert np.array_equal(icub.frame_placement(q, "r_hand_dh_frame"),
-                              frame_placement(icub, q, "r_hand_dh_frame"))
-    with pytest.warns(DeprecationWarning):
-        assert np.array_equal(icub.body_placement(q, body), body_placement(icub, q, body))
+        RigidBodyRegressor.from_urdf(icub_urdf_path(), spec, output="wrench")
+    with pytest.raises(ConfigurationError, match="RegressorSpec"):
+        RigidBodyRegressor(icub_text, ICUB_JOINTS)  # type: ignore[arg-type]  # the constructor takes a spec

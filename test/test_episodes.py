@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semiparam_ros.core.episodes import flag_samples, score_episodes
+from semiparam_ros.core.stream.episodes import flag_samples, score_episodes
 
 
 def test_flags_any_component_beyond_threshold_sigma():

@@ -23,14 +23,9 @@ import pytest
 
 import semiparam_ros.core.checkpoint as checkpoint_module
 from semiparam_ros.core.config import EstimatorConfig, load_config
-from semiparam_ros.core.estimator import (
-    OnlineEstimator,
-    StepResult,
-    build_model,
-    build_pipeline,
-    build_regressor,
-)
-from semiparam_ros.core.messages import JointStateData, Sample, WrenchData
+from semiparam_ros.core.estimator.build import build_model, build_pipeline, build_regressor
+from semiparam_ros.core.estimator.online import OnlineEstimator, StepResult
+from semiparam_ros.core.stream.messages import JointStateData, Sample, WrenchData
 from semiparam_ros.errors import CheckpointError, RejectedSampleError
 from semiparam_ros.io.bags import iter_samples
 
@@ -918,8 +913,8 @@ def test_joint_combination_online_equals_offline_model_and_checkpoint_round_trip
     learn) predicts; its checkpoint restores bit-identical predictions; a cascade estimator refuses it."""
     from itertools import islice
 
-    from semiparam_ros.core.semiparametric import SemiparametricModel
-    from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
+    from semiparam_ros.core.learners.joint import JointSemiparametricModel
+    from semiparam_ros.core.learners.semiparametric import SemiparametricModel
     from semiparam_ros.io.bags import read_messages
 
     cfg = config.with_overrides({"semiparametric.combination": "joint"})

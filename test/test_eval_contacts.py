@@ -1,4 +1,4 @@
-"""``evaluate --contacts``: the report's numbers against a direct computation from the ground-truth episodes
+"""``evaluate contacts``: the report's numbers against a direct computation from the ground-truth episodes
 and the predictions, the gate's effect on the error after the contacts, the JSON round trip, the figure.
 
 One short simulated log (``simulate --scenario contacts``: 50 s at 100 Hz, contacts of 15–25 N in 14–30 s,
@@ -15,8 +15,8 @@ import pytest
 import yaml
 
 from semiparam_ros.eval.contacts import ContactReport, contact_report, read_episodes, run_contacts
-from semiparam_ros.eval.report import to_plain, write_json
-from semiparam_ros.eval.run import load_evaluation_config
+from semiparam_ros.report.paper import to_plain, write_json
+from semiparam_ros.report.run import load_evaluation_config
 
 OVERRIDES = {"nonparametric.n_features": 100}
 
@@ -32,7 +32,7 @@ def contacts_log(tmp_path_factory):
                      "--contact-window", "14", "30", "--out", str(out), "--quiet"]) == 0
     bag = out / "icub_contacts"
     json_path, png = out / "contacts.json", out / "contacts.png"
-    assert evaluate(["--contacts", str(bag), "--set", "nonparametric.n_features=100", "--json",
+    assert evaluate(["contacts", str(bag), "--set", "nonparametric.n_features=100", "--json",
                      str(json_path), "--plot", str(png), "--no-progress"]) == 0
     config = load_evaluation_config(None, OVERRIDES)
     truth, runs = run_contacts(bag, config)

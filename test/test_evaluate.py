@@ -12,8 +12,8 @@ import pytest
 
 from semiparam_ros.eval.metrics import OutputSpec, group_rmse, window_samples, windowed_rmse
 from semiparam_ros.eval.protocol import SampleArrays, run_adaptation, run_protocol, split_bounds
-from semiparam_ros.eval.report import ProtocolReport, paper_checks, protocol_report, write_json
-from semiparam_ros.eval.tables import protocol_table
+from semiparam_ros.report.paper import ProtocolReport, paper_checks, protocol_report, write_json
+from semiparam_ros.report.tables import protocol_table
 
 WRENCH = OutputSpec.wrench()
 
@@ -239,8 +239,8 @@ def test_paper_checks_judge_sp_and_spj_separately() -> None:
 
 def test_build_models_spj_is_the_joint_fit_whatever_the_configuration_says() -> None:
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.core.semiparametric import SemiparametricModel
-    from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
+    from semiparam_ros.core.learners.joint import JointSemiparametricModel
+    from semiparam_ros.core.learners.semiparametric import SemiparametricModel
     from semiparam_ros.eval.replay import JOINT_SP, build_models
 
     small = {"nonparametric.n_features": 20, "nonparametric.standardizer_warmup": 5}
@@ -259,8 +259,8 @@ def test_build_models_spj_is_the_joint_fit_whatever_the_configuration_says() -> 
 
 def test_build_models_spc_is_the_papers_cascade_whatever_the_configuration_says() -> None:
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.core.semiparametric import SemiparametricModel
-    from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel
+    from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
+    from semiparam_ros.core.learners.semiparametric import SemiparametricModel
     from semiparam_ros.eval.replay import CASCADE_SP, build_models
 
     config = load_config(CONFIG).with_overrides({"nonparametric.n_features": 20})
@@ -293,10 +293,11 @@ def test_evaluate_cli_report_and_figure_on_committed_bag(tmp_path: Path, capsys)
 
     out_json, out_png = tmp_path / "report.json", tmp_path / "fig3.png"
     # a prefix of the committed bags and a small D: the fields, not the accuracy, are under test here
-    argv = ["--train", str(BAGS / "icub_xy"), "--test", str(BAGS / "icub_xz"), "--config", str(CONFIG),
-            "--set", "nonparametric.n_features=50", "--set", "nonparametric.standardizer_warmup=50",
-            "--train-limit", "300", "--test-limit", "400", "--splits", "2", "--models", "P", "NP", "SP",
-            "SPJ", "--json", str(out_json), "--plot", str(out_png), "--no-progress"]
+    argv = ["paper", "--train", str(BAGS / "icub_xy"), "--test", str(BAGS / "icub_xz"),
+            "--config", str(CONFIG), "--set", "nonparametric.n_features=50", "--set",
+            "nonparametric.standardizer_warmup=50", "--train-limit", "300", "--test-limit", "400", "--splits",
+            "2", "--models", "P", "NP", "SP", "SPJ", "--json", str(out_json), "--plot", str(out_png),
+            "--no-progress"]
     assert main(argv) == 0
     printed = capsys.readouterr().out
     assert "| SP |" in printed and "| SPJ |" in printed
@@ -341,16 +342,16 @@ def test_evaluate_cli_report_and_figure_on_committed_bag(tmp_path: Path, capsys)
 def test_evaluate_cli_rejects_bad_input(tmp_path: Path, capsys) -> None:
     from semiparam_ros.cli.evaluate import main
 
-    assert main(["--train", str(tmp_path / "missing"), "--test", str(tmp_path / "missing"),
+    assert main(["paper", "--train", str(tmp_path / "missing"), "--test", str(tmp_path / "missing"),
                  "--no-progress"]) == 2
     assert "evaluate: error" in capsys.readouterr().err
-    assert main(["--train", str(BAGS / "icub_xy"), "--test", str(BAGS / "icub_xz"), "--set",
+    assert main(["paper", "--train", str(BAGS / "icub_xy"), "--test", str(BAGS / "icub_xz"), "--set",
                  "nonparametric.sigma=-1", "--no-progress"]) == 2
-    assert main(["--train", str(BAGS / "icub_xy"), "--test", str(BAGS / "icub_xz"), "--train-limit", "50",
-                 "--test-limit", "50", "--splits", "10", "--split-size", "1000", "--no-progress"]) == 2
+    assert main(["paper", "--train", str(BAGS / "icub_xy"), "--test", str(BAGS / "icub_xz"), "--train-limit",
+                 "50", "--test-limit", "50", "--splits", "10", "--split-size", "1000", "--no-progress"]) == 2
     assert "fewer than" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        main(["--train", str(BAGS / "icub_xy")])
+        main(["paper", "--train", str(BAGS / "icub_xy")])
 
 
 def test_test_skip_runs_the_protocol_within_one_bag() -> None:
@@ -376,7 +377,7 @@ def _page_inputs(tmp_path: Path):
     """Toy reports of every kind the results page reads, written as JSON and read back."""
     from docs.tools.pages import load_inputs
     from docs.tools.replicates import replicate_summary
-    from semiparam_ros.eval.report import adaptation_report
+    from semiparam_ros.report.paper import adaptation_report
 
     def kinds():
         return {"P": ToyRidge(3, 6, lam=1e6), "NP": ToyRidge(3, 6), "SP": ToyRidge(3, 6, lam=0.5),
@@ -454,7 +455,7 @@ def test_no_module_of_the_package_writes_prose_pages() -> None:
 
 
 def test_figures_draw_spj_in_its_own_colour_and_name() -> None:
-    from semiparam_ros.eval.figures import COLORS, _color, _label
+    from semiparam_ros.report.figures import COLORS, _color, _label
 
     assert _color("SPJ", 0) == "tab:purple" == _color("SPJ adaptive (β=0.995)", 3)
     assert len(set(COLORS.values())) == len(COLORS)  # no two learners share a colour
@@ -467,8 +468,8 @@ def test_figures_draw_spj_in_its_own_colour_and_name() -> None:
 def test_adaptation_figure_is_a_valid_png(tmp_path: Path) -> None:
     from matplotlib.image import imread
 
-    from semiparam_ros.eval.figures import plot_adaptation
-    from semiparam_ros.eval.report import adaptation_report
+    from semiparam_ros.report.figures import plot_adaptation
+    from semiparam_ros.report.paper import adaptation_report
 
     stream = toy_stream(3000, 10, shift_at=1500)
     adapt = run_adaptation({"SP adaptive": ToyRidge(3, 6, forgetting=0.99), "SP": ToyRidge(3, 6)}, stream,
@@ -568,9 +569,9 @@ def test_payload_adaptation_on_committed_bag(tmp_path: Path) -> None:
     from matplotlib.image import imread
 
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.eval.figures import plot_adaptation
     from semiparam_ros.eval.replay import evaluate_adaptation
-    from semiparam_ros.eval.report import adaptation_report
+    from semiparam_ros.report.figures import plot_adaptation
+    from semiparam_ros.report.paper import adaptation_report
 
     # the paper's cascade, whose only way to follow a payload is the learners' forgetting (the default
     # consistent model follows it with its fast correction: test_contacts)
@@ -630,7 +631,7 @@ def test_payload_cli_and_pickup_time(tmp_path: Path, capsys) -> None:
         read_change_time(tmp_path)
     out = tmp_path / "payload.json"
     # explicit --pickup-time on a bag without a payload: the CLI path runs and reports finite numbers
-    argv = ["--payload", str(BAGS / "icub_xy"), "--pickup-time", "15", "--set", "nonparametric.n_features=50",
+    argv = ["payload", str(BAGS / "icub_xy"), "--pickup-time", "15", "--set", "nonparametric.n_features=50",
             "--forgetting", "0.99", "--models", "SP", "SPJ", "--json", str(out), "--plot",
             str(tmp_path / "p.png"), "--no-progress"]
     assert main(argv) == 0
@@ -642,7 +643,7 @@ def test_payload_cli_and_pickup_time(tmp_path: Path, capsys) -> None:
     assert len(report["summary"]) == 4 and report["summary"]["SPJ adaptive (β=0.99)"]["force"]["pre_rmse"] > 0
     assert (tmp_path / "p.png").read_bytes()[:8] == PNG_MAGIC
     # no scenario.yaml and no --pickup-time: a clear error
-    assert main(["--payload", str(BAGS / "icub_xy"), "--no-progress"]) == 2
+    assert main(["payload", str(BAGS / "icub_xy"), "--no-progress"]) == 2
     assert "pickup" in capsys.readouterr().err
 
 
@@ -683,8 +684,8 @@ def write_ur5_torque_bag(path: Path, seconds: float, seed: int, rate_hz: float =
     torque (a cable or spring: which no rigid-body + friction model expresses) and sensor noise."""
     import pinocchio as pin
 
-    from semiparam_ros.core.dynamics import example_robot_data_path
-    from semiparam_ros.core.messages import JointStateData
+    from semiparam_ros.core.rigid_body.dynamics import example_robot_data_path
+    from semiparam_ros.core.stream.messages import JointStateData
     from semiparam_ros.io.bags import BagWriter
 
     model = pin.buildModelFromUrdf(str(example_robot_data_path(UR5_URDF.split("://", 1)[1])))
@@ -725,9 +726,9 @@ def ur5_config():
 def test_six_joint_torques_are_evaluated_per_joint_not_as_a_wrench(ur5_bags, tmp_path: Path) -> None:
     """robot.output decides the groups: six joint torques are one "torque" group over the joints with
     per-joint RMSE [N·m] and nMSE, never force/torque halves; checked against a direct computation."""
-    from semiparam_ros.eval.figures import plot_protocol
     from semiparam_ros.eval.replay import evaluate_bags
-    from semiparam_ros.eval.run import evaluation_text
+    from semiparam_ros.report.figures import plot_protocol
+    from semiparam_ros.report.run import evaluation_text
 
     config = ur5_config()
     result, _ = evaluate_bags(ur5_bags / "train", ur5_bags / "test", config, kinds=("P", "NP", "SP"),
@@ -782,25 +783,21 @@ def test_progress_bar_only_on_a_terminal(capsys) -> None:
     assert capsys.readouterr().err == ""
 
 
-def test_subcommands_and_the_deprecated_flag_form_give_the_same_report(tmp_path: Path, capsys) -> None:
-    """`evaluate paper …` and the flag form of earlier releases (rewritten, with a deprecation note) run the
-    same protocol: the same JSON apart from the timings; `evaluate payload` needs its bag."""
-    from semiparam_ros.cli.evaluate import _legacy, main
+def test_the_paper_subcommand_reports_and_the_flag_form_of_earlier_releases_is_refused(tmp_path: Path,
+                                                                                     capsys) -> None:
+    """`evaluate paper …` writes its report; the flag form of earlier releases (removed) is a usage error."""
+    from semiparam_ros.cli.evaluate import main
 
     common = ["--train", str(BAGS / "icub_xy"), "--test", str(BAGS / "icub_xz"), "--train-limit", "300",
               "--test-limit", "400", "--splits", "2", "--models", "P", "--no-progress",
               "--set", "nonparametric.n_features=20"]
     assert main(["paper", *common, "--json", str(tmp_path / "new.json")]) == 0
+    new = json.loads((tmp_path / "new.json").read_text())
+    assert new["models"]["P"]["force_rmse"] > 0
     capsys.readouterr()
-    assert main([*common, "--json", str(tmp_path / "old.json")]) == 0
-    assert "deprecated flag form" in capsys.readouterr().err
-    new, old = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("new", "old"))
-    for doc in (new, old):  # timings differ run to run
-        for key in ("update_us", "update_us_stats", "train_s"):
-            doc.pop(key, None)
-    assert new == old and new["models"]["P"]["force_rmse"] > 0
-    assert _legacy(["--payload", "B", "--forgetting", "0.99"])[:2] == ["payload", "B"]
-    assert _legacy(["--config", "c.yaml", "--contacts", "B"]) == ["contacts", "B", "--config", "c.yaml"]
-    assert _legacy(["paper", "--train", "A"]) == ["paper", "--train", "A"]
+    with pytest.raises(SystemExit) as exit_info:
+        main([*common, "--json", str(tmp_path / "old.json")])
+    assert exit_info.value.code == 2 and "invalid choice" in capsys.readouterr().err
+    assert not (tmp_path / "old.json").exists()
     with pytest.raises(SystemExit):
         main(["payload"])  # the bag is required

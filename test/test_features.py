@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from sklearn.kernel_approximation import RBFSampler
 
-from semiparam_ros.core.features import RandomFourierFeatures, Standardizer
+from semiparam_ros.core.learners.features import RandomFourierFeatures, Standardizer
 
 
 def test_rff_matches_sklearn_rbfsampler_formulation():

@@ -12,11 +12,11 @@ import pytest
 from ros_helpers import REPO
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.feedforward import DesiredState, FeedForward, TrajectoryPoint
-from semiparam_ros.core.messages import JointStateData
-from semiparam_ros.core.serving import LearnedModel
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.errors import ConfigurationError
+from semiparam_ros.service.feedforward import DesiredState, FeedForward, TrajectoryPoint
+from semiparam_ros.service.serving import LearnedModel
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 
 PANDA = REPO / "config" / "panda.yaml"

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from semiparam_ros.core.adaptation import forgetting_factor
-from semiparam_ros.core.gate import ContactGate, GateConfig, Verdict
-from semiparam_ros.core.rrls import RecursiveRLS
-from semiparam_ros.core.uncertainty import NoiseScale
+from semiparam_ros.core.learners.adaptation import forgetting_factor
+from semiparam_ros.core.learners.rrls import RecursiveRLS
+from semiparam_ros.core.learners.uncertainty import NoiseScale
+from semiparam_ros.core.stream.gate import ContactGate, GateConfig, Verdict
 
 T0 = 1_700_000_000 * 10**9
 DT = 10_000_000  # 100 Hz
@@ -135,8 +135,8 @@ def test_gate_and_noise_state_survive_a_checkpoint(tmp_path):
     """After a restart from a checkpoint the gate is engaged at once and σ is the saved one: an outlier
     right after the warm start is a contact (gated), not a warm-up sample learned."""
     from semiparam_ros.core.config import EstimatorConfig
-    from semiparam_ros.core.estimator import OnlineEstimator
-    from semiparam_ros.core.messages import JointStateData
+    from semiparam_ros.core.estimator.online import OnlineEstimator
+    from semiparam_ros.core.stream.messages import JointStateData
 
     config = EstimatorConfig.defaults().with_overrides({
         "robot.output": "joint_torques", "nonparametric.n_features": 20, "gate.warmup": 1.0})

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.rate import measured_period_s
+from semiparam_ros.core.stream.rate import measured_period_s
 from semiparam_ros.eval.horizon import delayed_predictions
 from semiparam_ros.eval.protocol import SampleArrays, train
 from semiparam_ros.eval.replay import build_models

@@ -17,9 +17,9 @@ import pytest
 from test_estimator import CONFIG_PATH, JOINTS, PAPER, rich_stream
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.messages import JointStateData
-from semiparam_ros.core.pipeline import SamplePipeline
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import JointStateData
+from semiparam_ros.core.stream.pipeline import SamplePipeline
 from semiparam_ros.io.bags import read_messages
 from semiparam_ros.sim.arms import ARM_ROBOTS, arm_regressor
 from semiparam_ros.sim.encoders import encoder_readings

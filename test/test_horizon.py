@@ -7,7 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from semiparam_ros.core.semiparametric import NonparametricModel, ParametricModel, SemiparametricModel
+from semiparam_ros.core.learners.semiparametric import (
+    NonparametricModel,
+    ParametricModel,
+    SemiparametricModel,
+)
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.baselines import Persistence
 from semiparam_ros.eval.horizon import (
@@ -137,7 +141,7 @@ def test_evaluate_cli_reports_horizons_in_text_json_and_figure(tmp_path):
     root = Path(__file__).resolve().parents[1]
     out = tmp_path / "r.json"
     fig = tmp_path / "h.png"
-    code = main(["--train", str(root / "bags" / "icub_xy"), "--test", str(root / "bags" / "icub_xz"),
+    code = main(["paper", "--train", str(root / "bags" / "icub_xy"), "--test", str(root / "bags" / "icub_xz"),
                  "--config", str(root / "config" / "icub_right_arm.yaml"),
                  "--set", "nonparametric.n_features=40",
                  "--train-limit", "800", "--test-limit", "900", "--splits", "2", "--models", "P", "SP",

@@ -9,10 +9,11 @@ import pytest
 from ros_helpers import REPO
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.dynamics import RigidBodyRegressor, is_physically_consistent
-from semiparam_ros.core.identification import consistent_parameters, excitation_report, export_urdf
-from semiparam_ros.core.serving import LearnedModel
-from semiparam_ros.io.learn import learn_bags
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, is_physically_consistent
+from semiparam_ros.core.rigid_body.identification import consistent_parameters, excitation_report, export_urdf
+from semiparam_ros.core.rigid_body.urdf import RegressorSpec
+from semiparam_ros.service.learn import learn_bags
+from semiparam_ros.service.serving import LearnedModel
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 
@@ -106,8 +107,9 @@ def test_urdf_export_round_trip(learned, tmp_path):
     reg = est.regressor
     text = export_urdf(reg, c)
     config = est.config
-    again = RigidBodyRegressor(text, config["robot.joints"], output="joint_torques", friction=True,
-                               coulomb_velocity=config["parametric.coulomb_velocity"], joint_offsets=True)
+    again = RigidBodyRegressor(text, RegressorSpec(
+        tuple(config["robot.joints"]), output="joint_torques", friction=True,
+        coulomb_velocity=config["parametric.coulomb_velocity"], joint_offsets=True))
     names = reg.parameter_names
     inertial = np.array([not n.endswith((".viscous", ".coulomb", ".offset", ".armature")) for n in names])
     full = np.where(inertial, c.full, 0.0)

@@ -13,12 +13,12 @@ import pytest
 from test_estimator import assert_same_state, feed, rich_stream, snapshot
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.learning_loop import LearningLoop
-from semiparam_ros.core.messages import WrenchData
-from semiparam_ros.core.model_service import ModelService
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import WrenchData
 from semiparam_ros.errors import CheckpointError
-from semiparam_ros.io.checkpoint_writer import CheckpointWriter, warm_start
+from semiparam_ros.service.checkpoint_writer import CheckpointWriter, warm_start
+from semiparam_ros.service.learning_loop import LearningLoop
+from semiparam_ros.service.model_service import ModelService
 
 
 def _kind(msg) -> str:

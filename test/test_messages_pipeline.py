@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import scipy.signal as ss
 
-from semiparam_ros.core import pipeline as pl
-from semiparam_ros.core.acceleration import AccelerationConfig
-from semiparam_ros.core.messages import (
+from semiparam_ros.core.stream import pipeline as pl
+from semiparam_ros.core.stream.acceleration import AccelerationConfig
+from semiparam_ros.core.stream.messages import (
     JointStateData,
     Sample,
     WrenchData,
@@ -19,7 +19,7 @@ from semiparam_ros.core.messages import (
     stamp_to_ns,
     wrench_from_msg,
 )
-from semiparam_ros.core.pipeline import SamplePipeline
+from semiparam_ros.core.stream.pipeline import SamplePipeline
 from semiparam_ros.io.bags import BagWriter, iter_samples
 
 JOINTS = ("r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow")

@@ -26,7 +26,7 @@ from sensor_msgs.msg import JointState
 
 from semiparam_ros.core.checkpoint import load_npz
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
+from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.ros.bag_player import BagPlayer, RawMessage, load_raw
 from semiparam_ros.ros.conversions import stamp_msg
 

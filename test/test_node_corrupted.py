@@ -21,7 +21,7 @@ from ros_helpers import (
     wrench_array,
 )
 
-from semiparam_ros.core.messages import JointStateData, WrenchData
+from semiparam_ros.core.stream.messages import JointStateData, WrenchData
 from semiparam_ros.io.bags import BagWriter, read_messages
 from semiparam_ros.ros.bag_player import BagPlayer, load_raw
 

@@ -8,7 +8,7 @@ import time
 import pytest
 from ros_helpers import in_process_node, source_bag
 
-from semiparam_ros.core.messages import JointStateData
+from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.io.bags import read_messages
 from semiparam_ros.ros.run import EXECUTORS

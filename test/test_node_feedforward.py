@@ -23,7 +23,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config
-from semiparam_ros.io.learn import learn_bags
+from semiparam_ros.service.learn import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.closed_loop import ArmPlant, desired_trajectory, pd_gains, run_loop
 from semiparam_ros.sim.writer import write_recording
@@ -293,7 +293,7 @@ def test_payload_tare_and_pickup_over_dds(ros_env, checkpoint):
     the simulator's change of the carrying body's parameters. ``~/inertial_parameters`` names its values."""
     from geometry_msgs.msg import InertiaStamped
 
-    from semiparam_ros.core.payload import payload_from_parameters
+    from semiparam_ros.core.rigid_body.payload import payload_from_parameters
     from semiparam_ros.ros.conversions import parameters_names_from_msg
     from semiparam_ros.sim.arms import ARM_ROBOTS, arm_regressor
 

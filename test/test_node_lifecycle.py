@@ -15,8 +15,8 @@ from ros_helpers import CONFIG, NodeProcess, TestClient, make_ros_env
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from semiparam_ros.core.dynamics import resolve_urdf
-from semiparam_ros.core.estimator import OnlineEstimator
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.rigid_body.dynamics import resolve_urdf
 
 pytestmark = pytest.mark.ros
 

@@ -26,8 +26,8 @@ from ros_helpers import (
 from sensor_msgs.msg import JointState
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.messages import JointStateData
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.io.bags import read_messages
 from semiparam_ros.ros.bag_player import BagPlayer, load_raw
 

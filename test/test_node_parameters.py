@@ -22,7 +22,7 @@ from ros_helpers import (
 from std_msgs.msg import Float64MultiArray
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
+from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.ros.bag_player import BagPlayer, load_raw
 
 pytestmark = pytest.mark.ros
@@ -47,7 +47,7 @@ def test_invalid_startup_values_exit_with_a_clear_message(ros_env, tmp_path):
         "joint_fit_forgetting": (["semiparametric.combination:=joint", "parametric.forgetting:=0.99"],
                                  ["parametric.forgetting", "nonparametric.forgetting", "joint"]),
         "checkpoint": ([f"checkpoint.path:={incompatible}"], ["d100.npz", "load_on_start"]),
-        # the contact gate's parameters (core/gate.py)
+        # the contact gate's parameters (core/stream/gate.py)
         "gate_threshold": (["gate.threshold:=0.0"], ["gate.threshold", "> 0"]),
         "gate_duration": (["gate.max_contact_duration:=-3.0"], ["gate.max_contact_duration", ">= 0"]),
         # a misspelt name is refused with the closest known one (rclpy would keep it silently)

@@ -8,8 +8,8 @@ import time
 import pytest
 from ros_helpers import in_process_node, source_bag
 
-from semiparam_ros.core.estimator import samples_in
-from semiparam_ros.core.messages import JointStateData
+from semiparam_ros.core.stream.messages import JointStateData
+from semiparam_ros.core.stream.rate import samples_in
 from semiparam_ros.io.bags import read_messages
 
 pytestmark = pytest.mark.ros

@@ -16,8 +16,8 @@ from sensor_msgs.msg import JointState
 
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.messages import stamp_to_ns
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import stamp_to_ns
 from semiparam_ros.errors import CheckpointError, RejectedSampleError
 from semiparam_ros.ros.conversions import joint_state_from_cdr
 
@@ -114,8 +114,8 @@ def test_stale_temporaries_cold_start_and_a_disk_that_refuses_the_checkpoint(tmp
 
 
 def test_oversized_joint_states_are_refused_cheaply_and_the_name_cache_is_bounded():
-    from semiparam_ros.core.estimator import build_pipeline
-    from semiparam_ros.core.messages import JointStateData
+    from semiparam_ros.core.estimator.build import build_pipeline
+    from semiparam_ros.core.stream.messages import JointStateData
 
     big = JointState()
     n = 200_000

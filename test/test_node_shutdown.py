@@ -8,7 +8,7 @@ from ros_helpers import CONFIG, TOPICS, make_ros_env, offline_replay, source_bag
 
 from semiparam_ros.core.checkpoint import load_npz
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
+from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.ros.bag_player import load_raw
 
 pytestmark = pytest.mark.ros

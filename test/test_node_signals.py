@@ -18,7 +18,7 @@ import pytest
 from ros_helpers import CONFIG, TOPICS, NodeProcess, TestClient, make_ros_env, source_bag
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
+from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.ros.bag_player import BagPlayer, load_raw
 
 pytestmark = pytest.mark.ros

@@ -15,7 +15,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from semiparam_ros.core.config import PARAMETERS, EstimatorConfig, parameter_spec
-from semiparam_ros.core.messages import joint_state_from_msg
+from semiparam_ros.core.stream.messages import joint_state_from_msg
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.ros.conversions import (
     SerializedOutput,
@@ -118,8 +118,8 @@ def test_parameters_message_names_and_layout():
 
 
 def test_payload_messages_carry_the_estimate_and_its_std_in_the_distal_frame():
-    from semiparam_ros.core.dynamics import point_mass_parameters
-    from semiparam_ros.core.payload import payload_from_parameters
+    from semiparam_ros.core.rigid_body.dynamics import point_mass_parameters
+    from semiparam_ros.core.rigid_body.payload import payload_from_parameters
 
     delta = point_mass_parameters(1.5, [0.01, -0.02, 0.1])
     delta[4:] += [0.01, 0.0, 0.02, 0.0, 0.0, 0.03]  # plus an inertia of its own (Ixx, Iyy, Izz)

@@ -8,8 +8,8 @@ from __future__ import annotations
 import pytest
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.learning_loop import warm_up_kernels
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.service.learning_loop import warm_up_kernels
 
 
 @pytest.mark.parametrize("output", ["wrench", "joint_torques"])

@@ -13,10 +13,10 @@ from ros_helpers import REPO
 
 from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.dynamics import point_mass_parameters
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.messages import JointStateData
-from semiparam_ros.core.payload import PayloadLearner, payload_beyond_urdf, payload_from_parameters
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.rigid_body.dynamics import point_mass_parameters
+from semiparam_ros.core.rigid_body.payload import PayloadLearner, payload_beyond_urdf, payload_from_parameters
+from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.errors import CheckpointError
 from semiparam_ros.sim.arms import ARM_ROBOTS, ArmScenarioConfig, arm_regressor, simulate_arm
 

@@ -9,12 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from semiparam_ros.core.acceleration import AccelerationConfig, RateAdaptiveEstimator, samples_for_window
-from semiparam_ros.core.adaptation import learners
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.messages import Sample
-from semiparam_ros.core.rate import RATE_SAMPLES, RateMeter, measured_period_s, samples_in
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.learners.adaptation import learners
+from semiparam_ros.core.stream.acceleration import (
+    AccelerationConfig,
+    RateAdaptiveEstimator,
+    samples_for_window,
+)
+from semiparam_ros.core.stream.messages import Sample
+from semiparam_ros.core.stream.rate import RATE_SAMPLES, RateMeter, measured_period_s, samples_in
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.protocol import SampleArrays
 from semiparam_ros.eval.replay import build_models

@@ -8,15 +8,11 @@ import numpy as np
 import pytest
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import (
-    OnlineEstimator,
-    measured_period_s,
-    rmse_window_samples,
-    samples_in,
-    standardizer_warmup_samples,
-)
-from semiparam_ros.core.features import Standardizer
-from semiparam_ros.core.messages import Sample
+from semiparam_ros.core.estimator.build import rmse_window_samples, standardizer_warmup_samples
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.learners.features import Standardizer
+from semiparam_ros.core.stream.messages import Sample
+from semiparam_ros.core.stream.rate import measured_period_s, samples_in
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.replay import build_models
 

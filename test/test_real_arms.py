@@ -11,8 +11,9 @@ from test_dynamics import reference_model as dynamics_reference_model
 from test_dynamics import reference_torques, reference_wrench
 
 from semiparam_ros.core.config import EstimatorConfig, load_config
-from semiparam_ros.core.estimator import OnlineEstimator, build_regressor, column_scale
-from semiparam_ros.core.messages import JointStateData, Sample
+from semiparam_ros.core.estimator.build import build_regressor, column_scale
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import JointStateData, Sample
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = sorted((ROOT / "config").glob("*.yaml"))

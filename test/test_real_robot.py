@@ -20,14 +20,14 @@ from semiparam_ros.eval.baselines import (
 )
 from semiparam_ros.eval.metrics import OutputSpec
 from semiparam_ros.eval.protocol import SampleArrays, run_protocol
-from semiparam_ros.eval.real_robot import (
+from semiparam_ros.eval.replay import load_samples
+from semiparam_ros.report.real_robot import (
     BATCH,
     BATCH_ONLINE,
     PERSISTENCE,
     compare_on_logs,
     injected_torque_recovery,
 )
-from semiparam_ros.eval.replay import load_samples
 
 ROOT = Path(__file__).resolve().parents[1]
 KUKA = ROOT.parent / "shared" / "data" / "kuka_lwr4"  # beside the clone, as in CI
@@ -183,8 +183,8 @@ def test_node_step_sees_an_injected_torque_with_the_gate_and_equals_test_then_tr
     from test_evaluate import ur5_config, write_ur5_torque_bag
 
     from semiparam_ros.eval.protocol import test_then_train
-    from semiparam_ros.eval.real_robot import _node_predictions
     from semiparam_ros.eval.replay import build_models
+    from semiparam_ros.report.real_robot import _node_predictions
 
     write_ur5_torque_bag(tmp_path / "train", 20.0, seed=1)
     write_ur5_torque_bag(tmp_path / "test", 20.0, seed=2)
@@ -250,7 +250,7 @@ def test_kuka_comparison_reports_every_reference():
     exc = comp.excitation
     assert exc is not None and exc["condition"] > 1 and 0.0 <= exc["test_fraction_outside"] <= 1.0
     assert len(exc["least_excited"]) == 3
-    from semiparam_ros.eval.real_robot import comparison_markdown
+    from semiparam_ros.report.real_robot import comparison_markdown
 
     assert "Excitation of the training data" in comparison_markdown(comp)
 
@@ -266,7 +266,7 @@ def test_real_robots_command_reports_a_missing_data_folder(tmp_path, capsys):
 def test_joint_torque_floor_is_its_own_parameter_and_the_wrench_floors_are_unchanged():
     """With joint torques the ŷ block's floors come from min_scale.joint_torque (not the wrench's torque
     floor); with a wrench, from min_scale.force (3) and min_scale.torque (3). Exact: the floors are copied."""
-    from semiparam_ros.core.estimator import standardizer_min_scale
+    from semiparam_ros.core.estimator.build import standardizer_min_scale
 
     cfg = load_config(ROOT / "config" / "ur5.yaml").with_overrides(
         {"nonparametric.min_scale.joint_torque": 0.3, "nonparametric.min_scale.torque": 7.0})
@@ -286,8 +286,9 @@ def test_excitation_summary_against_independent_routes():
     """The condition number of A in physical units (eigvalsh of C A C, not the SVD of R C) and the fraction
     of test samples outside the excited range (one predict_one per sample, not the stacked predict_many),
     for a rigid-body learner trained on a short prefix of KUKA log 1 and tested on log 3."""
-    from semiparam_ros.core.estimator import OnlineEstimator, build_regressor, column_scale
-    from semiparam_ros.eval.real_robot import excitation_summary
+    from semiparam_ros.core.estimator.build import build_regressor, column_scale
+    from semiparam_ros.core.estimator.online import OnlineEstimator
+    from semiparam_ros.report.real_robot import excitation_summary
 
     cfg = load_config(ROOT / "config" / "kuka_lwr4.yaml").with_overrides(
         {"robot.urdf": str(KUKA / "kuka_lwr4_cogimon.urdf")})

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scipy.linalg import cho_factor, cho_solve
 
 from semiparam_ros.core import checkpoint
-from semiparam_ros.core.rrls import RecursiveRLS
+from semiparam_ros.core.learners.rrls import RecursiveRLS
 
 sys.path.insert(0, os.path.dirname(__file__))
 from reference_rrls import ReferenceQRRLS

@@ -17,10 +17,14 @@ import numpy as np
 import pytest
 from scipy.linalg import cho_factor, cho_solve
 
-from semiparam_ros.core._kernels import solve_predict
-from semiparam_ros.core.rrls import RecursiveRLS
-from semiparam_ros.core.semiparametric import NonparametricModel, ParametricModel, SemiparametricModel
-from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
+from semiparam_ros.core.learners._kernels import solve_predict
+from semiparam_ros.core.learners.joint import JointSemiparametricModel
+from semiparam_ros.core.learners.rrls import RecursiveRLS
+from semiparam_ros.core.learners.semiparametric import (
+    NonparametricModel,
+    ParametricModel,
+    SemiparametricModel,
+)
 from semiparam_ros.errors import RejectedSampleError
 
 sys.path.insert(0, os.path.dirname(__file__))

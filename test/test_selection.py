@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from semiparam_ros.eval.report import ProtocolReport
-from semiparam_ros.eval.selection import score_reports
+from semiparam_ros.report.paper import ProtocolReport
+from semiparam_ros.tune.selection import score_reports
 
 FIGS = Path(__file__).resolve().parents[1] / "docs" / "figures"
 

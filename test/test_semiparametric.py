@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.linalg import cho_factor, cho_solve
 
-from semiparam_ros.core.features import Standardizer
-from semiparam_ros.core.semiparametric import (
+from semiparam_ros.core.learners.features import Standardizer
+from semiparam_ros.core.learners.semiparametric import (
     NonparametricModel,
     ParametricModel,
     Prediction,

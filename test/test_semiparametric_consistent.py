@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from semiparam_ros.core.features import Standardizer
-from semiparam_ros.core.semiparametric import ParametricModel
-from semiparam_ros.core.semiparametric_consistent import ConsistentSemiparametricModel, ErrorTracker
+from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel, ErrorTracker
+from semiparam_ros.core.learners.features import Standardizer
+from semiparam_ros.core.learners.semiparametric import ParametricModel
 from semiparam_ros.errors import CheckpointError, RejectedSampleError
 
 
@@ -173,7 +173,7 @@ def sparse_regressor(x: np.ndarray) -> np.ndarray:
 def test_residual_keeps_only_the_regressor_entries_that_are_not_zero(monkeypatch):
     """Learning the identically zero entries of Φ as targets changes nothing but the cost: the model that
     drops them predicts bit for bit what the full regression predicts, on every sample and after."""
-    import semiparam_ros.core.semiparametric_consistent as mod
+    import semiparam_ros.core.learners.consistent as mod
 
     args = dict(lam_parametric=1e-2, lam_nonparametric=1e-1, n_features=60, sigma=1.5, seed=3,
                 standardizer=STD, novelty_scale=0.05, tracker=True)

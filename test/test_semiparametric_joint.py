@@ -6,9 +6,13 @@ import numpy as np
 import pytest
 from scipy.linalg import cho_factor, cho_solve
 
-from semiparam_ros.core.features import Standardizer
-from semiparam_ros.core.semiparametric import NonparametricModel, ParametricModel, SemiparametricModel
-from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
+from semiparam_ros.core.learners.features import Standardizer
+from semiparam_ros.core.learners.joint import JointSemiparametricModel
+from semiparam_ros.core.learners.semiparametric import (
+    NonparametricModel,
+    ParametricModel,
+    SemiparametricModel,
+)
 
 T, P, D, N_IN = 3, 4, 12, 2
 

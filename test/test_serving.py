@@ -20,11 +20,11 @@ from semiparam_ros import load_model
 from semiparam_ros.cli import learn as learn_cli
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.messages import JointStateData
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.errors import CheckpointError, RejectedSampleError
 from semiparam_ros.io.bags import read_messages
-from semiparam_ros.io.learn import learn_bags
+from semiparam_ros.service.learn import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, arm_regressor, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 

@@ -14,11 +14,11 @@ import yaml
 from mcap.reader import make_reader
 
 from semiparam_ros.cli.simulate import main
-from semiparam_ros.core.acceleration import AccelerationConfig
-from semiparam_ros.core.dynamics import RigidBodyRegressor, icub_urdf_path, point_mass_parameters
-from semiparam_ros.core.messages import JointStateData, WrenchData
-from semiparam_ros.core.pipeline import SamplePipeline
-from semiparam_ros.core.semiparametric import ParametricModel
+from semiparam_ros.core.learners.semiparametric import ParametricModel
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, icub_urdf_path, point_mass_parameters
+from semiparam_ros.core.stream.acceleration import AccelerationConfig
+from semiparam_ros.core.stream.messages import JointStateData, WrenchData
+from semiparam_ros.core.stream.pipeline import SamplePipeline
 from semiparam_ros.io.bags import iter_samples, read_messages, read_topic_arrays
 from semiparam_ros.sim import scenario as scenario_module
 from semiparam_ros.sim.effects import DEFAULT_EFFECTS, NOMINAL_RMS, SENSOR_FRAME

@@ -15,14 +15,18 @@ import math
 import numpy as np
 import pytest
 
-from semiparam_ros.core import _step_kernels as kernels
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.features import RandomFourierFeatures, Standardizer
-from semiparam_ros.core.messages import Sample
-from semiparam_ros.core.semiparametric import NonparametricModel, ParametricModel, SemiparametricModel
-from semiparam_ros.core.semiparametric_joint import JointSemiparametricModel
-from semiparam_ros.core.uncertainty import predict_with_variance
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.learners import _step_kernels as kernels
+from semiparam_ros.core.learners.features import RandomFourierFeatures, Standardizer
+from semiparam_ros.core.learners.joint import JointSemiparametricModel
+from semiparam_ros.core.learners.semiparametric import (
+    NonparametricModel,
+    ParametricModel,
+    SemiparametricModel,
+)
+from semiparam_ros.core.learners.uncertainty import predict_with_variance
+from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.errors import RejectedSampleError
 
 EPS = np.finfo(float).eps

@@ -9,9 +9,10 @@ import pytest
 
 from semiparam_ros.cli.tune import main as tune_main
 from semiparam_ros.core.config import load_config
-from semiparam_ros.core.estimator import build_model, measured_period_s
+from semiparam_ros.core.estimator.build import build_model
+from semiparam_ros.core.stream.rate import measured_period_s
 from semiparam_ros.eval.replay import load_samples
-from semiparam_ros.eval.selection import CachedRegressor, holdout_search, split_holdout
+from semiparam_ros.tune.selection import CachedRegressor, holdout_search, split_holdout
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config" / "icub_right_arm.yaml"
@@ -75,8 +76,9 @@ def test_tune_cli_writes_a_parameter_file_evaluate_accepts(tmp_path: Path, capsy
     assert tuned["nonparametric.sigma"] == float(selected[3])
     from semiparam_ros.cli.evaluate import main as evaluate_main
 
-    assert evaluate_main(["--train", str(XY), "--test", str(XY), "--config", str(out), "--train-limit", "200",
-                          "--test-limit", "200", "--splits", "2", "--no-progress"]) == 0
+    assert evaluate_main(["paper", "--train", str(XY), "--test", str(XY), "--config", str(out),
+                          "--train-limit", "200", "--test-limit", "200", "--splits", "2",
+                          "--no-progress"]) == 0
 
 
 def test_tune_spj_scores_the_joint_fit_and_selects_it(data, tmp_path: Path, capsys) -> None:
@@ -112,7 +114,7 @@ def test_tune_rejects_bad_input(data) -> None:
 
 
 def test_cached_regressor_matches_the_regressor(data) -> None:
-    from semiparam_ros.core.estimator import build_regressor
+    from semiparam_ros.core.estimator.build import build_regressor
 
     config, samples = data
     reg = build_regressor(config)

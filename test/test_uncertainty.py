@@ -5,8 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semiparam_ros.core.semiparametric import NonparametricModel, ParametricModel, SemiparametricModel
-from semiparam_ros.core.uncertainty import predict_with_variance
+from semiparam_ros.core.learners.semiparametric import (
+    NonparametricModel,
+    ParametricModel,
+    SemiparametricModel,
+)
+from semiparam_ros.core.learners.uncertainty import predict_with_variance
 from semiparam_ros.errors import RejectedSampleError
 
 

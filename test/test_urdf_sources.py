@@ -10,7 +10,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ros_helpers import REPO, NodeProcess, TestClient, make_ros_env
 from std_msgs.msg import String
 
-from semiparam_ros.core.dynamics import example_robot_data_path, resolve_urdf
+from semiparam_ros.core.rigid_body.dynamics import example_robot_data_path, resolve_urdf
 from semiparam_ros.errors import ConfigurationError
 
 PANDA_REL = "robots/panda_description/urdf/panda.urdf"

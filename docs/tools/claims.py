@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from semiparam_ros.eval.compare import PairStats
-from semiparam_ros.eval.report import CHECKED_SP_KINDS
+from semiparam_ros.report.paper import CHECKED_SP_KINDS
 
 __all__ = ["RestatedCheck", "restated_checks"]
 

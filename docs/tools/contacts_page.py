@@ -22,7 +22,7 @@ from pathlib import Path
 
 from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.eval.contacts import ContactReport
-from semiparam_ros.eval.tables import contacts_table, fmt
+from semiparam_ros.report.tables import contacts_table, fmt
 
 __all__ = ["acceptance", "contacts_values", "load_contact_reports", "render_contacts", "write_contacts"]
 

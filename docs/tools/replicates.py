@@ -7,7 +7,7 @@ logs with another seed draws new sensor noise and a new wander of the hand's spe
 (:mod:`semiparam_ros.sim.scenario`); everything else (robot, non-rigid effects, hyperparameters, protocol) is
 unchanged. Each seed is then an independent replicate of the whole experiment, and:
 
-* per criterion of the issue (:func:`~semiparam_ros.eval.report.paper_checks`): on how many seeds it holds,
+* per criterion of the issue (:func:`~semiparam_ros.report.paper.paper_checks`): on how many seeds it holds,
   and the spread of its value;
 * per pair of learners (A vs B), group, segment and target: :func:`~semiparam_ros.eval.compare.compare_pair`
   on the per-seed means (``n`` = seeds; the seeds are independent) and on all parts of all seeds pooled
@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.eval.compare import DEFAULT_PAIRS, Comparison, compare_pair
-from semiparam_ros.eval.report import (
+from semiparam_ros.report.paper import (
     SEGMENTS,
     Check,
     GroupStats,
@@ -36,7 +36,7 @@ from semiparam_ros.eval.report import (
     first_key,
     paper_checks,
 )
-from semiparam_ros.eval.tables import comparisons_table
+from semiparam_ros.report.tables import comparisons_table
 
 __all__ = ["Criterion", "ReplicateSummary", "replicate_summary", "replicates_markdown"]
 
@@ -45,7 +45,7 @@ _PROTOCOL_KEYS = ("split_size", "window_samples")
 
 @dataclass(frozen=True)
 class Criterion:
-    """One criterion of :func:`~semiparam_ros.eval.report.paper_checks` over the seeds.
+    """One criterion of :func:`~semiparam_ros.report.paper.paper_checks` over the seeds.
 
     Attributes:
         checks: The check on each seed (same identifier), in seed order.

@@ -18,9 +18,7 @@ contact detection per episode, the error after the contacts vs before, payload a
 
     evaluate contacts bags/generated/icub_contacts --json results/contacts.json --plot results/contacts.png
 
-The flag forms of earlier releases (``evaluate --train A --test B``, ``--payload BAG``, ``--contacts BAG``)
-still work, with a deprecation note. Argument parsing only; the work is done by
-:mod:`semiparam_ros.eval.run`.
+Argument parsing only; the work is done by :mod:`semiparam_ros.report.run`.
 """
 
 from __future__ import annotations
@@ -83,7 +81,6 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
 
 
 _MODELS = ("P", "NP", "SP", "SPJ", "SPC", "SPfrozenP")
-_COMMANDS = ("paper", "payload", "contacts")
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -161,25 +158,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _legacy(argv: list[str]) -> list[str]:
-    """Rewrite the flag form of earlier releases (``--train A --test B``, ``--payload X``, ``--contacts``)."""
-    if not argv or argv[0] in _COMMANDS or argv[0] in ("-h", "--help"):
-        return argv
-    for flag, command in (("--contacts", "contacts"), ("--payload", "payload")):
-        if flag in argv:
-            i = argv.index(flag)
-            if i + 1 >= len(argv):
-                break
-            rest = argv[:i] + argv[i + 2:]
-            new = [command, argv[i + 1], *rest]
-            break
-    else:
-        new = ["paper", *argv]
-    print(f"evaluate: deprecated flag form; use `evaluate {new[0]} …` (this call: "
-          f"evaluate {' '.join(new)})", file=sys.stderr)
-    return new
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``evaluate`` console script.
 
@@ -190,11 +168,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         Exit status: 0 on success, 2 on invalid input, 1 if a file cannot be read or written.
     """
     parser = build_parser()
-    args = parser.parse_args(_legacy(list(sys.argv[1:] if argv is None else argv)))
+    args = parser.parse_args(argv)
     from semiparam_ros.eval.horizon import DEFAULT_HORIZONS  # heavy imports after argument checks
     from semiparam_ros.eval.options import ProtocolOptions
     from semiparam_ros.eval.replay import Topics
-    from semiparam_ros.eval.run import (
+    from semiparam_ros.report.run import (
         ReportPaths,
         evaluate_contacts,
         evaluate_paper,

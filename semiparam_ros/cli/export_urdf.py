@@ -7,7 +7,7 @@
 Prints what the data determined (the information matrix's condition number and least-excited
 directions) and the consistent link masses; writes the robot's URDF with each identified link's
 ``<inertial>`` and each joint's ``<dynamics damping friction>``. Argument parsing only
-(:mod:`semiparam_ros.core.identification`).
+(:mod:`semiparam_ros.core.rigid_body.identification`).
 """
 
 from __future__ import annotations
@@ -35,8 +35,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``export_urdf``; returns the exit status (0 done, 2 invalid input, 1 an I/O failure)."""
     args = build_parser().parse_args(argv)
     from semiparam_ros.atomic import atomic_write_text
-    from semiparam_ros.core.identification import export_urdf
-    from semiparam_ros.core.serving import load_model
+    from semiparam_ros.core.rigid_body.identification import export_urdf
+    from semiparam_ros.service.serving import load_model
 
     try:
         model = load_model(args.checkpoint)

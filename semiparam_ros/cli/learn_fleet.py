@@ -6,7 +6,7 @@
 
 ``fleet/<robot>/`` holds each robot's bags; all but the last (in name order) are learned, the last is held
 out and the frozen model's error on it is reported (``checkpoints/fleet.md`` and ``fleet.json``).
-Argument parsing only; the work is done by :mod:`semiparam_ros.eval.fleet`.
+Argument parsing only; the work is done by :mod:`semiparam_ros.tune.fleet`.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``learn-fleet``; returns the exit status (0 done, 2 invalid input or a failed robot, 1 I/O)."""
     args = build_parser().parse_args(argv)
-    from semiparam_ros.eval.fleet import fleet_markdown, learn_fleet
+    from semiparam_ros.tune.fleet import fleet_markdown, learn_fleet
 
     try:
         rows = learn_fleet(args.root, args.config_per_robot, args.out, jobs=args.jobs, cluster=args.cluster,

@@ -9,7 +9,7 @@ measurements_3; friction-dominated joints 1, 5, 6, 7 of its README)::
     real_robots --data ../shared/data/kuka_lwr4 --json results/real_robots.json \
         --markdown results/real_robots.md
 
-Argument parsing only; the work is done by :mod:`semiparam_ros.eval.real_robot`.
+Argument parsing only; the work is done by :mod:`semiparam_ros.report.real_robot`.
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     args = build_parser().parse_args(argv)
     from semiparam_ros.eval.horizon import DEFAULT_HORIZONS  # heavy imports after argument parsing
-    from semiparam_ros.eval.real_robot import run_comparison
+    from semiparam_ros.report.real_robot import run_comparison
 
     horizons = DEFAULT_HORIZONS if args.horizons is None else (args.horizons or None)
 

@@ -10,7 +10,7 @@
 Prints the grid (best first) and writes a ROS 2 parameter file — the input configuration with the selected
 values — that the node (``--params-file``) and ``evaluate --config`` accept. Works for every
 ``robot.output`` (wrench or joint torques). Argument parsing only; the work is done by
-:mod:`semiparam_ros.eval.selection`.
+:mod:`semiparam_ros.tune.selection`.
 """
 
 from __future__ import annotations
@@ -105,7 +105,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         Exit status: 0 on success, 2 on invalid input, 1 if a file cannot be read or written.
     """
     args = build_parser().parse_args(argv)
-    from semiparam_ros.eval.run import run_tune  # heavy imports after argument parsing
+    from semiparam_ros.tune.run import run_tune  # heavy imports after argument parsing
 
     grid = {
         k: v

@@ -45,8 +45,6 @@ __all__ = [
     "write_config",
 ]
 
-_TYPES = ("string", "string_array", "double", "double_array", "integer", "bool")
-
 
 @dataclass(frozen=True)
 class ParameterSpec:
@@ -281,7 +279,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "ridge problem, which needs parametric.forgetting == nonparametric.forgetting; "
                   "'consistent' = rigid-body stage alone first, a residual on x that stays consistent with "
                   "the current parameters and falls back to zero where x is novel (the model), plus a fast "
-                  "tracker of the model's error (one step ahead); see core/semiparametric_consistent.py",
+                  "tracker of the model's error (one step ahead); see core/learners/consistent.py",
                   choices=("cascade", "joint", "consistent"),
                   structural=True, kinds=("SP",), unless="cascade"),
     ParameterSpec("semiparametric.novelty_scale", "double", 0.01,
@@ -306,8 +304,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("semiparametric.tracker_samples", "integer", 50,
                   "'consistent': learned samples over which the local tracker compares its error smoothers "
                   "and estimates the noise (a statistical sample size, not a time)", min=2, max=10**7),
-    # adaptation, uncertainty and the contact-aware learning gate (core/adaptation.py, core/uncertainty.py,
-    # core/gate.py; measurements in docs/adaptation.md)
+    # adaptation, uncertainty and the contact-aware learning gate (core/learners/adaptation.py,
+    # core/learners/uncertainty.py,
+    # core/stream/gate.py; measurements in docs/adaptation.md)
     ParameterSpec("adaptation.time_constant", "double", 20.0,
                   "memory of both learners [s]: when > 0 it replaces parametric.forgetting and "
                   "nonparametric.forgetting by beta = exp(-T/tau), T the sample period measured (median "
@@ -339,7 +338,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "units of the noise variance) above which an outlier is motion the model has not seen, "
                   "learned, not a contact; 0 = every outlier is a contact", min=0.0, max=1e12,
                   read_only=False),
-    # feed-forward at desired states (joint torques; core/feedforward.py)
+    # feed-forward at desired states (joint torques; service/feedforward.py)
     ParameterSpec("feedforward.joints", "string_array", [],
                   "joint order of ~/feedforward_commands and ~/feedforward (a JointGroupEffortController's "
                   "joints); empty = robot.joints"),
@@ -608,7 +607,7 @@ class EstimatorConfig:
 
     def urdf_path(self) -> Path:
         """Return the URDF path that ``robot.urdf`` names (see :func:`core.dynamics.resolve_urdf`)."""
-        from semiparam_ros.core.urdf import resolve_urdf
+        from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 
         return resolve_urdf(self["robot.urdf"])
 

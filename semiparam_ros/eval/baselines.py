@@ -14,10 +14,10 @@ Each is an online model of the protocol's interface (``predict_one``, ``predict_
   ``π̂ = argmin Σ_m ‖y_m − Φ_m π‖²``. The stacked regressor is reduced block by block to its triangular
   factor (``[R | d]`` with ``RᵀR = ΦᵀΦ``, ``Rᵀd = ΦᵀY``: a tall-skinny QR in O(n·t·b²) time and O(b²)
   memory, never the normal equations), and :func:`least_squares_model` turns the fit into a
-  :class:`~semiparam_ros.core.semiparametric.ParametricModel` that starts from exactly that state. Frozen,
-  it is the offline identification; updated online (test-then-train), each new sample extends the least
-  squares problem: after k test samples its parameters are the ordinary least-squares solution on the
-  training log plus those k samples (the recursive RLS of :mod:`semiparam_ros.core.rrls` with β = 1).
+  :class:`~semiparam_ros.core.learners.semiparametric.ParametricModel` that starts from exactly that state.
+  Frozen, it is the offline identification; updated online (test-then-train), each new sample extends the
+  least squares problem: after k test samples its parameters are the ordinary least-squares solution on the
+  training log plus those k samples (the recursive RLS of :mod:`semiparam_ros.core.learners.rrls` with β = 1).
 
 Units: outputs in N·m (joint torques) or N, N·m (wrench), as the regressor gives them.
 """
@@ -32,9 +32,9 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import build_regressor, column_scale, regressor_function
-from semiparam_ros.core.rrls import RecursiveRLS
-from semiparam_ros.core.semiparametric import ParametricModel, Prediction
+from semiparam_ros.core.estimator.build import build_regressor, column_scale, regressor_function
+from semiparam_ros.core.learners.rrls import RecursiveRLS
+from semiparam_ros.core.learners.semiparametric import ParametricModel, Prediction
 from semiparam_ros.core.validation import check_finite_array, check_positive_int
 from semiparam_ros.errors import ConfigurationError
 
@@ -155,8 +155,9 @@ def cad_model(config: EstimatorConfig) -> FixedParameters:
 def identification_regressor(config: EstimatorConfig) -> tuple[Regressor, np.ndarray]:
     """Return the regressor of batch identification: base parameters plus the configuration's extra columns.
 
-    The columns are scaled as the learners scale them (:func:`~semiparam_ros.core.estimator.column_scale`),
-    which leaves the least-squares prediction unchanged and improves the factor's conditioning.
+    The columns are scaled as the learners scale them
+    (:func:`~semiparam_ros.core.estimator.build.column_scale`), which leaves the least-squares prediction
+    unchanged and improves the factor's conditioning.
 
     Args:
         config: Estimator configuration (``robot.*``, ``parametric.friction/offsets/armature``).
@@ -256,9 +257,9 @@ def batch_least_squares(regressor: Regressor, X: np.ndarray, Y: np.ndarray, *,
 def least_squares_model(regressor: Regressor, fit: LeastSquaresFit) -> ParametricModel:
     """Build a rigid-body learner whose state is the batch fit: ordinary recursive least squares from there.
 
-    The returned :class:`~semiparam_ros.core.semiparametric.ParametricModel` (zero prior, β = 1) predicts
-    ``Φ(x) π̂`` and, updated with new samples, stays the exact least-squares solution over the fit's log
-    plus those samples (its factor is the fit's, extended by Givens rotations; no ridge: λ only sets the
+    The returned :class:`~semiparam_ros.core.learners.semiparametric.ParametricModel` (zero prior, β = 1)
+    predicts ``Φ(x) π̂`` and, updated with new samples, stays the exact least-squares solution over the fit's
+    log plus those samples (its factor is the fit's, extended by Givens rotations; no ridge: λ only sets the
     factor of a reset, never used here).
 
     Args:

@@ -1,17 +1,17 @@
 """Contact evaluation: the node's estimator over a log with contact episodes, with the gate on and off.
 
 A log with known contact episodes (the simulator's ``scenario.yaml``: ``contacts.episodes`` and an
-optional later ``payload``) is run through :class:`~semiparam_ros.core.estimator.OnlineEstimator` — the
+optional later ``payload``) is run through :class:`~semiparam_ros.core.estimator.online.OnlineEstimator` — the
 node's data path, which measures the sample period itself so ``adaptation.time_constant`` applies — once
 with ``gate.enabled`` true and once false, everything else as configured. For each run:
 
-- **detection** (:mod:`semiparam_ros.core.episodes`): a sample is flagged when a component of the external
-  estimate ``y − ŷ`` exceeds ``gate.threshold`` published σ; samples before ``gate.warmup`` are not
-  scored. Per episode: detected and delay [s]; recall over all episodes and over those with a peak force
-  ≥ ``strong_force`` [N]; false alarms per minute of contact-free time. Flags within ``pickup_window_s``
-  of a payload pickup are not false alarms (that time is left out like an episode): the new load *is* an
-  external force until the gate adopts it after ``gate.max_contact_duration``, and the learners need a
-  moment more to absorb it (default window: ``gate.max_contact_duration`` + 2 s);
+- **detection** (:mod:`semiparam_ros.core.stream.episodes`): a sample is flagged when a component of the
+  external estimate ``y − ŷ`` exceeds ``gate.threshold`` published σ; samples before ``gate.warmup`` are not
+  scored. Per episode: detected and delay [s]; recall over all episodes and over those with a peak force ≥
+  ``strong_force`` [N]; false alarms per minute of contact-free time. Flags within ``pickup_window_s`` of a
+  payload pickup are not false alarms (that time is left out like an episode): the new load *is* an external
+  force until the gate adopts it after ``gate.max_contact_duration``, and the learners need a moment more to
+  absorb it (default window: ``gate.max_contact_duration`` + 2 s);
 - **contact immunity**: the RMSE per output group (mean over the group's components of each component's
   RMSE) over ``window_s`` before the first episode (from the end of the warm-up at the earliest) and over
   ``window_s`` after the last episode's end (up to the pickup at the latest); ``ratio = after / before``;
@@ -36,10 +36,10 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.episodes import flag_samples, score_episodes
-from semiparam_ros.core.estimator import OnlineEstimator
-from semiparam_ros.core.messages import JointStateData, WrenchData
-from semiparam_ros.core.rate import stream_period_s
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.episodes import flag_samples, score_episodes
+from semiparam_ros.core.stream.messages import JointStateData, WrenchData
+from semiparam_ros.core.stream.rate import stream_period_s
 from semiparam_ros.eval.metrics import OutputSpec, group_rmse, window_samples, windowed_rmse
 from semiparam_ros.eval.options import DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol import Recovery, recovery

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.semiparametric import Prediction, SemiparametricModel
+from semiparam_ros.core.learners.semiparametric import Prediction, SemiparametricModel
 
 __all__ = ["FrozenParametricSP"]
 
@@ -21,10 +21,10 @@ __all__ = ["FrozenParametricSP"]
 class FrozenParametricSP:
     """A semiparametric learner whose rigid-body stage learns only its first ``learn_parametric_for`` samples.
 
-    Wraps a :class:`~semiparam_ros.core.semiparametric.SemiparametricModel`. Before the limit it behaves
-    exactly like the wrapped model (``predict_learn_one`` of both stages). Afterwards the rigid-body stage
-    only predicts ``ŷ = Φ(x) π̂`` and the residual stage predicts and learns ``y − ŷ`` from ``[x, ŷ]`` as
-    in the wrapped model.
+    Wraps a :class:`~semiparam_ros.core.learners.semiparametric.SemiparametricModel`. Before the limit it
+    behaves exactly like the wrapped model (``predict_learn_one`` of both stages). Afterwards the rigid-body
+    stage only predicts ``ŷ = Φ(x) π̂`` and the residual stage predicts and learns ``y − ŷ`` from ``[x, ŷ]``
+    as in the wrapped model.
 
     Args:
         model: The semiparametric learner (owned by the wrapper).

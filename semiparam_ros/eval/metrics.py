@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.rate import samples_in
+from semiparam_ros.core.stream.rate import samples_in
 
 __all__ = [
     "GROUP_UNITS",

@@ -7,10 +7,10 @@ then update one sample at a time; report mean and standard deviation over the pa
 component-averaged RMSE of forces and torques over a sliding window.
 
 This module works on plain arrays (:class:`SampleArrays`) and on any object with the online-model
-interface of :mod:`semiparam_ros.core.semiparametric` (``predict_learn_one(x, y)`` returning a prediction
-with a ``total`` attribute or an array, and ``copy()``), so it is tested against hand-written loops on toy
-models and used unchanged on bags by :mod:`semiparam_ros.eval.replay`. What the outputs are (a wrench or
-joint torques, hence the groups and units) is given by an :class:`~semiparam_ros.eval.metrics.OutputSpec`.
+interface of :mod:`semiparam_ros.core.learners.semiparametric` (``predict_learn_one(x, y)`` returning a
+prediction with a ``total`` attribute or an array, and ``copy()``), so it is tested against hand-written loops
+on toy models and used unchanged on bags by :mod:`semiparam_ros.eval.replay`. What the outputs are (a wrench
+or joint torques, hence the groups and units) is given by an :class:`~semiparam_ros.eval.metrics.OutputSpec`.
 
 A second protocol, :func:`run_adaptation`, follows one stream through an abrupt change (a payload picked
 up at a known time) and measures how fast each model's error returns to its pre-change level.
@@ -18,7 +18,7 @@ up at a known time) and measures how fast each model's error returns to its pre-
 Units: time in s (stamps in int ns), errors in N (forces) and N·m (torques), update times in µs.
 
 The results are arrays (:class:`ProtocolResult`, :class:`AdaptationResult`); the typed report built once
-from them is :func:`semiparam_ros.eval.report.protocol_report`.
+from them is :func:`semiparam_ros.report.paper.protocol_report`.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from semiparam_ros.core.rate import stream_period_s
+from semiparam_ros.core.stream.rate import stream_period_s
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse, group_rmse, window_samples, windowed_rmse
 from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 
@@ -114,7 +114,7 @@ class SampleArrays:
     @classmethod
     def from_samples(cls, samples: Iterable[Any], ground_truth: Mapping[int, np.ndarray] | None = None,
                      limit: int | None = None) -> SampleArrays:
-        """Collect :class:`~semiparam_ros.core.messages.Sample` objects into arrays.
+        """Collect :class:`~semiparam_ros.core.stream.messages.Sample` objects into arrays.
 
         Args:
             samples: Objects with ``stamp_ns``, ``x`` and ``y``.

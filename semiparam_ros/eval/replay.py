@@ -1,9 +1,10 @@
 """Bag replay: read bags through the node's own pipeline and run the evaluation protocols on them.
 
-Samples come from exactly the objects the live node uses: :func:`~semiparam_ros.core.estimator.build_pipeline`
+Samples come from exactly the objects the live node uses:
+:func:`~semiparam_ros.core.estimator.build.build_pipeline`
 (joint mapping, stamp pairing, acceleration estimate, drops counted) fed by
 :func:`~semiparam_ros.io.bags.iter_samples`, and the learners of
-:func:`~semiparam_ros.core.estimator.build_model`. When the bag also holds the noise-free wrench of a
+:func:`~semiparam_ros.core.estimator.build.build_model`. When the bag also holds the noise-free wrench of a
 simulation (``/ground_truth/wrench``), the noise-free wrench with the stamp of each sample (samples carry
 the wrench stamp) is its noise-free output, so errors can be split into model error and sensor noise.
 """
@@ -20,7 +21,8 @@ import numpy as np
 import yaml
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import build_model, build_pipeline, build_regressor, measured_period_s
+from semiparam_ros.core.estimator.build import build_model, build_pipeline, build_regressor
+from semiparam_ros.core.stream.rate import measured_period_s
 from semiparam_ros.eval.diagnostics import FrozenParametricSP
 from semiparam_ros.eval.horizon import HorizonReport, evaluate_horizons
 from semiparam_ros.eval.metrics import OutputSpec
@@ -60,10 +62,11 @@ _TRUTH_MARGIN_NS = 1_000_000_000
 #: The paper's three learners.
 KINDS: tuple[str, ...] = ("P", "NP", "SP")
 #: The joint semiparametric learner
-#: (:class:`~semiparam_ros.core.semiparametric_joint.JointSemiparametricModel`): the SP model built with
+#: (:class:`~semiparam_ros.core.learners.joint.JointSemiparametricModel`): the SP model built with
 #: ``semiparametric.combination = joint`` whatever the configuration says.
 JOINT_SP = "SPJ"
-#: The paper's cascade (:class:`~semiparam_ros.core.semiparametric.SemiparametricModel`): the SP model
+#: The paper's cascade (:class:`~semiparam_ros.core.learners.semiparametric.SemiparametricModel`): the SP
+# model
 #: built with ``semiparametric.combination = cascade`` whatever the configuration says.
 CASCADE_SP = "SPC"
 #: Diagnostic variant (:class:`~semiparam_ros.eval.diagnostics.FrozenParametricSP`): SP whose rigid-body
@@ -165,7 +168,7 @@ def build_models(config: EstimatorConfig, kinds: Sequence[str] = KINDS, *,
             cascade).
         n_train: Samples the rigid-body stage of :data:`FROZEN_P` learns (required for it).
         sample_period_s: The stream's sample period [s], measured as the node does
-            (:func:`~semiparam_ros.core.estimator.measured_period_s` of the first stream learned): it
+            (:func:`~semiparam_ros.core.stream.rate.measured_period_s` of the first stream learned): it
             converts a warm-up given in seconds, and with ``adaptation.time_constant`` τ > 0 every learner
             forgets with β = exp(−T/τ), as in the node (``None``: the configured factors, warm-up at 100 Hz).
 

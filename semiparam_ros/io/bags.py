@@ -4,8 +4,8 @@ Reading goes through :class:`rosbags.highlevel.AnyReader`, which accepts a bag f
 ``metadata.yaml``; MCAP or SQLite3 storage) or a bare ``.mcap`` file and streams messages in log-time
 order chunk by chunk, so a bag is never loaded whole. Messages are deserialised with the type
 definitions embedded in the bag and converted with the same duck-typed functions the live node uses
-(:func:`~semiparam_ros.core.messages.joint_state_from_msg`,
-:func:`~semiparam_ros.core.messages.wrench_from_msg`).
+(:func:`~semiparam_ros.core.stream.messages.joint_state_from_msg`,
+:func:`~semiparam_ros.core.stream.messages.wrench_from_msg`).
 
 Writing goes through :class:`rosbags.rosbag2.Writer` (rosbag2 version 9, MCAP storage) with the ROS 2
 Jazzy typestore, which gives ``<folder>/<folder>.mcap`` plus ``metadata.yaml`` — the layout ``ros2 bag``
@@ -35,7 +35,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from semiparam_ros.core.messages import (
+from semiparam_ros.core.stream.messages import (
     JointStateData,
     Sample,
     WrenchData,
@@ -50,7 +50,7 @@ from semiparam_ros.io.mcap_scan import McapScan, ScannedChannel
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
 
-    from semiparam_ros.core.pipeline import SamplePipeline
+    from semiparam_ros.core.stream.pipeline import SamplePipeline
 
 __all__ = [
     "JOINT_STATE_TYPE",
@@ -435,7 +435,7 @@ def iter_samples(
     joint_states_topic: str = "/joint_states",
     wrench_topic: str | None = _AUTO,
 ) -> Iterator[Sample]:
-    """Feed a bag through a :class:`~semiparam_ros.core.pipeline.SamplePipeline` and yield its samples.
+    """Feed a bag through a :class:`~semiparam_ros.core.stream.pipeline.SamplePipeline` and yield its samples.
 
     Messages enter the pipeline in log-time order, exactly as a live subscriber would receive them;
     drops are counted in ``pipeline.drops``.
@@ -448,7 +448,7 @@ def iter_samples(
             pipeline learns a wrench, none when it learns joint torques.
 
     Returns:
-        An iterator of :class:`~semiparam_ros.core.messages.Sample`.
+        An iterator of :class:`~semiparam_ros.core.stream.messages.Sample`.
 
     Raises:
         BagError: As :func:`read_messages`.

@@ -36,7 +36,7 @@ from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from semiparam_ros.core.messages import ns_to_stamp
+from semiparam_ros.core.stream.messages import ns_to_stamp
 from semiparam_ros.errors import BagError, ConfigurationError
 from semiparam_ros.io.bags import iter_raw, topic_info
 

@@ -1,8 +1,8 @@
-"""Conversions between ROS 2 messages and the plain-array types of :mod:`semiparam_ros.core.messages`.
+"""Conversions between ROS 2 messages and the plain-array types of :mod:`semiparam_ros.core.stream.messages`.
 
 Inputs are converted with the same duck-typed functions the bag reader uses
-(:func:`~semiparam_ros.core.messages.joint_state_from_msg`,
-:func:`~semiparam_ros.core.messages.wrench_from_msg`), so a message gives identical data live or from a
+(:func:`~semiparam_ros.core.stream.messages.joint_state_from_msg`,
+:func:`~semiparam_ros.core.stream.messages.wrench_from_msg`), so a message gives identical data live or from a
 bag. Outputs are built here: a wrench prediction as ``geometry_msgs/WrenchStamped`` (force first, N; then
 torque, N·m; in the sensor frame of the input), joint torques as ``sensor_msgs/JointState`` with only
 ``effort`` (N·m) filled, and the base inertial parameters as ``std_msgs/Float64MultiArray``.
@@ -38,9 +38,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from semiparam_ros.core.feedforward import DesiredState, FeedForwardCommand, TrajectoryPoint
-from semiparam_ros.core.identification import ConsistentEstimate
-from semiparam_ros.core.messages import (
+from semiparam_ros.core.rigid_body.identification import ConsistentEstimate
+from semiparam_ros.core.rigid_body.payload import PayloadEstimate
+from semiparam_ros.core.stream.messages import (
     JointStateData,
     WrenchData,
     joint_state_from_msg,
@@ -48,8 +48,8 @@ from semiparam_ros.core.messages import (
     stamp_to_ns,
     wrench_from_msg,
 )
-from semiparam_ros.core.payload import PayloadEstimate
 from semiparam_ros.errors import RejectedSampleError
+from semiparam_ros.service.feedforward import DesiredState, FeedForwardCommand, TrajectoryPoint
 
 __all__ = [
     "SerializedOutput",
@@ -141,7 +141,7 @@ def desired_state_from_msg(msg: Any) -> DesiredState:
 
     Returns:
         The plain-array form (values are checked later, by
-        :class:`~semiparam_ros.core.feedforward.FeedForward`).
+        :class:`~semiparam_ros.service.feedforward.FeedForward`).
 
     Raises:
         RejectedSampleError: A stamp with ``nanosec ≥ 10⁹`` or negative, or non-numeric values.

@@ -74,8 +74,8 @@ from collections.abc import Mapping
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-from semiparam_ros.core.gate import Verdict
-from semiparam_ros.core.learning_loop import LearningLoop
+from semiparam_ros.core.stream.gate import Verdict
+from semiparam_ros.service.learning_loop import LearningLoop
 
 __all__ = ["NodeStatistics", "diagnostic_array"]
 

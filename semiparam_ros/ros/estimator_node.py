@@ -3,10 +3,10 @@
 Run it with ``ros2 run semiparam_ros estimator --ros-args --params-file config/icub_right_arm.yaml`` (or
 ``python -m semiparam_ros.ros.run …``: the command line lives in :mod:`semiparam_ros.ros.run`). Its topics,
 services, QoS and threads are documented in docs/node.md. The work is done by parts that never import
-rclpy: :class:`~semiparam_ros.core.learning_loop.LearningLoop` (input queue, overload policy, the
+rclpy: :class:`~semiparam_ros.service.learning_loop.LearningLoop` (input queue, overload policy, the
 estimator offline replay uses too, so a bag gives the same numbers either way),
-:class:`~semiparam_ros.core.model_service.ModelService` (feed-forward, gravity, payload, link inertias)
-and :class:`~semiparam_ros.io.checkpoint_writer.CheckpointWriter` (the checkpoint thread). This module
+:class:`~semiparam_ros.service.model_service.ModelService` (feed-forward, gravity, payload, link inertias)
+and :class:`~semiparam_ros.service.checkpoint_writer.CheckpointWriter` (the checkpoint thread). This module
 converts messages, hands them on, and publishes what comes back.
 
 One executor thread runs everything that touches the estimator. A subscription callback converts its
@@ -35,14 +35,11 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator import OnlineEstimator, build_regressor, rmse_window_samples
-from semiparam_ros.core.feedforward import DesiredState, FeedForward
-from semiparam_ros.core.learning_loop import Input, LearningLoop, warm_up_kernels
-from semiparam_ros.core.messages import WrenchData
-from semiparam_ros.core.model_service import ModelService
-from semiparam_ros.core.urdf import TOPIC_SCHEME
+from semiparam_ros.core.estimator.build import build_regressor, rmse_window_samples
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.rigid_body.urdf import TOPIC_SCHEME
+from semiparam_ros.core.stream.messages import WrenchData
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
-from semiparam_ros.io.checkpoint_writer import CheckpointWriter, warm_start
 from semiparam_ros.ros import conversions as cv
 from semiparam_ros.ros.description import DescriptionTimeoutError, wait_for_description
 from semiparam_ros.ros.diagnostics import NodeStatistics, diagnostic_array, estimator_statistics
@@ -51,6 +48,10 @@ from semiparam_ros.ros.outputs import PARAMETERS_QOS, Outputs
 from semiparam_ros.ros.parameter_files import parameter_files, unmatched_files_message
 from semiparam_ros.ros.parameters import ParameterError, declare_parameters, make_parameter_validator
 from semiparam_ros.ros.save_service import SaveService
+from semiparam_ros.service.checkpoint_writer import CheckpointWriter, warm_start
+from semiparam_ros.service.feedforward import DesiredState, FeedForward
+from semiparam_ros.service.learning_loop import Input, LearningLoop, warm_up_kernels
+from semiparam_ros.service.model_service import ModelService
 
 __all__ = ["INPUT_QOS", "PARAMETERS_QOS", "EstimatorNode", "StartupError"]
 
@@ -172,7 +173,7 @@ class EstimatorNode(Node):
         self._rmse_window_final = bool(cfg["diagnostics.rmse_window"])
         self._warn = ThrottledWarnings(self.get_logger(), _LOG_THROTTLE_S)
         projection = self._service.projection
-        self.outputs = Outputs(self, () if self._output == "wrench" else self._joints, warn=self._warn,
+        self.outputs = Outputs(self, () if self._output == "wrench" else self._joints,
                                n_links=0 if projection is None else est.regressor.n_bodies)
         kinds = ("joint_states", "wrench")
         self.inputs = InputStreams(self, {k: cfg[f"topics.{k}"] for k in kinds},

@@ -20,10 +20,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
-from semiparam_ros.core.learning_loop import LearningLoop
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.ros import conversions as cv
 from semiparam_ros.ros.diagnostics import NodeStatistics
+from semiparam_ros.service.learning_loop import LearningLoop
 
 __all__ = ["GONE", "INPUT_QOS", "MAX_DRAIN", "InputStreams", "ThrottledWarnings", "take"]
 

@@ -25,7 +25,7 @@ from rclpy.lifecycle import LifecycleNodeMixin, LifecycleState, TransitionCallba
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from semiparam_ros.core.urdf import TOPIC_SCHEME
+from semiparam_ros.core.rigid_body.urdf import TOPIC_SCHEME
 from semiparam_ros.ros.estimator_node import EstimatorNode, StartupError
 
 __all__ = ["LifecycleEstimatorNode"]

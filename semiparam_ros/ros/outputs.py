@@ -20,11 +20,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
-from semiparam_ros.core.estimator import StepResult
-from semiparam_ros.core.feedforward import FeedForwardCommand
-from semiparam_ros.core.identification import ConsistentEstimate
-from semiparam_ros.core.payload import PayloadEstimate
+from semiparam_ros.core.estimator.online import StepResult
+from semiparam_ros.core.rigid_body.identification import ConsistentEstimate
+from semiparam_ros.core.rigid_body.payload import PayloadEstimate
 from semiparam_ros.ros import conversions as cv
+from semiparam_ros.service.feedforward import FeedForwardCommand
 
 __all__ = ["PARAMETERS_QOS", "Outputs"]
 
@@ -43,17 +43,14 @@ class Outputs:
         joints: ``robot.joints``; empty for a wrench model (``robot.output: wrench``).
         n_links: Bodies of the rigid-body model when the consistent projection runs (``~/link_inertias``,
             latched one message per link); 0 without it.
-        warn: Logs a throttled warning ``(key, text, once=…)`` (the deprecated topic's notice).
     """
 
-    def __init__(self, node: Node, joints: tuple[str, ...], *, n_links: int,
-                 warn: Callable[..., None]) -> None:
+    def __init__(self, node: Node, joints: tuple[str, ...], *, n_links: int) -> None:
         def pub(msg_type: type, topic: str, qos: QoSProfile | int = _OUTPUT_QOS) -> Any:
             # no event handlers: each is one more entity in every executor wait
             return node.create_publisher(msg_type, topic, qos,
                                          event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
-        self._warn = warn
         self.wrench = not joints
         base, kind = ("~/predicted_wrench", WrenchStamped) if self.wrench else ("~/predicted_joint_torques",
                                                                                JointState)
@@ -64,7 +61,6 @@ class Outputs:
         self._template = None if self.wrench else cv.SerializedOutput(
             lambda stamp, tau: cv.joint_torques_msg(stamp, joints, tau), len(joints))
         if not self.wrench:
-            self.legacy = pub(JointState, "predicted_joint_torques")  # the deprecated name outside ~/
             self.gravity = pub(JointState, "~/gravity_torques")
             self.ff_commands = pub(Float64MultiArray, "~/feedforward_commands", _FF_QOS)
             self.ff = pub(JointState, "~/feedforward", _FF_QOS)
@@ -98,10 +94,6 @@ class Outputs:
             self.model.publish(fill(stamp, pred.total if pred.correction is None
                                     else pred.total - pred.correction))
         if not self.wrench:
-            if self.legacy.get_subscription_count():
-                self._warn("legacy topic", "a subscriber reads predicted_joint_torques outside the node's "
-                           "namespace: deprecated, use ~/predicted_joint_torques", once=True)
-                self.legacy.publish(fill(stamp, pred.total))
             if gravity is not None and self.gravity.get_subscription_count():
                 self.gravity.publish(fill(stamp, gravity(result.sample.q)))
         for pub, value in ((self.parametric, pred.parametric), (self.residual, pred.residual),

@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.dynamics import RigidBodyRegressor, is_physically_consistent
-from semiparam_ros.core.urdf import resolve_urdf
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, is_physically_consistent
+from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 from semiparam_ros.sim.contacts import (
     ContactConfig,
     ContactEpisode,
@@ -236,7 +236,7 @@ class ArmRobot:
 
     Attributes:
         name: Short name (``"panda"``, ``"ur5"``), the prefix of its bag names.
-        urdf: ``robot.urdf`` value (:func:`~semiparam_ros.core.urdf.resolve_urdf`).
+        urdf: ``robot.urdf`` value (:func:`~semiparam_ros.core.rigid_body.urdf.resolve_urdf`).
         joints: The moving joints, in the published order; every other joint is locked at 0.
         end_effector: Frame where payloads are attached and contacts act.
         position_window: (n, 2) joint range the excitation may use (rad), inside the URDF limits.

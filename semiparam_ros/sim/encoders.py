@@ -5,7 +5,7 @@ that jitters around the nominal period, and reports a velocity that is either th
 (smooth, ``velocity="exact"``) or the backward difference of the quantized positions
 (``velocity="differentiated"``: steps of ``resolution / Δt`` rad/s, as many drivers do). Loggers round
 once more (a log written with four decimals holds 1e-4 rad). This is what the glitch check
-(:mod:`semiparam_ros.core.glitch`) must never mistake for an outlier.
+(:mod:`semiparam_ros.core.stream.glitch`) must never mistake for an outlier.
 
 >>> import numpy as np
 >>> from semiparam_ros.sim.trajectories import PointToPoint
@@ -23,7 +23,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from semiparam_ros.core.messages import JointStateData
+from semiparam_ros.core.stream.messages import JointStateData
 
 __all__ = ["encoder_readings"]
 

@@ -1,6 +1,6 @@
 """Where URDF frames sit on the regressor's bodies and in the base: the simulator's kinematic queries.
 
-The regressor (:class:`~semiparam_ros.core.dynamics.RigidBodyRegressor`) lumps links into bodies; a
+The regressor (:class:`~semiparam_ros.core.rigid_body.dynamics.RigidBodyRegressor`) lumps links into bodies; a
 payload or a contact is placed on a body through the frame it is attached to. Poses are 4×4 homogeneous
 transforms [m] in the URDF root (base) frame or in a body frame (the frame its parameters are expressed in).
 """
@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from semiparam_ros.core.dynamics import RigidBodyRegressor
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = ["body_placement", "frame_in_body", "frame_placement"]

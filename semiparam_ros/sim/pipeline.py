@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.dynamics import RigidBodyRegressor, point_mass_parameters
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, point_mass_parameters
 from semiparam_ros.sim.contacts import ContactConfig, ContactEpisode, contact_forces, draw_episodes
 from semiparam_ros.sim.frames import frame_in_body
 from semiparam_ros.sim.ik import ArmKinematics

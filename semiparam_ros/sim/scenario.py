@@ -41,8 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.dynamics import RigidBodyRegressor
-from semiparam_ros.core.urdf import icub_urdf_path
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
+from semiparam_ros.core.rigid_body.urdf import icub_urdf_path
 from semiparam_ros.sim.contacts import (
     CONTACTS_DURATION_S,
     ContactConfig,

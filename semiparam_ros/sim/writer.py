@@ -47,7 +47,7 @@ import numpy as np
 import yaml
 
 from semiparam_ros.atomic import atomic_open
-from semiparam_ros.core.messages import JointStateData, WrenchData
+from semiparam_ros.core.stream.messages import JointStateData, WrenchData
 from semiparam_ros.io.bags import BagWriter
 from semiparam_ros.sim.arms import ArmRecording
 from semiparam_ros.sim.effects import SENSOR_FRAME

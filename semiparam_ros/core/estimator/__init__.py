@@ -1,0 +1,1 @@
+"""The online estimator: building it from a configuration, streaming samples, the checkpoint format."""

@@ -1,0 +1,382 @@
+"""Build the estimator's parts from a configuration: regressor, sample pipeline and learners.
+
+One configuration gives one rigid-body regressor (:func:`build_regressor`, Pinocchio from the URDF), one
+message-to-sample pipeline (:func:`build_pipeline`) and one learner (:func:`build_model`: ``P``, ``NP`` or
+``SP`` in the configured combination). Lengths the configuration gives in seconds are converted at the
+measured sample period (:func:`apply_sample_period`); before it is known, at :data:`NOMINAL_PERIOD_S`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Literal
+
+import numpy as np
+
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.learners.adaptation import forgetting_factor, learners
+from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
+from semiparam_ros.core.learners.joint import JointSemiparametricModel
+from semiparam_ros.core.learners.semiparametric import (
+    NonparametricModel,
+    ParametricModel,
+    SemiparametricModel,
+)
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
+from semiparam_ros.core.rigid_body.urdf import RegressorSpec
+from semiparam_ros.core.stream.acceleration import AccelerationConfig
+from semiparam_ros.core.stream.gate import GateConfig
+from semiparam_ros.core.stream.pipeline import SamplePipeline
+from semiparam_ros.core.stream.rate import samples_in
+from semiparam_ros.errors import ConfigurationError
+
+#: The three learners of the paper: rigid body, random features, their combination.
+ModelKind = Literal["P", "NP", "SP"]
+#: Any learner :func:`build_model` returns.
+Model = (ParametricModel | NonparametricModel | SemiparametricModel | JointSemiparametricModel
+         | ConsistentSemiparametricModel)
+
+
+def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None,
+                    source: str = "the checkpoint's URDF") -> RigidBodyRegressor:
+    """Build the rigid-body regressor described by a configuration.
+
+    With ``robot.output: joint_torques``, ``parametric.friction`` / ``offsets`` / ``armature`` append the
+    per-joint friction, offset and armature columns (see :mod:`semiparam_ros.core.rigid_body.dynamics`); with
+    ``wrench``, ``parametric.sensor_offset`` appends the six sensor offsets.
+
+    Args:
+        config: Estimator configuration (``robot.*`` and ``parametric.*``).
+        urdf_xml: URDF text to use instead of the file ``robot.urdf`` names (a checkpoint's own copy, or
+            what a robot_description topic published).
+        source: Where ``urdf_xml`` came from, for messages.
+
+    Returns:
+        The regressor of the F/T sensor wrench or of the joint torques.
+
+    Raises:
+        FileNotFoundError: If ``robot.urdf`` names no file (and no ``urdf_xml`` is given).
+        ConfigurationError: If the URDF, joints or sensor are invalid.
+    """
+    output = config["robot.output"]
+    if urdf_xml is None:
+        path = config.urdf_path()
+        if not path.is_file():
+            raise FileNotFoundError(f"URDF file not found: {path}")
+        urdf_xml, source = path.read_text(encoding="utf-8"), str(path)
+    spec = RegressorSpec(
+        tuple(config["robot.joints"]),
+        ft_sensor=config["robot.ft_sensor"] if output == "wrench" else None,
+        locked=config.locked,
+        gravity=tuple(config["robot.gravity"]),
+        output=output,
+        sensor_offset=bool(config["parametric.sensor_offset"]) and output == "wrench",
+        friction=bool(config["parametric.friction"]) and output == "joint_torques",
+        coulomb_velocity=config["parametric.coulomb_velocity"],
+        joint_offsets=bool(config["parametric.offsets"]) and output == "joint_torques",
+        armature=bool(config["parametric.armature"]) and output == "joint_torques",
+    )
+    return RigidBodyRegressor(urdf_xml, spec, source=source)
+
+
+def regressor_function(regressor: RigidBodyRegressor,
+                       scale: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray]:
+    """Adapt a regressor to the learners' flat input ``x = [q, dq, ddq]``.
+
+    Args:
+        regressor: Rigid-body regressor of n joints.
+        scale: Optional column scales ``c`` (n_base,): the function then returns ``Φ_b diag(1/c)``, the
+            regressor of the scaled parameters ``θ = c ⊙ π_b`` (see :func:`column_scale`).
+
+    Returns:
+        A function mapping x (3n,) to the base regressor (t × n_base), scaled if asked.
+    """
+    inv = None if scale is None else 1.0 / np.asarray(scale, dtype=np.float64)
+
+    def base_regressor(x: np.ndarray) -> np.ndarray:
+        # the learners pass a checked (3n,) float64 x; equal bit for bit to base_regressor(q, dq, ddq) / c
+        return regressor.base_regressor_of_input(x, inv)
+
+    return base_regressor
+
+
+def column_scale(config: EstimatorConfig, regressor: RigidBodyRegressor) -> np.ndarray:
+    """Characteristic magnitude ``c_j`` of each base-regressor column (ones without column scaling).
+
+    With ``parametric.column_scaling`` the learners see ``Φ_b diag(1/c)`` and learn ``θ = c ⊙ π_b``, where
+    ``c_j`` is the RMS of column j over the random states of the base-parameter search (q within the
+    limits, |q̇| ≤ 1.5 rad/s, |q̈| ≤ 10 rad/s²; :attr:`BaseParameterMap.column_rms`). ``θ_j`` is then
+    parameter j's typical contribution to y (N, N·m): the ridge ``λ‖θ − θ₀‖²`` penalizes every parameter
+    by the output it explains, so one λ means the same for a link mass (kg), an inertia (kg·m²), a viscous
+    coefficient (N·m·s/rad) and an offset (N·m), on any robot. ``π_b = θ / c``.
+
+    Args:
+        config: Estimator configuration (``parametric.column_scaling``).
+        regressor: The rigid-body regressor.
+
+    Returns:
+        (n_base,) positive scales (units of y per unit of the parameter).
+    """
+    rms = regressor.base.column_rms
+    if not config["parametric.column_scaling"] or rms is None:
+        return np.ones(regressor.n_base)
+    return np.asarray(rms, dtype=np.float64).copy()
+
+
+def parametric_prior(config: EstimatorConfig, regressor: RigidBodyRegressor) -> np.ndarray:
+    """Return the base parameters the rigid-body stage is regularized toward, in unscaled units.
+
+    Args:
+        config: Estimator configuration (``parametric.prior``).
+        regressor: The rigid-body regressor.
+
+    Returns:
+        (n_base,): ``'urdf'`` the URDF's base parameters (zero for sensor offsets, friction, joint offsets
+        and armature), so that before any data the prediction is RNEA with the URDF's inertias;
+        ``'zero'`` zeros (the paper's protocol).
+    """
+    if config["parametric.prior"] == "zero":
+        return np.zeros(regressor.n_base)
+    return regressor.to_base(regressor.urdf_parameters())
+
+
+def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
+    """Build the message-to-sample pipeline described by a configuration.
+
+    Args:
+        config: Estimator configuration (``robot.*``, ``sync.*``, ``acceleration.*``, ``limits.*``); a
+            zero ``acceleration.max_gap_s`` or ``limits.*`` means "never restart" / "no bound".
+
+    Returns:
+        A fresh pipeline.
+    """
+
+    def bound(name: str) -> float | None:
+        return config[name] or None
+
+    return SamplePipeline(
+        config["robot.joints"],
+        output=config["robot.output"],
+        frame_id=config["robot.frame_id"] or None,
+        sync_tolerance=config["sync.tolerance"],
+        acceleration=AccelerationConfig(
+            method=config["acceleration.method"],
+            window=config["acceleration.window"] or 9,
+            window_s=None if config["acceleration.window"] else config["acceleration.window_s"],
+            polyorder=config["acceleration.polyorder"],
+            cutoff_hz=config["acceleration.cutoff_hz"],
+            bandwidth_hz=config["acceleration.bandwidth_hz"],
+            kalman_model=config["acceleration.kalman_model"],
+            max_gap_s=bound("acceleration.max_gap_s"),
+        ),
+        max_abs_position=bound("limits.max_abs_position"),
+        max_abs_velocity=bound("limits.max_abs_velocity"),
+        max_abs_output=bound("limits.max_abs_output"),
+        glitch_ratio=config["limits.glitch_ratio"],
+        glitch_time_constant=config["limits.glitch_time_constant"],
+    )
+
+
+def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np.ndarray:
+    """Floors of the residual stage's standardization scales, in the units of its inputs.
+
+    Args:
+        config: Estimator configuration (``nonparametric.min_scale.*``, ``robot.*``).
+        with_outputs: Append the ŷ block (SP's residual input ``[x, ŷ]``) to the x block.
+
+    Returns:
+        One floor per input: q [rad], q̇ [rad/s], q̈ [rad/s²] per joint, then forces [N] and torques
+        [N·m] of a wrench (``min_scale.force``/``torque``), or joint torques [N·m] per joint
+        (``min_scale.joint_torque``: the wrench floors never apply to joint torques).
+    """
+    n = len(config["robot.joints"])
+    floors = [np.full(n, config[f"nonparametric.min_scale.{name}"])
+              for name in ("position", "velocity", "acceleration")]
+    if with_outputs:
+        if config["robot.output"] == "wrench":
+            floors += [np.full(3, config["nonparametric.min_scale.force"]),
+                       np.full(3, config["nonparametric.min_scale.torque"])]
+        else:
+            floors.append(np.full(n, config["nonparametric.min_scale.joint_torque"]))
+    return np.concatenate(floors)
+
+
+#: Sample period [s] at which seconds-based lengths are converted before the rate is measured (100 Hz: the
+#: rate at which the former sample-count defaults were chosen).
+NOMINAL_PERIOD_S = 0.01
+#: ``semiparametric.*`` parameters of the consistent SP, named as its constructor's keywords.
+_CONSISTENT_KEYS = ("novelty_scale", "tracker", "tracker_position_scale", "tracker_velocity_scale",
+                    "tracker_samples", "tracker_time_constant")
+
+
+def standardizer_warmup_samples(config: EstimatorConfig, sample_period_s: float | None = None) -> int:
+    """Length of the residual stage's standardizer warm-up [samples].
+
+    Args:
+        config: ``nonparametric.standardizer_warmup`` (samples; wins when > 0) or
+            ``nonparametric.standardizer_warmup_s`` [s].
+        sample_period_s: Measured sample period [s]; ``None``: :data:`NOMINAL_PERIOD_S` (provisional, until
+            :class:`~semiparam_ros.core.estimator.online.OnlineEstimator` has measured it).
+
+    Returns:
+        The warm-up length, ≥ 1.
+    """
+    if config["nonparametric.standardizer_warmup"]:
+        return int(config["nonparametric.standardizer_warmup"])
+    return samples_in(config["nonparametric.standardizer_warmup_s"], sample_period_s or NOMINAL_PERIOD_S)
+
+
+def rmse_window_samples(config: EstimatorConfig, sample_period_s: float | None = None) -> int:
+    """Length of the diagnostics' running RMSE window [samples].
+
+    Args:
+        config: ``diagnostics.rmse_window`` (samples; wins when > 0) or ``diagnostics.rmse_window_s`` [s].
+        sample_period_s: Measured sample period [s]; ``None``: :data:`NOMINAL_PERIOD_S`.
+
+    Returns:
+        The window length, ≥ 1.
+    """
+    if config["diagnostics.rmse_window"]:
+        return int(config["diagnostics.rmse_window"])
+    return samples_in(config["diagnostics.rmse_window_s"], sample_period_s or NOMINAL_PERIOD_S)
+
+
+def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
+                regressor: RigidBodyRegressor | None = None, *,
+                sample_period_s: float | None = None) -> Model:
+    """Build one of the paper's three learners.
+
+    The rigid-body stage works on the scaled base parameters ``θ = c ⊙ π_b`` (:func:`column_scale`) and
+    starts from (and is regularized toward) :func:`parametric_prior`; its ``parameters`` are θ̂ (divide by
+    :func:`column_scale` for π̂_b, as
+    :attr:`~semiparam_ros.core.estimator.online.OnlineEstimator.parameters` does).
+
+    Args:
+        config: Estimator configuration (``parametric.*``, ``nonparametric.*``, ``adaptation.*``).
+        kind: ``"P"`` (rigid-body RRLS), ``"NP"`` (random features RRLS) or ``"SP"`` (both; the paper's
+            cascade or the joint fit, by ``semiparametric.combination``).
+        regressor: Rigid-body regressor to use; built from the configuration when omitted.
+        sample_period_s: The stream's sample period [s], when known (offline tools). With
+            ``adaptation.time_constant`` τ > 0 both stages then forget with β = exp(−T/τ) instead of the
+            configured per-sample factors, and a warm-up given in seconds is converted at it
+            (:func:`standardizer_warmup_samples`). ``None``: the configured β, and the warm-up provisionally
+            at 100 Hz (:class:`~semiparam_ros.core.estimator.online.OnlineEstimator` measures T itself and
+            sets both later).
+
+    Returns:
+        The learner.
+
+    Raises:
+        ConfigurationError: On an unknown kind.
+    """
+    if kind not in ("P", "NP", "SP"):
+        raise ConfigurationError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
+    model = _build_model(config, kind, regressor)
+    if sample_period_s is not None:
+        apply_sample_period(model, config, sample_period_s)
+    return model
+
+
+def apply_sample_period(model: Model, config: EstimatorConfig, sample_period_s: float) -> float | None:
+    """Convert what the configuration gives in seconds for a learner, at the measured sample period.
+
+    The one route by which the rate reaches a learner, online
+    (:class:`~semiparam_ros.core.estimator.online.OnlineEstimator`, once its
+    :class:`~semiparam_ros.core.stream.rate.RateMeter` has measured the period) and offline
+    (:func:`build_model` with ``sample_period_s``): the standardizer warm-up given in seconds becomes samples
+    (:func:`standardizer_warmup_samples`, if it is still running), the consistent model's fast correction
+    takes its memory ``semiparametric.tracker_time_constant``, and with ``adaptation.time_constant`` τ > 0
+    every learner (the slow ones) forgets with β = exp(−T/τ).
+
+    Args:
+        model: A learner (not yet past its warm-up for the warm-up to change).
+        config: Its configuration.
+        sample_period_s: The measured period T [s].
+
+    Returns:
+        β if the time constant set it, else ``None``.
+    """
+    if not config["nonparametric.standardizer_warmup"]:
+        model.set_standardizer_warmup(standardizer_warmup_samples(config, sample_period_s))
+    if isinstance(model, ConsistentSemiparametricModel):
+        model.set_sample_period(sample_period_s)  # the fast correction's memory in seconds
+    tau = float(config["adaptation.time_constant"])
+    if tau <= 0.0:
+        return None
+    beta = forgetting_factor(tau, sample_period_s)
+    for rls in learners(model):
+        rls.set_forgetting(beta)
+    return beta
+
+
+def _build_model(config: EstimatorConfig, kind: ModelKind,
+                 regressor: RigidBodyRegressor | None) -> Model:
+    """Build the learner of ``kind`` with the configured per-sample factors and the provisional warm-up."""
+    n_joints = len(config["robot.joints"])
+    n_inputs = 3 * n_joints
+    warmup = standardizer_warmup_samples(config, None)
+    if kind == "NP":
+        n_outputs = 6 if config["robot.output"] == "wrench" else n_joints
+        return NonparametricModel(
+            n_inputs,
+            n_outputs,
+            n_features=config["nonparametric.n_features"],
+            sigma=config["nonparametric.sigma"],
+            lam=config["nonparametric.lam"],
+            forgetting=config["nonparametric.forgetting"],
+            seed=config["nonparametric.seed"],
+            standardizer_warmup=warmup,
+            standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
+        )
+    regressor = regressor if regressor is not None else build_regressor(config)
+    scale = column_scale(config, regressor)
+    phi = regressor_function(regressor, scale if config["parametric.column_scaling"] else None)
+    prior = scale * parametric_prior(config, regressor)
+    if kind == "P":
+        return ParametricModel(
+            phi,
+            regressor.n_base,
+            regressor.n_outputs,
+            lam=config["parametric.lam"],
+            forgetting=config["parametric.forgetting"],
+            prior=prior,
+        )
+    shared = dict(
+        lam_parametric=config["parametric.lam"],
+        lam_nonparametric=config["nonparametric.lam"],
+        n_features=config["nonparametric.n_features"],
+        sigma=config["nonparametric.sigma"],
+        seed=config["nonparametric.seed"],
+        standardizer_warmup=warmup,
+    )
+    if config["semiparametric.combination"] == "joint":
+        # the configuration guarantees equal forgetting factors for the joint fit
+        return JointSemiparametricModel(
+            phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared,
+            forgetting=config["parametric.forgetting"],
+            standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
+            prior=prior,
+        )
+    # the rigid-body stage first and alone, each stage with its own forgetting: the cascade and the
+    # consistent model
+    two_stage = dict(forgetting_parametric=config["parametric.forgetting"],
+                     forgetting_nonparametric=config["nonparametric.forgetting"], prior=prior)
+    if config["semiparametric.combination"] == "consistent":
+        return ConsistentSemiparametricModel(
+            phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared, **two_stage,
+            standardizer_min_scale=standardizer_min_scale(config, with_outputs=False),
+            # the constructor's keywords are the parameters' names
+            **{name: config[f"semiparametric.{name}"] for name in _CONSISTENT_KEYS},
+            sample_period_s=NOMINAL_PERIOD_S,
+        )
+    return SemiparametricModel(
+        phi, regressor.n_base, n_inputs, regressor.n_outputs, **shared, **two_stage,
+        standardizer_min_scale=standardizer_min_scale(config, with_outputs=True),
+    )
+
+
+def gate_config(config: EstimatorConfig) -> GateConfig:
+    """Return the contact gate's settings of a configuration (``gate.*``)."""
+    return GateConfig(threshold=config["gate.threshold"],
+                      max_contact_duration_s=config["gate.max_contact_duration"],
+                      warmup_s=config["gate.warmup"], novelty=config["gate.novelty"])

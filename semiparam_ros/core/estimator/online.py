@@ -1,0 +1,508 @@
+"""The online estimator: pipeline + learner, driven one message at a time.
+
+This is the single data path shared by the live node and offline replay: messages go through
+:class:`~semiparam_ros.core.stream.pipeline.SamplePipeline` (joint mapping, stamp pairing, acceleration
+estimate, drops counted by reason) and every paired sample goes through :meth:`OnlineEstimator.step`,
+which first predicts (a priori: the prediction never saw its own label) and then learns — the
+rigid-body stage first, then the residual. The same bag therefore gives the same numbers whichever way it
+is fed. The checkpoint format is :mod:`semiparam_ros.core.estimator.state`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.estimator.build import (
+    Model,
+    ModelKind,
+    apply_sample_period,
+    build_model,
+    build_pipeline,
+    build_regressor,
+    column_scale,
+    gate_config,
+)
+from semiparam_ros.core.estimator.state import check_magnitudes, meta_arrays, read_meta
+from semiparam_ros.core.learners._step_kernels import joined_within
+from semiparam_ros.core.learners.adaptation import learners
+from semiparam_ros.core.learners.semiparametric import (
+    Prediction,
+    rigid_body_part,
+)
+from semiparam_ros.core.learners.uncertainty import NoiseScale
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
+from semiparam_ros.core.rigid_body.payload import PayloadLearner
+from semiparam_ros.core.stream.gate import ContactGate, Verdict
+from semiparam_ros.core.stream.messages import JointStateData, Sample, WrenchData
+from semiparam_ros.core.stream.rate import RateMeter
+from semiparam_ros.core.validation import MAX_ABS_INPUT
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
+
+DROP_REJECTED_SAMPLE = "rejected_sample"
+"""Key of :attr:`OnlineEstimator.drops`: a paired sample the learner refused (values beyond its input
+bound or a regressor overflow), typically after a finite but absurd joint state passed the pipeline."""
+
+NOT_LEARNED_GATED_CONTACT = "gated_contact"
+"""Key of :attr:`OnlineEstimator.not_learned`: a sample predicted but not learned because its residual
+was implausibly large for less than ``gate.max_contact_duration`` (see :mod:`semiparam_ros.core.stream.gate`);
+not an input drop."""
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one paired sample produced.
+
+    Attributes:
+        sample: The sample (stamp [ns], q [rad], dq [rad/s], ddq [rad/s²], measured y).
+        prediction: The a-priori prediction of y (parametric, residual and total parts; N, N·m for a
+            wrench, N·m for joint torques), made before the sample was learned.
+        latency_s: Wall time of predict + learn for this sample [s].
+        learned: Whether the sample was learned (false when learning is disabled or the gate refused it).
+        std: Predictive standard deviation of each component of y, noise included (units of y; +inf
+            before the first sample): also the σ of the external wrench/torques ``y − prediction.total``.
+        verdict: The contact gate's verdict, or None when the gate is off or learning is disabled.
+    """
+
+    sample: Sample
+    prediction: Prediction
+    latency_s: float
+    learned: bool
+    std: np.ndarray | None = None
+    verdict: Verdict | None = None
+
+    @property
+    def external(self) -> np.ndarray:
+        """``y − prediction.total``, what the model does not explain.
+
+        The external wrench (N, N·m) or joint torques (N·m) when something touches the robot, noise
+        otherwise (σ = :attr:`std`).
+        """
+        return self.sample.y - self.prediction.total
+
+
+class OnlineEstimator:
+    """Pipeline + semiparametric learner, driven one message at a time.
+
+    Args:
+        config: Validated configuration.
+        regressor: Prebuilt regressor (to share one between estimators); built when omitted.
+        kind: Learner to run; the node runs ``"SP"``, whose prediction carries all three parts.
+
+    Example:
+        >>> from semiparam_ros.core.config import EstimatorConfig
+        >>> est = OnlineEstimator(EstimatorConfig.defaults())  # iCub right arm, F/T sensor wrench
+        >>> est.regressor.n_base
+        17
+        >>> est.process_joint_state(JointStateData(10**9, ("r_elbow",), [0.1]))  # joints missing
+        []
+        >>> est.n_dropped
+        1
+    """
+
+    def __init__(self, config: EstimatorConfig, *, regressor: RigidBodyRegressor | None = None,
+                 kind: ModelKind = "SP") -> None:
+        self.config = config
+        self.kind: ModelKind = kind
+        self.regressor = regressor if regressor is not None else build_regressor(config)
+        self.pipeline = build_pipeline(config)
+        self.model = build_model(config, kind, self.regressor)
+        self._scale = column_scale(config, self.regressor)
+        self.learning_enabled = bool(config["learning_enabled"])
+        self._n_joints = len(config["robot.joints"])
+        self.n_samples_learned = 0
+        #: Samples predicted without learning because the caller fell behind (``skip_learning``).
+        self.n_learning_skipped = 0
+        #: The payload learner since the last :meth:`tare_payload` (None before one).
+        self.payload: PayloadLearner | None = None
+        self._rejected = 0
+        self.noise = NoiseScale(self.model.n_outputs, config["uncertainty.noise_time_constant"])
+        self.gate = ContactGate(gate_config(config))
+        self.gate_enabled = bool(config["gate.enabled"])
+        self.forgetting: float | None = None  # β from adaptation.time_constant, once the rate is measured
+        #: Sample period [s] measured from the first :data:`RATE_SAMPLES` samples (None until then).
+        self.sample_period_s: float | None = None
+        self._rate = RateMeter()  # the rule of offline replay's measured_period_s(stamps)
+
+    # ------------------------------------------------------------------ streaming
+    def process_joint_state(self, msg: JointStateData, *, skip_learning: bool = False) -> list[StepResult]:
+        """Feed a joint state; return the results of the samples it completed (often none or one).
+
+        Never raises on bad data: the pipeline drops and counts bad messages, and a sample the learner
+        rejects (:class:`~semiparam_ros.errors.RejectedSampleError`) is counted under ``rejected_sample``
+        in :attr:`drops` (the learned state is unchanged). Any other exception is a programming error: it
+        propagates and no drop is counted.
+
+        Args:
+            msg: The joint state.
+            skip_learning: Predict the completed samples cheaply without learning them (see :meth:`step`).
+        """
+        return self._step_all(self.pipeline.add_joint_state(msg), skip_learning)
+
+    def process_wrench(self, msg: WrenchData, *, skip_learning: bool = False) -> list[StepResult]:
+        """Feed an F/T reading; return the results of the samples it completed (never raises on bad data)."""
+        return self._step_all(self.pipeline.add_wrench(msg), skip_learning)
+
+    def _step_all(self, samples: list[Sample], skip_learning: bool = False) -> list[StepResult]:
+        # The pipeline drops NaN/inf and values beyond limits.*, but those bounds can be switched off (0)
+        # or be loose: a finite but absurd value (e.g. a velocity of 1e200 rad/s) then poisons the q̈
+        # window, and the learners refuse those samples with a RejectedSampleError (state untouched).
+        # Streaming counts that as a drop rather than abort the message and lose the other samples it
+        # completed. Any other exception is a bug and propagates, with the counters untouched.
+        results: list[StepResult] = []
+        for sample in samples:
+            try:
+                results.append(self.step(sample, skip_learning=skip_learning))
+            except RejectedSampleError:
+                self._rejected += 1
+        return results
+
+    def step(self, sample: Sample, *, skip_learning: bool = False) -> StepResult:
+        """Predict y for a sample, then learn it (unless learning is disabled or the gate refuses it).
+
+        The sample is validated once (sizes; NaN, inf or beyond ±1e150); with the gate on, the model's
+        :meth:`predict_ahead` context (regressor, parametric prediction, random features) is learned from
+        directly, so nothing is computed twice. With the gate off the step is the paper's
+        ``predict_learn_one``, bit for bit.
+
+        With ``skip_learning`` (a node that fell behind its input) the sample is predicted by the model's
+        cheap ``predict_held`` (the consistent SP holds its residual from the last full prediction) and
+        not learned; the noise estimate skips it, the gate does not see it, and it is counted in
+        :attr:`n_learning_skipped`.
+
+        Args:
+            sample: A clean sample from the pipeline.
+            skip_learning: Predict cheaply and do not learn.
+
+        Returns:
+            The a-priori prediction and the time it took.
+
+        Raises:
+            RejectedSampleError: If the learner rejects the sample (wrong sizes, non-finite or absurdly
+                large values, regressor overflow); the learned state, the gate and the noise estimate are
+                then unchanged.
+        """
+        if self.sample_period_s is None:
+            self._measure_rate(sample.stamp_ns)
+        start = time.perf_counter()
+        x, y = self._check_sample(sample)
+        model = self.model
+        if skip_learning and self.learning_enabled:
+            prediction = model.predict_held(x)
+            assert prediction.variance is not None  # a held prediction carries it
+            std = self.noise.std(prediction.variance)
+            self.noise.skip(sample.stamp_ns)
+            self.n_learning_skipped += 1
+            return StepResult(sample, prediction, time.perf_counter() - start, False, std, None)
+        # a priori, with the relative variance v = z A⁻¹ zᵀ of each output (the state is not changed)
+        ahead = model.predict_ahead_checked(x)
+        prediction = ahead.prediction
+        variance = prediction.variance
+        assert variance is not None  # a context always carries it
+        verdict = None
+        if self.learning_enabled and self.gate_enabled:
+            error = y - prediction.total
+            std = self.noise.std(variance)
+            verdict = self.gate.decide(sample.stamp_ns, error, std, float(variance.max()))
+            learned = verdict.learn
+            if learned:
+                model.learn_ahead_checked(ahead, y)
+                self.n_samples_learned += 1
+        else:
+            # gate off: exactly the paper's predict-then-learn (bit-identical predictions)
+            learned = self.learning_enabled
+            if learned:
+                prediction = model.predict_learn_one(x, y)
+                self.n_samples_learned += 1
+            std = self.noise.std(variance)
+            error = y - prediction.total
+        if learned and self.payload is not None:
+            self.payload.update(sample.q, sample.dq, sample.ddq, y)
+        if learned or verdict is None:
+            # σ is the model's: a fast correction of the recent error (the consistent SP's) makes one-step
+            # errors far smaller than those of a model that stops learning, e.g. through a contact
+            correction = prediction.correction
+            self.noise.update(sample.stamp_ns, error if correction is None else error + correction, variance)
+        else:
+            self.noise.skip(sample.stamp_ns)
+        return StepResult(sample, prediction, time.perf_counter() - start, learned, std, verdict)
+
+    def _check_sample(self, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
+        """``(x, y)`` of a sample, sizes and values checked once for every stage after it.
+
+        Raises:
+            RejectedSampleError: On a wrong size, or NaN, inf or an entry beyond ±MAX_ABS_INPUT.
+        """
+        n, t = self._n_joints, self.model.n_outputs
+        q, dq, ddq, y = sample.q, sample.dq, sample.ddq, sample.y
+        if not (q.shape == dq.shape == ddq.shape == (n,) and y.shape == (t,)):
+            raise RejectedSampleError(f"sample must have q, dq, ddq of {n} joints and y of {t} values, got "
+                                      f"{q.shape}, {dq.shape}, {ddq.shape} and {y.shape}")
+        # one pass catches NaN (comparison false), ±inf and values whose squares would overflow
+        bad, xy = joined_within(q, dq, ddq, y, MAX_ABS_INPUT)
+        if bad:
+            raise RejectedSampleError(f"{'x' if bad == 1 else 'y'} contains NaN, inf or entries larger than "
+                                      f"{MAX_ABS_INPUT:g} in magnitude")
+        return xy[: 3 * n], xy[3 * n :]
+
+    def tare_payload(self) -> None:
+        """Start counting a payload from now: the rigid-body model as it is becomes the reference.
+
+        From the next learned sample on, :attr:`payload` learns the change of the distal body's ten
+        inertial parameters that explains ``y − Φ_b π̂_b`` (π̂_b frozen now; see
+        :mod:`semiparam_ros.core.rigid_body.payload`). Tare before a pickup, with nothing carried.
+
+        Raises:
+            ValueError: For a learner without a rigid-body part (``NP``).
+        """
+        params = self.parameters
+        if params is None:
+            raise ValueError("a payload needs a rigid-body part: this learner is nonparametric only")
+        self.payload = PayloadLearner(self.regressor, params)
+
+    def apply_pending(self) -> bool:
+        """Apply the learners' deferred updates now (idle time; see :meth:`RecursiveRLS.apply_pending`).
+
+        A node calls this when no input waits, so that the next sample's prediction is only a triangular
+        solve: the longest uninterruptible piece of work per learned sample is then about half as long.
+
+        Returns:
+            Whether any update was pending.
+        """
+        return self.model.apply_pending()
+
+    @property
+    def has_pending(self) -> bool:
+        """Whether a learner holds a deferred update (see :meth:`apply_pending`)."""
+        return self.model.has_pending()
+
+    def rigid_body_state(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """Copy what the consistent projection needs of the rigid-body learner.
+
+        Returns:
+            ``(θ, R, λ)``: the parametric learner's coefficients (scaled columns), a copy of its upper
+            triangular factor and its regularization.
+
+        Raises:
+            ConfigurationError: The model has no rigid-body part (``NP``).
+        """
+        par = rigid_body_part(self.model)
+        if par is None:
+            raise ConfigurationError("the model has no rigid-body part to project")
+        return par.parameters.copy(), par.rls.R.copy(), par.rls.lam
+
+    def _apply_forgetting(self, beta: float) -> None:
+        for rls in learners(self.model):
+            rls.set_forgetting(beta)
+        self.forgetting = beta
+
+    def apply_runtime_parameters(self, config: EstimatorConfig) -> None:
+        """Take the run-time gate and noise parameters (``gate.*``, ``uncertainty.*``) of a configuration.
+
+        Args:
+            config: A validated configuration (only its run-time gate/uncertainty entries are read).
+
+        Raises:
+            ValueError: On an invalid gate parameter (nothing is changed then).
+        """
+        gate = gate_config(config)
+        self.noise.set_time_constant(config["uncertainty.noise_time_constant"])
+        self.gate.config = gate
+        self.gate_enabled = bool(config["gate.enabled"])
+
+    def _measure_rate(self, stamp_ns: int) -> None:
+        """Feed the rate meter; once the period is known, convert what is given in seconds.
+
+        The seconds-based warm-up becomes samples, and with ``adaptation.time_constant`` τ > 0 every
+        learner forgets with β = exp(−T/τ) from then on (:func:`apply_sample_period`, as offline).
+        """
+        period = self._rate.add(stamp_ns)
+        if period is None:
+            return
+        self.sample_period_s = period
+        beta = apply_sample_period(self.model, self.config, period)
+        if beta is not None:
+            self.forgetting = beta
+
+    # ------------------------------------------------------------------ inspection
+    @property
+    def drops(self) -> dict[str, int]:
+        """Input messages dropped so far, by reason (the pipeline's reasons and ``rejected_sample``)."""
+        drops = dict(self.pipeline.drops)
+        drops[DROP_REJECTED_SAMPLE] = self._rejected
+        return drops
+
+    @property
+    def not_learned(self) -> dict[str, int]:
+        """Samples predicted but deliberately not learned, by reason (``gated_contact``); not drops."""
+        return {NOT_LEARNED_GATED_CONTACT: self.gate.counts[Verdict.GATED]}
+
+    @property
+    def n_dropped(self) -> int:
+        """Total of :attr:`drops` (every reason, ``rejected_sample`` included), without building the dict."""
+        return self.pipeline.n_dropped + self._rejected
+
+    @property
+    def parameters(self) -> np.ndarray | None:
+        """Current estimate of the base parameters π̂_b in physical units (None for the NP learner).
+
+        Inertial combinations (kg, kg·m, kg·m²), then sensor offsets (N, N·m) or per-joint viscous
+        (N·m·s/rad), Coulomb (N·m), offset (N·m) and armature (kg·m²) terms, named by
+        :attr:`parameter_names`.
+        """
+        return self.physical_parameters(self.model)
+
+    @property
+    def column_scale(self) -> np.ndarray:
+        """The column scales c of the rigid-body learner (θ = c ⊙ π_b; ones without column scaling)."""
+        return self._scale.copy()
+
+    def physical_parameters(self, model: Model) -> np.ndarray | None:
+        """Return the base parameters of a model of this estimator (its own or a copy) in physical units.
+
+        Args:
+            model: A learner built for this estimator's configuration (e.g. ``est.model.copy()``).
+
+        Returns:
+            π̂_b = θ / c (see :attr:`parameters`), or None for the NP learner.
+        """
+        theta = model.parameters
+        return None if theta is None else theta / self._scale
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of the base parameters, as combinations of the URDF parameters."""
+        return tuple(self.regressor.base_parameter_names)
+
+    @property
+    def model_size(self) -> int:
+        """Number of learned coefficients: the base parameters π̂ plus the D × t residual weights.
+
+        The same for both SP combinations (the joint fit's random-feature factor carries t·p extra
+        columns, but the model it encodes is π and the D × t weights of the residual).
+        """
+        n_out = self.regressor.n_outputs
+        size = 0
+        if self.kind in ("P", "SP"):
+            size += self.regressor.n_base
+        if self.kind in ("NP", "SP"):
+            size += int(self.config["nonparametric.n_features"]) * n_out
+        return size
+
+    def start_recording(self) -> None:
+        """Begin another recording (another bag): keep what was learned, restart the time-based state.
+
+        The pipeline (pairing buffers, acceleration window, stamp order) starts afresh, the noise estimate
+        and the contact gate take the next stamp as a new beginning (a warm-up already over stays over),
+        so a later recording whose stamps lie before the previous one's is learned, not dropped.
+        """
+        self.pipeline.reset(keep_counts=True)
+        self.noise.restart_stream()
+        self.gate.restart_stream()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget everything learned and restart the pipeline (configuration kept)."""
+        self.model.reset()
+        self.pipeline.reset()
+        self.n_samples_learned = 0
+        self.n_learning_skipped = 0
+        self.payload = None
+        self._rejected = 0
+        self.noise.reset()
+        self.gate.reset()
+
+    def save(self, path: str | Path) -> None:
+        """Write the learned state to one ``.npz`` file atomically (temp file + rename).
+
+        Args:
+            path: Destination file.
+        """
+        atomic_save_npz(Path(path).expanduser(), self.checkpoint_state())
+
+    def checkpoint_state(self) -> dict[str, np.ndarray]:
+        """Return what :meth:`save` writes, as arrays that share no memory with the live learner.
+
+        The node takes this snapshot under its model lock (a memory copy) and writes it from another
+        thread with :func:`~semiparam_ros.core.checkpoint.atomic_save_npz`, so learning never waits for disk.
+
+        A checkpoint is self-contained: besides the learned state (``model.*``), the noise estimate behind
+        σ (``noise.*``) and the contact gate's state (``gate.*``: its warm-up over, its counts; so neither
+        σ nor the gate warms up again after a restart) it holds the whole configuration (``meta.config``,
+        JSON), the URDF text (``meta.urdf``), the robot's identity (``meta.robot``: its name and CAD base
+        parameters) and the versions that wrote it (``meta.versions``), so
+        :func:`semiparam_ros.load_model` needs nothing else.
+
+        Returns:
+            Checkpoint arrays by key (``model.*`` learned state, ``noise.*``, ``meta.*``).
+        """
+        state = {key: np.array(value, copy=True) for key, value in self.model.state_dict("model.").items()}
+        state.update(self.noise.state_dict("noise."))
+        state.update(self.gate.state_dict("gate."))
+        if self.payload is not None:
+            state.update(self.payload.state_dict("payload."))
+        state.update(meta_arrays(self.config, self.kind, self.regressor, self.n_samples_learned))
+        return state
+
+    def load(self, path: str | Path) -> None:
+        """Restore the learned state written by :meth:`save`.
+
+        Args:
+            path: Checkpoint file.
+
+        Raises:
+            CheckpointError: If the file is missing or corrupt, was written for another model structure
+                (joints, output, features…) or another robot (URDF name or CAD inertial parameters); the
+                current state is then left untouched.
+        """
+        self.load_state(load_npz(Path(path).expanduser()), path)
+
+    def load_state(self, state: dict[str, np.ndarray], path: str | Path = "checkpoint") -> None:
+        """Restore the learned state from the arrays of a checkpoint already read (see :meth:`load`).
+
+        Args:
+            state: Checkpoint arrays (:func:`~semiparam_ros.core.checkpoint.load_npz`).
+            path: Where they came from, for messages.
+
+        Raises:
+            CheckpointError: As :meth:`load`.
+        """
+        n_learned = read_meta(state, path, self.config, self.kind, self.regressor)
+        model = self.model.copy()
+        noise = NoiseScale(self.model.n_outputs, self.noise.time_constant_s)
+        gate = ContactGate(self.gate.config)
+        payload = None
+        try:
+            model.load_state_dict(state, "model.")
+            if "noise.s2" in state:  # checkpoints written before they carried σ and the gate have neither
+                noise.load_state_dict(state, "noise.")
+            if "gate.warm" in state:
+                gate.load_state_dict(state, "gate.")
+            if "payload.reference" in state:  # a tare was made
+                payload = PayloadLearner.from_state_dict(self.regressor, state, "payload.")
+        except CheckpointError as err:
+            raise CheckpointError(f"{path}: {err}") from err
+        except (TypeError, KeyError, IndexError, OverflowError, ValueError) as err:
+            # e.g. a counter stored as a vector: the learners' checks expect scalars; still a bad file
+            raise CheckpointError(f"{path}: corrupt checkpoint: {type(err).__name__}: {err}") from err
+        check_magnitudes(path, state)
+        try:  # a probe: a state that loads but cannot predict would refuse every sample afterwards
+            probe = model.predict_one(np.zeros(3 * self._n_joints))
+            finite = bool(np.isfinite(probe.total).all())
+        except RejectedSampleError:
+            finite = False
+        if not finite:
+            raise CheckpointError(f"{path}: corrupt checkpoint: its model's prediction at q = q̇ = q̈ = 0 is "
+                                  "not finite")
+        self.model = model
+        self.noise = noise
+        self.gate = gate
+        self.payload = payload
+        self.n_samples_learned = n_learned
+        if self.forgetting is not None:
+            self._apply_forgetting(self.forgetting)

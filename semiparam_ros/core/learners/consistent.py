@@ -1,0 +1,673 @@
+"""A semiparametric model that stays a model: a consistent, abstaining residual plus a fast error tracker.
+
+The paper's cascade (:class:`~semiparam_ros.core.learners.semiparametric.SemiparametricModel`) is an excellent
+one-step-ahead predictor and a poor *model*: trained on one motion and used without updates on another it
+is worse than its own rigid-body part, because (a) its residual learned the targets ``y − Φ(x)π̂_t`` while
+π̂_t was still moving, so it is inconsistent with the final π̂; (b) random Fourier features are global
+cosines, so away from the data the residual does not fall back to zero; (c) its one-step accuracy comes
+from the residual stage tracking the latest samples, which says nothing about other states. This model
+separates the two jobs (two time scales) and publishes them apart.
+
+**1. Rigid-body part** — the cascade's parametric stage, fitted alone and first (the physical model keeps
+priority): ``ŷ_P = Φ(x)π̂``, π̂ = π₀ + δ̂ regularized toward the prior π₀ (the URDF's parameters).
+
+**2. Consistent residual** (the slow part: the model's correction). The residual of the *current* π̂ over
+all the data seen (with the learners' forgetting β),
+
+    W(δ) = argmin_W Σ_m β^{n−m} ‖y_m − Φ_m π₀ − Φ_m δ − Wᵀφ_m‖² + λ‖W‖²  =  A⁻¹(B_y − Σ_k B_Φk δ),
+
+is linear in δ: one random-feature :class:`~semiparam_ros.core.learners.rrls.RecursiveRLS` regresses the
+columns ``U = [y − Φπ₀, Φ_1, …, Φ_t]`` (``Φ_k`` the k-th row of the regressor) on ``φ(s(x))`` — the same
+statistics as the joint fit of :mod:`semiparam_ros.core.learners.joint`, but π̂ comes from the rigid-body part
+alone. One forward substitution gives ``[p | P_1 … P_t] = φᵀA⁻¹[B_y | B_Φ]`` and the residual of the current
+parameters is ``r_k = p_k − P_k δ̂``: it never goes stale when π̂ moves (the consistency correction of
+adaptive semiparametric dynamics learning, here exact).
+
+**3. Abstention.** The same forward substitution gives the residual stage's relative predictive variance
+``v = φA⁻¹φᵀ``; ``ν = λv`` is the fraction of the prior variance left at x (≈ 0 where the data
+determines the residual, about 1 far from it: ``‖φ‖² ≈ 1``, and with forgetting the kept prior weight
+oscillates around λ, so ν can exceed 1 a little). The residual is used with the weight ``g = exp(−(ν/ν₀)²)``
+(``novelty_scale`` ν₀): where x is novel the model falls back to its rigid-body part instead of
+extrapolating cosines. The predictive variance reported is unchanged (the residual's own), so σ still says
+how novel the state is. **model(x) = ŷ_P + g·r** is what is used frozen, at desired states and for
+feed-forward.
+
+**4. Fast correction** (the tracker: one step ahead, payloads, contacts). Two parts, both learned only
+from the samples the model learns (the contact gate's refusals are held out of them too):
+
+* a *fast rigid-body correction* ``Φ(x) δ_f``: recursive ridge regression of the model's error
+  ``e = y − model(x)`` on the regressor rows with a short memory (``tracker_time_constant`` τ_f, but at
+  least 10 rows per parameter: β = exp(−1/N), N = max(τ_f/T, 10p/t) samples once the sample period T is
+  known): a payload or a drift of the inertial parameters is a change ``Φ(x)Δπ``, which it follows
+  within about τ_f and carries to nearby states through Φ (it fades like the local tracker below, over
+  :attr:`FAST_FADE` times its distances). It is used with the weight ``w = max(0, 1 − 9r̂v/c²)`` of its
+  value c against its own standard deviation (:meth:`fast_weight`): where it only fits noise (a model
+  already at the noise floor) w ≈ 0 and it adds nothing;
+* a *local error tracker* for the rest, ``e − wΦδ_f`` (:class:`ErrorTracker`): a bank of exponential
+  smoothers of the error with gains K ∈ {0, 0.1, 0.3, 1} (none, averages, the last error carried over),
+  the one with the smallest recent one-step error used per output — K = 1 where the error drifts faster
+  than its noise (persistence of the model's error), K = 0 where noise dominates. The estimate ``b̂`` was
+  made at the state ``x_b`` of the last learned sample and is used at x with the weight
+  ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``: one step later κ ≈ 1, at a state far
+  from the last learned one (a model h seconds old, a desired state, a new motion) κ → 0.
+
+Prediction: ``model(x) + w Φ(x)δ_f + κ b̂``; a frozen model is ``model(x)`` (:meth:`predict_model`).
+
+Parts (:class:`~semiparam_ros.core.learners.semiparametric.Prediction`): ``parametric = ŷ_P``,
+``residual = g·r + correction``, ``correction = wΦδ_f + κb̂`` (so ``total − correction`` is model(x)),
+``variance`` the relative variance of the rigid-body part plus the residual stage's.
+
+Units: x = [q, q̇, q̈] (rad, rad/s, rad/s²), y in N and N·m (wrench in the sensor frame) or N·m (joint
+torques); ℓ_q in rad, ℓ_q̇ in rad/s.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from semiparam_ros.core.learners.adaptation import forgetting_factor
+from semiparam_ros.core.learners.features import Standardizer
+from semiparam_ros.core.learners.rrls import RecursiveRLS
+from semiparam_ros.core.learners.semiparametric import (
+    NonparametricModel,
+    ParametricModel,
+    Prediction,
+    PredictionContext,
+    Regressor,
+    _TwoStageModel,
+)
+from semiparam_ros.core.validation import check_finite_array, check_positive_int, check_range
+from semiparam_ros.errors import CheckpointError, RejectedSampleError
+
+__all__ = ["ConsistentSemiparametricModel", "ErrorTracker", "structural_entries"]
+
+
+class ErrorTracker:
+    """Smoothers of a model's recent error, the best of them chosen by its recent one-step accuracy.
+
+    A bank of exponential smoothers ``b_K ← b_K + K(e − b_K)`` of the model's error e, one per gain K in
+    :attr:`GAINS` (K = 0: no correction, the model alone; K = 1: the last error carried over; in between,
+    averages over about 1/K samples — the steady-state Kalman filters of a drifting error seen through
+    noise, for drift-to-noise ratios from none to large). Each smoother's a-priori one-step squared error
+    is averaged over about ``stats_samples`` learned samples, and per output the smoother with the
+    smallest one is used: where the error drifts faster than its noise, K → 1; where noise dominates (a
+    model at the noise floor), K = 0 and the tracker adds nothing. The choice needs no model of the noise
+    and follows a change of regime within ``stats_samples`` samples.
+
+    An estimate made at the state ``x_b`` of the last learned sample is used at x with the weight
+    ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``. The increments of the error
+    also give its white-noise variance per output (``r̂ = −E[d_m d_{m−1}]``, d the increments), used by
+    the fast rigid-body correction (:meth:`noise_variance`).
+
+    Args:
+        n_outputs: t, the number of outputs.
+        n_joints: n (the state coordinates are q and q̇ of the n joints).
+        position_scale: ℓ_q [rad] of the fading weight.
+        velocity_scale: ℓ_q̇ [rad/s] of the fading weight.
+        stats_samples: About how many learned samples the running statistics average over.
+
+    Raises:
+        ConfigurationError: Invalid sizes or scales.
+
+    Example:
+        >>> import numpy as np
+        >>> tr = ErrorTracker(1, 1, position_scale=0.1, velocity_scale=1.0, stats_samples=5)
+        >>> x = np.array([0.0, 0.0, 0.0])  # q, q̇, q̈ of one joint
+        >>> for _ in range(20):  # the model is 0.5 too low, without noise: carry the error over
+        ...     tr.update(x, np.array([0.5]), np.array([0.0]))
+        >>> tr.correction(x).round(3).tolist()
+        [0.5]
+        >>> float(tr.correction(np.array([1.0, 0.0, 0.0]))[0]) < 1e-10  # 10 ℓ_q away: nothing
+        True
+    """
+
+    #: Gains of the smoothers: none, about 10 and 3 samples averaged, the last error.
+    GAINS = np.array([0.0, 0.1, 0.3, 1.0])
+
+    def __init__(self, n_outputs: int, n_joints: int, *, position_scale: float, velocity_scale: float,
+                 stats_samples: int = 20) -> None:
+        self.n_outputs = check_positive_int("n_outputs", n_outputs)
+        self.n_joints = check_positive_int("n_joints", n_joints)
+        pos = check_range("position_scale", position_scale, 0.0, lo_inclusive=False)
+        vel = check_range("velocity_scale", velocity_scale, 0.0, lo_inclusive=False)
+        self.stats_samples = check_positive_int("stats_samples", stats_samples, minimum=2)
+        n = self.n_joints
+        self._inv_scale = np.concatenate([np.full(n, 1.0 / pos), np.full(n, 1.0 / vel)])
+        self.position_scale, self.velocity_scale = float(pos), float(vel)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the estimates and the statistics."""
+        t, k = self.n_outputs, len(self.GAINS)
+        self.estimates = np.zeros((k, t))     # b_K (units of y)
+        self.errors = np.zeros((k, t))        # running a-priori squared error of each smoother
+        self.state: np.ndarray | None = None  # scaled [q, q̇] of the last learned sample
+        self.last_error = np.zeros(t)         # e of the last learned sample
+        self.last_increment = np.zeros(t)     # its increment e − e_prev
+        self.cov_increment = np.zeros(t)      # running E[d_m d_{m−1}]
+        self.n_errors = 0                     # learned samples seen
+
+    def _scaled(self, x: np.ndarray) -> np.ndarray:
+        return x[:2 * self.n_joints] * self._inv_scale
+
+    def weight(self, x: np.ndarray) -> float:
+        """κ ∈ [0, 1] at the state x = [q, q̇, q̈] (0 before any learned sample)."""
+        if self.state is None:
+            return 0.0
+        d = self._scaled(x) - self.state
+        return math.exp(-0.5 * float(d @ d))
+
+    @property
+    def chosen(self) -> np.ndarray:
+        """Index into :attr:`GAINS` of the smoother used, per output (K = 0 until 2 errors are seen)."""
+        if self.n_errors < 2:
+            return np.zeros(self.n_outputs, dtype=np.int64)
+        return np.argmin(self.errors, axis=0)
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """b̂ (t,): the chosen smoother's estimate per output, units of y."""
+        return self.estimates[self.chosen, np.arange(self.n_outputs)]
+
+    def correction(self, x: np.ndarray) -> np.ndarray:
+        """``κ(x) b̂`` (t,), units of y."""
+        return self.weight(x) * self.estimate
+
+    def noise_variance(self) -> np.ndarray:
+        """r̂ (t,): the white-noise variance of the error, ``max(0, −E[d_m d_{m−1}])`` [units of y²]."""
+        return np.maximum(-self.cov_increment, 0.0)
+
+    def update(self, x: np.ndarray, y: np.ndarray, model: np.ndarray, weight: float | None = None) -> None:
+        """Absorb a learned sample: its state x, measurement y and the model's a-priori prediction.
+
+        Args:
+            x: The state ``[q, q̇, q̈]`` (validated, finite).
+            y: The measurement (t,).
+            model: The prediction the error is relative to (t,).
+            weight: ``weight(x)`` if already computed for this state (nothing updated since).
+        """
+        e = y - model
+        a = max(1.0 / (self.n_errors + 1), 1.0 / self.stats_samples)
+        if self.n_errors >= 1:
+            d = e - self.last_error
+            if self.n_errors >= 2:
+                b = max(1.0 / (self.n_errors - 1), 1.0 / self.stats_samples)
+                self.cov_increment += b * (d * self.last_increment - self.cov_increment)
+            self.last_increment = d
+        prior = (self.weight(x) if weight is None else weight) * self.estimates
+        miss = e - prior
+        self.errors += a * (miss * miss - self.errors)
+        self.estimates = prior + self.GAINS[:, None] * miss
+        self.state = self._scaled(x)
+        self.last_error = e
+        self.n_errors += 1
+
+    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Return the tracker's state as arrays."""
+        return {
+            f"{prefix}estimates": self.estimates.copy(),
+            f"{prefix}errors": self.errors.copy(),
+            f"{prefix}state": np.zeros(0) if self.state is None else self.state.copy(),
+            f"{prefix}last_error": self.last_error.copy(),
+            f"{prefix}last_increment": self.last_increment.copy(),
+            f"{prefix}cov_increment": self.cov_increment.copy(),
+            f"{prefix}n_errors": np.array(self.n_errors),
+        }
+
+    def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
+        """Replace the state (validated first: sizes and finiteness).
+
+        Raises:
+            CheckpointError: Missing keys, wrong sizes or non-finite values.
+        """
+        t, n, k = self.n_outputs, self.n_joints, len(self.GAINS)
+        try:
+            vals = {name: np.asarray(state[f"{prefix}{name}"], dtype=np.float64)
+                    for name in ("last_error", "last_increment", "cov_increment")}
+            banks = {name: np.asarray(state[f"{prefix}{name}"], dtype=np.float64)
+                     for name in ("estimates", "errors")}
+            st = np.asarray(state[f"{prefix}state"], dtype=np.float64)
+            n_errors = int(state[f"{prefix}n_errors"])
+        except KeyError as err:
+            raise CheckpointError(f"state is missing key {err}") from err
+        bad = (any(v.shape != (t,) or not np.isfinite(v).all() for v in vals.values())
+               or any(v.shape != (k, t) or not np.isfinite(v).all() for v in banks.values())
+               or bool((banks["errors"] < 0).any()) or n_errors < 0
+               or (st.size and (st.shape != (2 * n,) or not np.isfinite(st).all())))
+        if bad:
+            raise CheckpointError("tracker state has the wrong sizes or non-finite values")
+        self.estimates, self.errors = banks["estimates"], banks["errors"]
+        self.last_error, self.last_increment = vals["last_error"], vals["last_increment"]
+        self.cov_increment = vals["cov_increment"]
+        self.state = st if st.size else None
+        self.n_errors = n_errors
+
+
+def structural_entries(regressor: Regressor, n_inputs: int, n_outputs: int, n_params: int,
+                       samples: int = 8) -> np.ndarray:
+    """Flat indices of the entries of ``Φ(x)`` (t × p) that are not identically zero.
+
+    Found at ``samples`` random inputs (standard normal, a fixed seed: the same indices every time): an
+    entry zero at all of them is structurally zero (a smooth function of the state vanishing on a set of
+    measure zero is not hit by chance).
+
+    Args:
+        regressor: Maps x (n_inputs,) to Φ (n_outputs, n_params).
+        n_inputs: Length of x.
+        n_outputs: t.
+        n_params: p.
+        samples: Random inputs tried.
+
+    Returns:
+        Sorted int64 indices into ``Φ.reshape(-1)``.
+
+    Example:
+        >>> import numpy as np
+        >>> structural_entries(lambda x: np.array([[x[0], 0.0], [1.0, x[1] ** 2]]), 2, 2, 2)
+        array([0, 2, 3])
+    """
+    rng = np.random.default_rng(20161)
+    nonzero = np.zeros(n_outputs * n_params, dtype=bool)
+    for _ in range(samples):
+        Phi = np.asarray(regressor(rng.standard_normal(n_inputs)), dtype=np.float64)
+        nonzero |= Phi.reshape(-1) != 0.0
+    return np.flatnonzero(nonzero).astype(np.int64)
+
+
+class _Context(PredictionContext):
+    """A prediction context that also keeps the local tracker's reference prediction and weight at x."""
+
+    __slots__ = ("kappa", "model_total")
+
+    def __init__(self, prediction: Prediction, model: Any, x: np.ndarray, Phi: np.ndarray | None,
+                 phi: np.ndarray | None, model_total: np.ndarray, kappa: float) -> None:
+        super().__init__(prediction, model, x, Phi, phi)
+        self.model_total = model_total
+        self.kappa = kappa  # the tracker's weight at x
+
+
+class ConsistentSemiparametricModel(_TwoStageModel):
+    """Rigid-body part, consistent abstaining residual and fast error tracker (see the module docstring).
+
+    Args:
+        regressor: Maps x to ``Φ(x)`` (n_outputs, n_params).
+        n_params: p, number of (base) parameters.
+        n_inputs: Length of x (3 × joints).
+        n_outputs: t, length of y.
+        lam_parametric: λ of the rigid-body part.
+        lam_nonparametric: λ of the residual (prior precision of its weights).
+        n_features: D random features of the residual (input: the standardized x).
+        sigma: Kernel width in standardized units of x.
+        forgetting_parametric: β of the rigid-body part (per sample).
+        forgetting_nonparametric: β of the residual (per sample).
+        seed: Seed of the random features.
+        standardizer: Optional fitted :class:`Standardizer` for x.
+        standardizer_warmup: Online warm-up of the standardizer (samples; 0 = identity); the residual is
+            zero and the rigid-body part learns alone until it is over.
+        standardizer_min_scale: Floors of the warm-up's scales (units of x).
+        prior: Prior mean π₀ of the rigid-body parameters (default zero).
+        novelty_scale: ν₀ > 0 of the residual's weight ``exp(−(ν/ν₀)²)``.
+        tracker: Whether the fast correction is used (False: the prediction is model(x)).
+        tracker_position_scale: ℓ_q [rad] of the tracker's fading weight.
+        tracker_velocity_scale: ℓ_q̇ [rad/s] of the tracker's fading weight.
+        tracker_samples: Learned samples the tracker's statistics (its choice of smoother, the noise
+            variance) average over.
+        tracker_time_constant: τ_f [s], memory of the fast rigid-body correction (its ridge λ is
+            ``lam_parametric``, toward zero).
+        sample_period_s: Provisional sample period [s] converting τ_f until :meth:`set_sample_period`.
+
+    Raises:
+        ConfigurationError: Invalid sizes or hyperparameters.
+
+    Example:
+        >>> import numpy as np
+        >>> line = lambda x: np.array([[x[0], 1.0]])  # rigid part y = a·q + b (one joint)
+        >>> m = ConsistentSemiparametricModel(line, 2, 3, 1, lam_parametric=1e-6, lam_nonparametric=1e-3,
+        ...                                   n_features=300, sigma=1.0, standardizer_warmup=50)
+        >>> q = np.linspace(-1.0, 1.0, 400)
+        >>> for qi in q:
+        ...     m.learn_one([qi, 0.0, 0.0], [3.0 * qi + 1.0 + 0.2 * np.sin(3.0 * qi)])
+        >>> pred = m.predict_one([0.3, 0.0, 0.0])
+        >>> bool(abs(pred.total[0] - pred.correction[0] - (1.9 + 0.2 * np.sin(0.9))) < 0.02)  # the model
+        True
+        >>> far = m.predict_model([30.0, 0.0, 0.0])  # far outside the data: the rigid-body part alone
+        >>> bool(abs(far.total[0] - far.parametric[0]) < 1e-6)
+        True
+    """
+
+    _kind = "semiparametric_consistent"
+
+    def __init__(self, regressor: Regressor, n_params: int, n_inputs: int, n_outputs: int, *,
+                 lam_parametric: float = 1.0, lam_nonparametric: float = 1.0, n_features: int = 500,
+                 sigma: float = 1.0, forgetting_parametric: float = 1.0,
+                 forgetting_nonparametric: float = 1.0, seed: int = 0,
+                 standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
+                 standardizer_min_scale: Any = 0.0, prior: Any = None, novelty_scale: float = 0.01,
+                 tracker: bool = True, tracker_position_scale: float = 0.05,
+                 tracker_velocity_scale: float = 0.5, tracker_samples: int = 50,
+                 tracker_time_constant: float = 0.3, sample_period_s: float = 0.01) -> None:
+        self.parametric = ParametricModel(regressor, n_params, n_outputs, lam=lam_parametric,
+                                          forgetting=forgetting_parametric, prior=prior)
+        p, t = self.parametric.n_params, self.parametric.n_outputs
+        # the residual regresses y and the entries of Φ that are not identically zero (about half of a
+        # joint-torque regressor's: a joint's torque does not depend on the bodies before it, friction
+        # columns are diagonal); the others would only be learned as zeros at the cost of their columns
+        self._phi_entries = structural_entries(regressor, int(n_inputs), t, p)
+        self.nonparametric = NonparametricModel(int(n_inputs), t + self._phi_entries.size,
+                                                n_features=n_features,
+                                                sigma=sigma, lam=lam_nonparametric,
+                                                forgetting=forgetting_nonparametric, seed=seed,
+                                                standardizer=standardizer,
+                                                standardizer_warmup=standardizer_warmup,
+                                                standardizer_min_scale=standardizer_min_scale)
+        self.n_inputs = int(n_inputs)
+        self.n_outputs = t
+        self.n_params = p
+        self.novelty_scale = check_range("novelty_scale", novelty_scale, 0.0, lo_inclusive=False)
+        self.use_tracker = bool(tracker)
+        self.tracker = ErrorTracker(t, max(1, self.n_inputs // 3), position_scale=tracker_position_scale,
+                                    velocity_scale=tracker_velocity_scale, stats_samples=tracker_samples)
+        self.tracker_time_constant = check_range("tracker_time_constant", tracker_time_constant, 0.0,
+                                                 lo_inclusive=False)
+        self.fast = RecursiveRLS(p, 1, lam_parametric, forgetting=self._fast_forgetting(sample_period_s))
+        self.n_samples_seen = 0
+        self._held: tuple[np.ndarray, float] | None = None  # (g·r, its relative variance) last computed
+
+    #: The fast rigid-body correction fades like the local tracker but over this many times its distances
+    #: (it is a rigid-body correction, valid further from where it was learned than a local error).
+    FAST_FADE = 4.0
+
+    #: The fast correction remembers at least this many rows per parameter (a statistical floor: p
+    #: parameters need several times p equations before a noisy fit is worth adding to the prediction).
+    FAST_ROWS_PER_PARAMETER = 10
+
+    def _fast_forgetting(self, sample_period_s: float) -> float:
+        """β_f = exp(−1/N), N = max(τ_f/T, 10·p/t) samples (τ_f in s, T the period in s)."""
+        floor = self.FAST_ROWS_PER_PARAMETER * self.n_params / self.n_outputs
+        samples = max(self.tracker_time_constant / float(sample_period_s), floor)
+        return forgetting_factor(samples, 1.0)
+
+    def set_sample_period(self, sample_period_s: float) -> None:
+        """Convert the fast correction's memory τ_f [s] at the measured sample period [s].
+
+        Raises:
+            ConfigurationError: On a non-positive period.
+        """
+        self.fast.set_forgetting(self._fast_forgetting(sample_period_s))
+
+    # ------------------------------------------------------------------ prediction
+    def _model_valid(self, xv: np.ndarray, Phi: np.ndarray, rigid: np.ndarray | None = None, *,
+                     held: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(ŷ_P, g·r, relative variance, φ or None)`` for a validated x and its regressor.
+
+        ``rigid``: other rigid-body parameters to predict with (see :meth:`predict_model`). ``held``: take
+        the residual ``g·r`` and its relative variance as last computed (see :meth:`predict_held`).
+        """
+        par_model, npm = self.parametric, self.nonparametric
+        yp, var = par_model.predict_phi(Phi, True)
+        assert var is not None  # asked for
+        if rigid is not None:
+            yp = Phi @ rigid
+        if held and self._held is not None:
+            r_held, v_held = self._held
+            return yp, r_held.copy(), var + v_held, None
+        if not npm.standardizer.ready:
+            self._held = None
+            return yp, np.zeros(self.n_outputs), var, None
+        t = self.n_outputs
+        phi = npm.features_of(xv)
+        P, v = npm.rls.predict_checked(phi, True)
+        assert v is not None  # asked for
+        pk = P[0]
+        delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
+        r = pk[:t] - self._expand(pk[t:]) @ delta
+        nu = npm.rls.lam * float(v[0])
+        r *= math.exp(-((nu / self.novelty_scale) ** 2))
+        if rigid is None:
+            self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
+        return yp, r, var + float(v[0]), phi
+
+    def predict_checked(self, xv: np.ndarray, Phi: np.ndarray, *, held: bool = False
+                       ) -> tuple[Prediction, np.ndarray, np.ndarray | None, float]:
+        """Return the prediction, ``model(x) + wΦδ_f`` (the local tracker's reference), φ and κ(x)."""
+        yp, r, var, phi = self._model_valid(xv, Phi, held=held)
+        model_total = yp + r
+        if not self.use_tracker:
+            return Prediction(yp, r, model_total, var, np.zeros(self.n_outputs)), model_total, phi, 0.0
+        kappa = self.tracker.weight(xv)
+        kappa_fast = kappa ** (1.0 / self.FAST_FADE ** 2)  # the same fade over FAST_FADE × the distances
+        P, v = self.fast.predict_checked(Phi, True)
+        assert v is not None  # asked for
+        c = P[:, 0]
+        fast = model_total + (kappa_fast * self.fast_weight(c, v)) * c
+        total = fast + kappa * self.tracker.estimate
+        return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
+
+    def _expand(self, values: np.ndarray) -> np.ndarray:
+        """Return the (t, p) matrix of the residual's Φ part from its learned entries (zeros elsewhere)."""
+        full = np.zeros(self.n_outputs * self.n_params)
+        full[self._phi_entries] = values
+        return full.reshape(self.n_outputs, self.n_params)
+
+    def fast_weight(self, c: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Weight of the fast rigid-body correction per output, in [0, 1]: ``max(0, 1 − 9 r̂ v / c²)``.
+
+        ``c = Φδ_f`` is the correction, ``r̂ v`` its variance (v the relative predictive variance of the
+        fast learner, r̂ the noise variance of the model's error estimated by the tracker): the correction
+        counts only as far as it stands out from its own noise by three standard deviations — at once for a
+        payload (large, well determined), not at all where it only fits noise (a model at the noise floor).
+        """
+        noise = 9.0 * self.tracker.noise_variance() * v
+        c2 = c * c
+        return np.where(c2 > noise, 1.0 - noise / np.where(c2 > 0.0, c2, 1.0), 0.0)
+
+    def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
+        """Predict ``model(x) + wΦ(x)δ_f + κ b̂`` with its parts (``correction`` = the last two terms).
+
+        Args:
+            x: The input ``[q, q̇, q̈]``.
+            return_variance: Keep the relative predictive variance in the result (always computed: the
+                residual's weight needs it).
+
+        Raises:
+            RejectedSampleError: Bad x or regressor output.
+        """
+        xv, _, Phi = self._check(x)
+        pred = self.predict_checked(xv, Phi)[0]
+        if not return_variance:
+            pred = Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
+        return pred
+
+    def rls_stages(self) -> tuple[RecursiveRLS, ...]:
+        """Return the recursive least-squares learners holding this model's state (the learner contract)."""
+        return (self.parametric.rls, self.nonparametric.rls, self.fast)
+
+    def adaptive_stages(self) -> tuple[RecursiveRLS, ...]:
+        """Return the two stages' learners (the fast tracker keeps its own memory, ``set_sample_period``)."""
+        return (self.parametric.rls, self.nonparametric.rls)
+
+    def predict_held(self, x: Any) -> Prediction:
+        """Predict x as :meth:`predict_one` but with the residual held from the last full prediction.
+
+        The rigid-body part, the fast correction and the tracker are evaluated at x (O(p²)); the residual
+        ``g·r`` and its relative variance are those of the last :meth:`predict_one` or learned sample (the
+        O(D²) triangular solve of the random-feature learner is skipped). This is the prediction of a
+        node that falls behind: at 1 kHz the residual, a smooth function of the state, changes little in
+        the few ms it is held. Before any residual was computed (warm-up) it is the full prediction.
+
+        Args:
+            x: The input ``[q, q̇, q̈]`` (rad, rad/s, rad/s²).
+
+        Returns:
+            The prediction with its parts and relative variance.
+
+        Raises:
+            RejectedSampleError: Bad x or regressor output.
+        """
+        xv, _, Phi = self._check(x)
+        return self.predict_checked(xv, Phi, held=True)[0]
+
+    def predict_model(self, x: Any, rigid: np.ndarray | None = None) -> Prediction:
+        """Predict model(x) alone (rigid-body part + weighted residual; no fast correction).
+
+        What a feed-forward term at a desired state uses: it does not depend on the last measurement.
+
+        Args:
+            x: The input ``[q, q̇, q̈]``.
+            rigid: Rigid-body parameters to predict with instead of the learned ones (the learner's units,
+                e.g. a physically consistent projection). The residual stays consistent with them: it
+                learned ``y − Φπ₀`` and ``Φ``, so ``r = E[y − Φπ₀] − E[Φ](π − π₀)`` for any π.
+
+        Raises:
+            RejectedSampleError: Bad x or regressor output.
+        """
+        xv, _, Phi = self._check(x)
+        yp, r, var, _ = self._model_valid(xv, Phi, self._checked_rigid(rigid))
+        return Prediction(yp, r, yp + r, var)
+
+    def _checked_rigid(self, rigid: np.ndarray | None) -> np.ndarray | None:
+        if rigid is None:
+            return None
+        arr = np.asarray(rigid, dtype=np.float64)
+        if arr.shape != (self.n_params,) or not np.isfinite(arr).all():
+            raise RejectedSampleError(f"rigid must be {self.n_params} finite parameters")
+        return arr
+
+    def predict_model_many(self, X: Any, rigid: np.ndarray | None = None) -> Prediction:
+        """:meth:`predict_model` of N inputs at once (arrays of shape (N, t); ``variance`` included).
+
+        The regressors are evaluated row by row; both learners then predict all rows with one matrix
+        product and one triangular solve each (BLAS level 3): equal to N calls of :meth:`predict_model` to
+        rounding (the residual's weight ``exp(−(ν/ν₀)²)`` is smooth in ν).
+
+        Args:
+            X: (N, n_inputs) inputs ``[q, q̇, q̈]``.
+            rigid: Rigid-body parameters to predict with instead of the learned ones (see
+                :meth:`predict_model`).
+
+        Returns:
+            The model's prediction per row: rigid-body part, weighted residual, total, relative variance.
+
+        Raises:
+            RejectedSampleError: Wrong shape, NaN/inf in X, or a bad regressor output.
+        """
+        X2 = check_finite_array("X", X, (None, self.n_inputs))
+        par_model, npm = self.parametric, self.nonparametric
+        Phi = par_model.phi_rows(X2)
+        yp, var = par_model.predict_phi_rows(Phi)
+        rigid = self._checked_rigid(rigid)
+        if rigid is not None:
+            yp = Phi @ rigid
+        r = np.zeros_like(yp)
+        if npm.standardizer.ready:
+            n, t, p = Phi.shape
+            phi = np.ascontiguousarray(npm.rff.map_checked(npm.standardizer.apply_checked(X2)))
+            P, v = npm.rls.predict_checked(phi, True)
+            assert v is not None  # asked for
+            delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
+            full = np.zeros((n, t * p))
+            full[:, self._phi_entries] = P[:, t:]
+            r = P[:, :t] - full.reshape(n, t, p) @ delta
+            nu = npm.rls.lam * v
+            r *= np.exp(-((nu / self.novelty_scale) ** 2))[:, None]
+            var = var + v[:, None]
+        return Prediction(yp, r, yp + r, var)
+
+    # ------------------------------------------------------------------ learning
+    def predict_ahead_checked(self, xv: np.ndarray) -> PredictionContext:
+        """Do :meth:`predict_ahead` for an input already checked (finite, the model's shape) and copied."""
+        Phi = self.parametric.phi_fresh(xv)
+        pred, model_total, phi, kappa = self.predict_checked(xv, Phi)
+        return _Context(pred, self, xv, Phi, phi, model_total, kappa)
+
+    def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
+        """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
+        ctx = self._take(context)
+        assert isinstance(ctx, _Context) and ctx.Phi is not None  # made by _predict_ahead_valid
+        Phi, phi, xv = ctx.Phi, ctx.phi, ctx.x
+        par_model, npm = self.parametric, self.nonparametric
+        y0 = par_model.prior_output(Phi)
+        target = yv.copy() if y0 is None else yv - y0
+        # both learners' rows are checked before either changes: a refused value leaves the model as it was
+        par_step = par_model.rls.checked_step(Phi, target.reshape(-1, 1), owned=True)
+        fast_step = None
+        if self.use_tracker:
+            # the fast correction learns the error of model(x) (the a-priori model, without corrections)
+            pred = ctx.prediction
+            model_only = pred.total if pred.correction is None else pred.total - pred.correction
+            fast_step = RecursiveRLS.checked_step(Phi, (yv - model_only).reshape(-1, 1))
+        if phi is None:
+            npm.standardizer.partial_fit(xv)
+            par_model.rls.defer_step(par_step)
+        else:
+            u = np.concatenate([target, Phi.reshape(-1)[self._phi_entries]]).reshape(1, -1)
+            np_step = RecursiveRLS.checked_step(phi, u, owned=True)
+            par_model.rls.defer_step(par_step)
+            npm.rls.defer_step(np_step)
+        if fast_step is not None:
+            self.fast.defer_step(fast_step)
+            self.tracker.update(xv, yv, ctx.model_total, ctx.kappa)
+        par_model.n_samples_seen += 1
+        npm.n_samples_seen += 1
+        self.n_samples_seen += 1
+
+    def learn_one(self, x: Any, y: Any) -> None:
+        """Learn one sample (x, y).
+
+        Raises:
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
+        """
+        self.predict_learn_one(x, y)
+
+    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
+        """Return the a-priori prediction (all parts), then learn (x, y).
+
+        Raises:
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
+        """
+        ctx = self.predict_ahead(x)
+        self.learn_ahead(ctx, y)
+        pred = ctx.prediction
+        return Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
+
+    def reset(self) -> None:
+        """Forget everything (both learners and the fast correction)."""
+        super().reset()
+        self.fast.reset()
+        self.tracker.reset()
+        self._held = None
+
+    def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Return the learners' and the tracker's state as arrays."""
+        state = super().state_dict(prefix)
+        state[f"{prefix}phi_entries"] = self._phi_entries.copy()
+        state.update(self.tracker.state_dict(f"{prefix}tracker."))
+        state.update(self.fast.state_dict(f"{prefix}fast."))
+        return state
+
+    def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
+        """Replace the whole state (validated completely before anything changes).
+
+        Raises:
+            CheckpointError: Wrong kind, missing keys or sizes that do not match this model.
+        """
+        tracker = ErrorTracker(self.n_outputs, self.tracker.n_joints,
+                               position_scale=self.tracker.position_scale,
+                               velocity_scale=self.tracker.velocity_scale,
+                               stats_samples=self.tracker.stats_samples)
+        tracker.load_state_dict(state, f"{prefix}tracker.")
+        entries = state.get(f"{prefix}phi_entries")
+        if entries is None or not np.array_equal(np.asarray(entries), self._phi_entries):
+            raise CheckpointError("the residual's regressor entries differ from this model's (a checkpoint "
+                                  "of another robot or structure, or one written before the residual "
+                                  "kept only the regressor's non-zero entries: learn it again)")
+        fast = RecursiveRLS.from_state_dict(state, f"{prefix}fast.")
+        if fast.n_features != self.n_params or fast.n_outputs != 1:
+            raise CheckpointError(f"the fast correction's state has {fast.n_features} parameters, expected "
+                                  f"{self.n_params}")
+        super().load_state_dict(state, prefix)
+        self.tracker, self.fast = tracker, fast
+        self._held = None

@@ -1,0 +1,1 @@
+"""Rigid-body dynamics: URDF, the Pinocchio regressor, consistent identification and the payload."""

@@ -1,0 +1,1 @@
+"""The message-to-sample stream: messages, pairing, acceleration, rate, glitches and the contact gate."""

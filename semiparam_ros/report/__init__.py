@@ -1,0 +1,1 @@
+"""Reports a user runs on their bags: the paper's protocol, real logs, tables, figures and pages."""

@@ -1,0 +1,461 @@
+"""The learned model as a function of the state: what a controller's feed-forward term calls.
+
+:func:`load_model` reads a self-contained checkpoint (configuration, URDF text and learned state travel
+inside it; see :meth:`OnlineEstimator.checkpoint_state`) and returns a :class:`LearnedModel`:
+
+    τ(q, q̇, q̈) = Φ(q, q̇, q̈) π̂  +  g(x) r(x),          σ(x) = sqrt(s² (1 + v(x)))
+
+the identified rigid-body part (base inertial parameters π̂ with friction and offsets) plus the residual
+where the data determine it (weight g in [0, 1], 0 in states never seen; see
+:mod:`semiparam_ros.core.learners.consistent`), with its predictive standard deviation σ (s² the
+noise variance the estimator measured, v the relative posterior variance at x). No correction of a recent
+measured error enters: the model depends on the state only, so it may be evaluated at a **desired** state,
+ahead of the measurement.
+
+Units: q [rad] (m for prismatic joints), q̇ [rad/s], q̈ [rad/s²]; outputs N·m per joint (``robot.output:
+joint_torques``, the order of :attr:`LearnedModel.joints`) or the F/T sensor wrench [N, N·m] in the sensor
+frame (``wrench``). Sign convention of joint torques: the torque the actuator applies to the child link
+about the joint axis (what RNEA returns).
+
+Example:
+    >>> import tempfile, pathlib
+    >>> import numpy as np
+    >>> from semiparam_ros.core.config import EstimatorConfig
+    >>> from semiparam_ros.core.estimator.online import OnlineEstimator
+    >>> est = OnlineEstimator(EstimatorConfig.defaults())  # the iCub arm of example-robot-data, F/T wrench
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "icub.npz"
+    >>> est.save(path)
+    >>> model = load_model(path)
+    >>> model.joints
+    ('r_shoulder_pitch', 'r_shoulder_roll', 'r_shoulder_yaw', 'r_elbow')
+    >>> y, std = model.predict(np.zeros(4), np.zeros(4), np.zeros(4))  # nothing learned: the CAD model
+    >>> bool(np.allclose(y, model.cad(np.zeros(4), np.zeros(4), np.zeros(4))))
+    True
+    >>> Y, S = model.predict(np.zeros((5, 4)), np.zeros((5, 4)), np.zeros((5, 4)))  # five states at once
+    >>> Y.shape
+    (5, 6)
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from semiparam_ros.core.checkpoint import load_npz
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.estimator.build import Model, build_regressor
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.estimator.state import learner_kind, read_config
+from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
+from semiparam_ros.core.learners.semiparametric import ParametricModel, Prediction, rigid_body_part
+from semiparam_ros.core.learners.uncertainty import predict_with_variance
+from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, ExcitationReport
+from semiparam_ros.core.rigid_body.payload import PayloadEstimate
+from semiparam_ros.core.validation import check_finite_array
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
+
+__all__ = ["LearnedModel", "ModelPrediction", "load_model"]
+
+
+@dataclass(frozen=True)
+class ModelPrediction:
+    """The model at one state (arrays of shape (t,)) or N states ((N, t)).
+
+    Attributes:
+        total: Rigid-body part + residual [N·m, or N and N·m for a wrench].
+        rigid_body: The identified rigid-body part ``Φ π̂`` (with friction and offsets when configured).
+        residual: The weighted residual ``g r`` (0 where the state was never seen).
+        std: Predictive standard deviation σ of ``total`` (noise included; +inf when the checkpoint holds
+            no noise estimate yet).
+    """
+
+    total: np.ndarray
+    rigid_body: np.ndarray
+    residual: np.ndarray
+    std: np.ndarray
+
+
+class LearnedModel:
+    """A learned inverse-dynamics model, evaluated at any state (read-only; not thread-safe).
+
+    Wraps an :class:`OnlineEstimator` (the node's live one, or one restored by :func:`load_model`) without
+    copying it: predictions read the learned state as it is now. :meth:`snapshot` freezes a copy instead
+    (what a controller should be served while the estimator goes on learning: a model that changes at
+    every sample injects sample-to-sample torque jitter into the loop it drives).
+
+    Args:
+        estimator: The estimator whose model is served.
+        model: A frozen copy of the estimator's learner to serve instead of the live one (see
+            :meth:`snapshot`).
+        noise_s2: The noise variance [units of y²] that goes with ``model`` (None: the estimator's).
+
+    Attributes:
+        estimator: The wrapped estimator (advanced use: parameters, configuration, further learning).
+    """
+
+    def __init__(self, estimator: OnlineEstimator, *, model: Model | None = None,
+                 noise_s2: np.ndarray | None = None, solve: bool = True) -> None:
+        self.estimator = estimator
+        self._frozen = model
+        self._frozen_s2 = noise_s2
+        self._consistent: tuple[tuple[int, int], ConsistentEstimate] | None = None
+        self._attached: ConsistentEstimate | None = None
+        self._solve = bool(solve)
+        self._weights: np.ndarray | None = None  # the projection's prior weights (cached: 64 regressor rows)
+        #: Software versions that wrote the checkpoint (empty for a live estimator).
+        self.versions: dict[str, Any] = {}
+        regressor = estimator.regressor
+        self._n = len(regressor.joint_names)
+        base_names = estimator.parameter_names
+        # base parameters that are not inertial: sensor offsets, per-joint friction, offsets, armature
+        extra = [i for i, name in enumerate(base_names)
+                 if name.startswith("offset_") or name.rsplit(".", 1)[-1] in regressor.extra_kinds]
+        self._inertial = np.ones(len(base_names), dtype=bool)
+        self._inertial[extra] = False
+        self._cad_full = regressor.urdf_parameters()
+
+    def snapshot(self) -> LearnedModel:
+        """Return a frozen copy: the model as it is now, unaffected by what the estimator learns next.
+
+        A memory copy of the learned state (≈ 0.6 ms for a 7-joint arm at D = 500), sharing the
+        regressor: use it from the thread that drives the estimator.
+        """
+        s2 = self._noise_s2()
+        return LearnedModel(self.estimator, model=self._model().copy(),
+                            noise_s2=None if s2 is None else s2.copy(), solve=self._solve)
+
+    def attach_consistent(self, estimate: ConsistentEstimate | None) -> None:
+        """Use a consistent estimate solved elsewhere (the node's worker process) instead of solving here."""
+        self._attached = estimate
+
+    def consistent(self) -> ConsistentEstimate:
+        """Return the physically consistent per-link parameters of the rigid-body part (cached).
+
+        The projection of :mod:`semiparam_ros.core.rigid_body.identification` (cvxpy + Clarabel, tens of ms;
+        the first call also imports cvxpy): the learner's estimate where the data determine it, the URDF's CAD
+        values elsewhere, every body a physical mass distribution, friction ≥ 0.
+
+        Raises:
+            ValueError: For a model without a rigid-body part (``NP``).
+            ConfigurationError: If the solver fails.
+        """
+        from semiparam_ros.core.rigid_body.identification import consistent_parameters
+
+        if self._attached is not None:
+            return self._attached
+        model = self._model()
+        par = self._rigid_learner()
+        key = (id(model), int(model.n_samples_seen))
+        if self._consistent is None or self._consistent[0] != key:
+            rls = par.rls
+            estimate = consistent_parameters(self.estimator.regressor, par.parameters, rls.R,
+                                             self.estimator.column_scale, rls.lam)
+            self._consistent = (key, estimate)
+        return self._consistent[1]
+
+    def payload(self, consistent: ConsistentEstimate | None = None) -> PayloadEstimate:
+        """Return the payload the distal body carries: mass [kg], centre of mass [m], inertia [kg·m²].
+
+        Since the last tare (:meth:`OnlineEstimator.tare_payload`, the node's ``~/payload/tare``) when one
+        was made: the change of the distal body's parameters learned from the samples after it. Otherwise
+        beyond the URDF: the consistent estimate of the distal body minus its CAD values. Each with its
+        standard deviation; the centre of mass in the frame of the distal body (the child link of the last
+        configured joint), the inertia about the centre of mass (see
+        :mod:`semiparam_ros.core.rigid_body.payload`).
+
+        Args:
+            consistent: The consistent estimate beyond which the URDF's is counted (default
+                :meth:`consistent`, solved here if none is attached).
+
+        Raises:
+            ValueError: For a model without a rigid-body part (``NP``).
+            ConfigurationError: If the consistent projection's solver fails.
+        """
+        from semiparam_ros.core.rigid_body.identification import full_column_rms
+        from semiparam_ros.core.rigid_body.payload import payload_beyond_urdf
+
+        est = self.estimator
+        if est.payload is not None:
+            return est.payload.estimate()
+        rls = self._rigid_learner().rls
+        if consistent is None:
+            consistent = self.consistent()
+        s2 = self._noise_s2()
+        noise = float(np.mean(s2)) if s2 is not None and np.all(np.isfinite(s2)) else float("nan")
+        if self._weights is None:
+            self._weights = full_column_rms(est.regressor)
+        return payload_beyond_urdf(est.regressor, consistent.full, rls.R, est.column_scale, rls.lam,
+                                   self._weights, noise, est.n_samples_learned)
+
+    def excitation(self) -> ExcitationReport:
+        """Return what the data seen so far determine: the rigid-body information matrix's spectrum.
+
+        Raises:
+            ValueError: For a model without a rigid-body part (``NP``).
+        """
+        from semiparam_ros.core.rigid_body.identification import excitation_report
+
+        rls = self._rigid_learner().rls
+        return excitation_report(rls.R, self.estimator.column_scale, self.estimator.parameter_names)
+
+    def excited(self, q: Any, dq: Any, ddq: Any) -> np.ndarray:
+        """Tell whether the data seen so far determine the rigid-body part at these states.
+
+        False where the rigid-body learner's relative predictive variance ``φ A⁻¹ φᵀ`` exceeds
+        :data:`~semiparam_ros.core.rigid_body.identification.OUTSIDE_EXCITED` on some output: a frozen model
+        used there extrapolates (the CAD values carry it, or nothing does).
+
+        Args:
+            q: Positions (n,) or (N, n) [rad].
+            dq: Velocities [rad/s], same shape.
+            ddq: Accelerations [rad/s²], same shape.
+
+        Returns:
+            A bool, or (N,) bools.
+
+        Raises:
+            RejectedSampleError: Wrong shapes or non-finite values.
+            ValueError: For a model without a rigid-body part (``NP``).
+        """
+        from semiparam_ros.core.rigid_body.identification import outside_excited
+
+        X, single = self._states(q, dq, ddq)
+        variance = self._rigid_learner().predict_many(X).variance
+        assert variance is not None  # predict_many returns it
+        inside = ~outside_excited(variance)
+        return inside[0] if single else inside
+
+    def _rigid_learner(self) -> ParametricModel:
+        """Return the rigid-body learner of the served model.
+
+        Raises:
+            ValueError: For a model without one (``NP``).
+        """
+        par = rigid_body_part(self._model())
+        if par is None:
+            raise ValueError("this needs a rigid-body part: the model is nonparametric only")
+        return par
+
+    def _model(self) -> Model:
+        return self.estimator.model if self._frozen is None else self._frozen
+
+    def _noise_s2(self) -> np.ndarray | None:
+        return self.estimator.noise.s2 if self._frozen is None else self._frozen_s2
+
+    # ------------------------------------------------------------------ description
+    @property
+    def joints(self) -> tuple[str, ...]:
+        """The joints, in the order of q, q̇, q̈ and of joint-torque outputs."""
+        return tuple(self.estimator.regressor.joint_names)
+
+    @property
+    def output(self) -> str:
+        """``"joint_torques"`` or ``"wrench"``."""
+        return str(self.estimator.regressor.output)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        """Names of the output components (joint names, or ``fx … tz``)."""
+        return tuple(self.estimator.regressor.output_names)
+
+    @property
+    def n_samples_learned(self) -> int:
+        """Samples the model has learned (the estimator's now, for a snapshot too)."""
+        return int(self.estimator.n_samples_learned)
+
+    @property
+    def config(self) -> EstimatorConfig:
+        """The configuration the model was learned with."""
+        return self.estimator.config
+
+    @property
+    def ready(self) -> bool:
+        """Whether the residual is active (its input standardizer finished its warm-up).
+
+        Before that the prediction is the rigid-body part alone (the CAD model before any data).
+        """
+        model = self._model()
+        npm = getattr(model, "nonparametric", None)
+        if npm is None:
+            return model.n_samples_seen > 0 if isinstance(model, ParametricModel) else False
+        return bool(npm.standardizer.ready)
+
+    @property
+    def parameters(self) -> np.ndarray | None:
+        """Identified base parameters in physical units (see :attr:`OnlineEstimator.parameters`)."""
+        return self.estimator.physical_parameters(self._model())
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of :attr:`parameters`."""
+        return self.estimator.parameter_names
+
+    # ------------------------------------------------------------------ evaluation
+    def _states(self, q: Any, dq: Any, ddq: Any) -> tuple[np.ndarray, bool]:
+        """``X = [q, q̇, q̈]`` (N, 3n) and whether one state was given; shapes and values checked."""
+        n = self._n
+        arrays = [check_finite_array(name, v) for name, v in (("q", q), ("dq", dq), ("ddq", ddq))]
+        shapes = {a.shape for a in arrays}
+        if len(shapes) != 1:
+            raise RejectedSampleError(f"q, dq, ddq must have one shape, got {[a.shape for a in arrays]}")
+        shape = arrays[0].shape
+        if shape == (n,):
+            return np.concatenate(arrays)[None, :], True
+        if len(shape) == 2 and shape[1] == n and shape[0] > 0:
+            return np.concatenate(arrays, axis=1), False
+        raise RejectedSampleError(f"q, dq, ddq must have shape ({n},) or (N, {n}) for joints "
+                                  f"{list(self.joints)}, got {shape}")
+
+    def _model_rows(self, X: np.ndarray, consistent: bool | None = None) -> Prediction:
+        """Return the model (no fast correction) at each row of X with its relative variance, all (N, t)."""
+        model = self._model()
+        rigid = None
+        if consistent is None:  # the configuration's choice, where it can be had without solving here
+            consistent = (bool(self.config["parametric.consistent"])
+                          and (self._attached is not None or self._solve)
+                          and isinstance(model, ConsistentSemiparametricModel | ParametricModel))
+        if consistent:
+            if not isinstance(model, ConsistentSemiparametricModel | ParametricModel):
+                raise ValueError("consistent=True needs the consistent SP (the default) or the P learner")
+            rigid = self.estimator.column_scale * self.consistent().base
+        if isinstance(model, ConsistentSemiparametricModel):
+            if X.shape[0] == 1:
+                pred = model.predict_model(X[0], rigid)
+                return Prediction(pred.parametric[None], pred.residual[None], pred.total[None],
+                                  np.asarray(pred.variance)[None])
+            return model.predict_model_many(X, rigid)
+        if isinstance(model, ParametricModel) and (X.shape[0] > 1 or rigid is not None):
+            return model.predict_many(X, rigid)
+        preds = [predict_with_variance(model, x) for x in X]  # the other learners: one state at a time
+        return Prediction(np.array([p.parametric for p in preds]), np.array([p.residual for p in preds]),
+                          np.array([p.total for p in preds]), np.array([p.variance for p in preds]))
+
+    def _std(self, variance: np.ndarray) -> np.ndarray:
+        s2 = self._noise_s2()
+        if s2 is None:
+            return np.full(variance.shape, np.inf)
+        return np.sqrt(s2 * (1.0 + np.fmax(variance, 0.0)))
+
+    def predict_parts(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None
+                      ) -> ModelPrediction:
+        """Return the model and its parts at one state or N states.
+
+        Args:
+            q: Positions (n,) or (N, n) [rad].
+            dq: Velocities, same shape [rad/s].
+            ddq: Accelerations, same shape [rad/s²].
+            consistent: Use the physically consistent rigid-body parameters (:meth:`consistent`) instead
+                of the unconstrained estimate; the residual follows them. Better outside the excited range
+                (real KUKA, frozen on a faster motion: 2.7× lower error; docs/identification.md). None:
+                ``parametric.consistent`` of the configuration (on by default; a model that may not
+                solve here — the node's served copy — uses it once its worker's solution is attached).
+
+        Returns:
+            Total, rigid-body part, residual and σ, each (t,) or (N, t).
+
+        Raises:
+            RejectedSampleError: Wrong shapes, NaN/inf or absurdly large values (nothing is changed).
+        """
+        X, single = self._states(q, dq, ddq)
+        pred = self._model_rows(X, consistent)
+        assert pred.variance is not None  # every path returns it
+        std = self._std(np.asarray(pred.variance))
+        total, rigid, residual = pred.total, pred.parametric, pred.residual
+        if single:
+            return ModelPrediction(total[0].copy(), rigid[0].copy(), residual[0].copy(), std[0].copy())
+        return ModelPrediction(total, rigid, residual, std)
+
+    def predict(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """``(τ, σ)``: the model at one state (n,) → (t,), or N states (N, n) → (N, t).
+
+        Many states in one call are far cheaper per state than single calls (one matrix product and one
+        triangular solve for all of them; measured in ``bench/bench_serving.py``).
+
+        Args:
+            q: Positions (n,) or (N, n) [rad], in the order of :attr:`joints`.
+            dq: Velocities [rad/s], same shape.
+            ddq: Accelerations [rad/s²], same shape.
+            consistent: Use the physically consistent rigid-body parameters (see :meth:`predict_parts`).
+
+        Returns:
+            The prediction [N·m] and its standard deviation [N·m].
+
+        Raises:
+            RejectedSampleError: Wrong shapes, NaN/inf or absurdly large values.
+        """
+        parts = self.predict_parts(q, dq, ddq, consistent=consistent)
+        return parts.total, parts.std
+
+    def gravity(self, q: Any) -> np.ndarray:
+        """Gravity torques (or the gravity wrench at the sensor) of the identified inertial parameters.
+
+        ``Φ(q, 0, 0) π̂`` with the friction, offset and armature columns left out: what holds the arm
+        still at q (no residual, no offsets).
+
+        Args:
+            q: Positions (n,) or (N, n) [rad].
+
+        Returns:
+            (t,) or (N, t) [N·m].
+
+        Raises:
+            RejectedSampleError: Wrong shape or non-finite q.
+            ValueError: For a model without a rigid-body part (``NP``).
+        """
+        params = self.parameters
+        if params is None:
+            raise ValueError("gravity() needs a rigid-body part: this model is nonparametric only")
+        qa = check_finite_array("q", q)
+        zeros = np.zeros_like(qa)
+        Phi = self.estimator.regressor.base_regressor(qa, zeros, zeros)
+        return np.asarray(Phi[..., self._inertial] @ params[self._inertial])
+
+    def cad(self, q: Any, dq: Any, ddq: Any) -> np.ndarray:
+        """Return the CAD model: RNEA with the URDF's inertial parameters, no friction or offsets [N·m].
+
+        Args:
+            q: Positions (n,) or (N, n) [rad].
+            dq: Velocities [rad/s], same shape.
+            ddq: Accelerations [rad/s²], same shape.
+
+        Returns:
+            (t,) or (N, t).
+
+        Raises:
+            RejectedSampleError: Wrong shapes or non-finite values.
+        """
+        reg = self.estimator.regressor
+        Phi = reg.regressor(q, dq, ddq)
+        return np.asarray(Phi @ self._cad_full)
+
+
+def load_model(path: str | os.PathLike[str]) -> LearnedModel:
+    """Load a learned model from a self-contained checkpoint (no configuration or URDF file needed).
+
+    Args:
+        path: A checkpoint written by the node (``~/save``, periodic, final), by ``learn`` or by
+            :meth:`OnlineEstimator.save`.
+
+    Returns:
+        The model, ready to predict.
+
+    Raises:
+        CheckpointError: Missing, truncated, corrupt or foreign file; a checkpoint of an older version
+            without its configuration; a state that does not fit its own configuration.
+    """
+    state = load_npz(Path(path).expanduser())
+    config, urdf, versions = read_config(path, state)
+    try:
+        regressor = build_regressor(config, urdf_xml=urdf)
+        estimator = OnlineEstimator(config, regressor=regressor, kind=learner_kind(state))
+    except (ConfigurationError, OSError) as err:
+        raise CheckpointError(f"{path}: cannot rebuild the model it holds: {err}") from err
+    estimator.load_state(state, str(path))
+    model = LearnedModel(estimator)
+    model.versions = versions
+    return model

@@ -1,0 +1,1 @@
+"""Hyperparameter selection: hold-out and protocol grids, selection by held-out motion, fleets."""
