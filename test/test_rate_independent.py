@@ -10,6 +10,7 @@ import pytest
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.build import rmse_window_samples, standardizer_warmup_samples
 from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.estimator.state import fingerprint as fingerprint_of
 from semiparam_ros.core.learners.features import Standardizer
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.core.stream.rate import measured_period_s, samples_in
@@ -71,7 +72,7 @@ def test_the_estimator_converts_the_warm_up_at_the_measured_rate_like_replay(rat
     offline = build_models(cfg, ["SP", "NP"], sample_period_s=measured_period_s(stamps))
     assert offline["SP"].nonparametric.standardizer.warmup == expected
     assert offline["NP"].standardizer.warmup == expected
-    fingerprint = est._fingerprint()
+    fingerprint = fingerprint_of(cfg, "SP", est.regressor)
     assert "standardizer_warmup_s" in fingerprint and '"nonparametric.standardizer_warmup"' not in fingerprint
 
 

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.linalg import cho_factor, cho_solve
 
+from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.core.learners.features import Standardizer
 from semiparam_ros.core.learners.semiparametric import (
     NonparametricModel,
     ParametricModel,
-    Prediction,
     SemiparametricModel,
 )
 

@@ -26,6 +26,7 @@ from semiparam_ros.core.learners.semiparametric import (
     SemiparametricModel,
 )
 from semiparam_ros.core.learners.uncertainty import predict_with_variance
+from semiparam_ros.core.stream.gate import exceeds
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.errors import RejectedSampleError
 
@@ -288,6 +289,6 @@ def test_noise_and_gate_kernels_are_the_numpy_expressions_bit_for_bit():
         s[rng.random(t) < 0.1] = np.inf
         e[rng.random(t) < 0.1] = np.nan
         for threshold in (0.5, 2.0, 5.0):
-            assert kernels.exceeds(e, s, threshold) == bool(np.any(np.abs(e) > threshold * s))
+            assert exceeds(e, s, threshold) == bool(np.any(np.abs(e) > threshold * s))
     ok, got = kernels.noise_update(s2, np.array([0.0, np.inf, 0, 0, 0, 0]), v, 0.5)
     assert not ok and np.array_equal(got, s2)

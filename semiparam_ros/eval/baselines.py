@@ -33,8 +33,9 @@ from scipy.linalg import solve_triangular
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import build_regressor, column_scale, regressor_function
+from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.core.learners.rrls import RecursiveRLS
-from semiparam_ros.core.learners.semiparametric import ParametricModel, Prediction
+from semiparam_ros.core.learners.semiparametric import ParametricModel
 from semiparam_ros.core.validation import check_finite_array, check_positive_int
 from semiparam_ros.errors import ConfigurationError
 

@@ -13,7 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.learners.semiparametric import Prediction, SemiparametricModel
+from semiparam_ros.core.learners.contract import Prediction
+from semiparam_ros.core.learners.semiparametric import SemiparametricModel
 
 __all__ = ["FrozenParametricSP"]
 

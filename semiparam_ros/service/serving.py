@@ -51,7 +51,8 @@ from semiparam_ros.core.estimator.build import Model, build_regressor
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.estimator.state import learner_kind, read_config
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
-from semiparam_ros.core.learners.semiparametric import ParametricModel, Prediction, rigid_body_part
+from semiparam_ros.core.learners.contract import Prediction
+from semiparam_ros.core.learners.semiparametric import ParametricModel, rigid_body_part
 from semiparam_ros.core.learners.uncertainty import predict_with_variance
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, ExcitationReport
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate

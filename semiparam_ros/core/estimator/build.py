@@ -3,7 +3,8 @@
 One configuration gives one rigid-body regressor (:func:`build_regressor`, Pinocchio from the URDF), one
 message-to-sample pipeline (:func:`build_pipeline`) and one learner (:func:`build_model`: ``P``, ``NP`` or
 ``SP`` in the configured combination). Lengths the configuration gives in seconds are converted at the
-measured sample period (:func:`apply_sample_period`); before it is known, at :data:`NOMINAL_PERIOD_S`.
+measured sample period by the learner itself (:func:`period_settings`, ``Learner.on_period``); before it
+is known, at :data:`NOMINAL_PERIOD_S`.
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from typing import Literal
 import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.learners.adaptation import forgetting_factor, learners
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
+from semiparam_ros.core.learners.contract import PeriodSettings
 from semiparam_ros.core.learners.joint import JointSemiparametricModel
 from semiparam_ros.core.learners.semiparametric import (
     NonparametricModel,
@@ -272,41 +273,24 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
     if kind not in ("P", "NP", "SP"):
         raise ConfigurationError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
     model = _build_model(config, kind, regressor)
+    model.period_settings = period_settings(config)
     if sample_period_s is not None:
-        apply_sample_period(model, config, sample_period_s)
+        model.on_period(sample_period_s)
     return model
 
 
-def apply_sample_period(model: Model, config: EstimatorConfig, sample_period_s: float) -> float | None:
-    """Convert what the configuration gives in seconds for a learner, at the measured sample period.
+def period_settings(config: EstimatorConfig) -> PeriodSettings:
+    """Return what a learner of this configuration converts at the measured sample period.
 
-    The one route by which the rate reaches a learner, online
-    (:class:`~semiparam_ros.core.estimator.online.OnlineEstimator`, once its
-    :class:`~semiparam_ros.core.stream.rate.RateMeter` has measured the period) and offline
-    (:func:`build_model` with ``sample_period_s``): the standardizer warm-up given in seconds becomes samples
-    (:func:`standardizer_warmup_samples`, if it is still running), the consistent model's fast correction
-    takes its memory ``semiparametric.tracker_time_constant``, and with ``adaptation.time_constant`` τ > 0
-    every learner (the slow ones) forgets with β = exp(−T/τ).
-
-    Args:
-        model: A learner (not yet past its warm-up for the warm-up to change).
-        config: Its configuration.
-        sample_period_s: The measured period T [s].
-
-    Returns:
-        β if the time constant set it, else ``None``.
+    ``adaptation.time_constant`` τ [s] (0: the per-sample factors stay) and the standardizer warm-up
+    ``nonparametric.standardizer_warmup_s`` [s] unless ``nonparametric.standardizer_warmup`` gives it in
+    samples; the consistent model also converts ``semiparametric.tracker_time_constant`` (its own
+    parameter). See :meth:`~semiparam_ros.core.learners.contract.Learner.on_period`.
     """
-    if not config["nonparametric.standardizer_warmup"]:
-        model.set_standardizer_warmup(standardizer_warmup_samples(config, sample_period_s))
-    if isinstance(model, ConsistentSemiparametricModel):
-        model.set_sample_period(sample_period_s)  # the fast correction's memory in seconds
-    tau = float(config["adaptation.time_constant"])
-    if tau <= 0.0:
-        return None
-    beta = forgetting_factor(tau, sample_period_s)
-    for rls in learners(model):
-        rls.set_forgetting(beta)
-    return beta
+    warmup_s = None if config["nonparametric.standardizer_warmup"] else \
+        float(config["nonparametric.standardizer_warmup_s"])
+    return PeriodSettings(time_constant_s=max(0.0, float(config["adaptation.time_constant"])),
+                          standardizer_warmup_s=warmup_s)
 
 
 def _build_model(config: EstimatorConfig, kind: ModelKind,

@@ -21,7 +21,6 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import (
     Model,
     ModelKind,
-    apply_sample_period,
     build_model,
     build_pipeline,
     build_regressor,
@@ -30,11 +29,8 @@ from semiparam_ros.core.estimator.build import (
 )
 from semiparam_ros.core.estimator.state import check_magnitudes, meta_arrays, read_meta
 from semiparam_ros.core.learners._step_kernels import joined_within
-from semiparam_ros.core.learners.adaptation import learners
-from semiparam_ros.core.learners.semiparametric import (
-    Prediction,
-    rigid_body_part,
-)
+from semiparam_ros.core.learners.contract import Prediction
+from semiparam_ros.core.learners.semiparametric import rigid_body_part
 from semiparam_ros.core.learners.uncertainty import NoiseScale
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.payload import PayloadLearner
@@ -296,11 +292,6 @@ class OnlineEstimator:
             raise ConfigurationError("the model has no rigid-body part to project")
         return par.parameters.copy(), par.rls.R.copy(), par.rls.lam
 
-    def _apply_forgetting(self, beta: float) -> None:
-        for rls in learners(self.model):
-            rls.set_forgetting(beta)
-        self.forgetting = beta
-
     def apply_runtime_parameters(self, config: EstimatorConfig) -> None:
         """Take the run-time gate and noise parameters (``gate.*``, ``uncertainty.*``) of a configuration.
 
@@ -316,18 +307,18 @@ class OnlineEstimator:
         self.gate_enabled = bool(config["gate.enabled"])
 
     def _measure_rate(self, stamp_ns: int) -> None:
-        """Feed the rate meter; once the period is known, convert what is given in seconds.
+        """Feed the rate meter; once the period is known, announce it to the learner (once).
 
-        The seconds-based warm-up becomes samples, and with ``adaptation.time_constant`` τ > 0 every
-        learner forgets with β = exp(−T/τ) from then on (:func:`apply_sample_period`, as offline).
+        The learner converts what its configuration gives in seconds at it
+        (:meth:`~semiparam_ros.core.learners.contract.Learner.on_period`): the standardizer warm-up, the
+        fast correction's memory and, with ``adaptation.time_constant`` τ > 0, β = exp(−T/τ) — as
+        offline, where :func:`~semiparam_ros.core.estimator.build.build_model` is given the period.
         """
         period = self._rate.add(stamp_ns)
         if period is None:
             return
         self.sample_period_s = period
-        beta = apply_sample_period(self.model, self.config, period)
-        if beta is not None:
-            self.forgetting = beta
+        self.forgetting = self.model.on_period(period)
 
     # ------------------------------------------------------------------ inspection
     @property
@@ -504,5 +495,5 @@ class OnlineEstimator:
         self.gate = gate
         self.payload = payload
         self.n_samples_learned = n_learned
-        if self.forgetting is not None:
-            self._apply_forgetting(self.forgetting)
+        if self.sample_period_s is not None:  # the restored learner takes the stream's period too
+            self.model.on_period(self.sample_period_s)

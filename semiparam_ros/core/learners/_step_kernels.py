@@ -1,9 +1,8 @@
-"""Compiled small-vector kernels of the per-sample step: noise scale, predictive σ and the gate's test.
+"""Compiled small-vector kernels of the per-sample step: noise scale, predictive σ, sample checks.
 
 At one sample per millisecond the t ≈ 6-vector work of
-:class:`~semiparam_ros.core.learners.uncertainty.NoiseScale`
-and :class:`~semiparam_ros.core.stream.gate.ContactGate` costs more in numpy's per-call overhead (a dozen
-ufunc
+:class:`~semiparam_ros.core.learners.uncertainty.NoiseScale` (and of the contact gate's test,
+:func:`semiparam_ros.core.stream.gate.exceeds`) costs more in numpy's per-call overhead (a dozen ufunc
 calls and reductions, each ≈ 0.5–1.5 µs with cold caches after the rotations) than in arithmetic. These
 kernels do the same element-wise IEEE operations in the same order (no ``fastmath``), so their results are
 bit-identical to the numpy expressions they replace, which stay in the callers as the reference for any
@@ -24,7 +23,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
-    "exceeds", "joined_within", "noise_std", "noise_update", "standardized_features",
+    "joined_within", "noise_std", "noise_update", "standardized_features",
 ]
 
 
@@ -54,15 +53,6 @@ def noise_update(s2: np.ndarray, e: np.ndarray, v: np.ndarray, alpha: float) -> 
         target = e[k] * e[k] / (1.0 + vk)
         out[k] = s2[k] + alpha * (target - s2[k])
     return True, out
-
-
-@njit(cache=True, nogil=True)
-def exceeds(e: np.ndarray, s: np.ndarray, threshold: float) -> bool:
-    """``any(|e_k| > threshold · s_k)`` (no division: σ may be 0 or inf; a NaN compares false)."""
-    for k in range(e.shape[0]):
-        if abs(e[k]) > threshold * s[k]:
-            return True
-    return False
 
 
 @njit(cache=True, nogil=True)

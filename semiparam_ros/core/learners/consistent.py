@@ -69,13 +69,12 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.core.learners.adaptation import forgetting_factor
+from semiparam_ros.core.learners.contract import Prediction, PredictionContext
 from semiparam_ros.core.learners.features import Standardizer
 from semiparam_ros.core.learners.rrls import RecursiveRLS
 from semiparam_ros.core.learners.semiparametric import (
     NonparametricModel,
     ParametricModel,
-    Prediction,
-    PredictionContext,
     Regressor,
     _TwoStageModel,
 )
@@ -317,7 +316,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             variance) average over.
         tracker_time_constant: τ_f [s], memory of the fast rigid-body correction (its ridge λ is
             ``lam_parametric``, toward zero).
-        sample_period_s: Provisional sample period [s] converting τ_f until :meth:`set_sample_period`.
+        sample_period_s: Provisional sample period [s] converting τ_f until :meth:`on_period`.
 
     Raises:
         ConfigurationError: Invalid sizes or hyperparameters.
@@ -390,13 +389,18 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         samples = max(self.tracker_time_constant / float(sample_period_s), floor)
         return forgetting_factor(samples, 1.0)
 
-    def set_sample_period(self, sample_period_s: float) -> None:
-        """Convert the fast correction's memory τ_f [s] at the measured sample period [s].
+    def on_period(self, sample_period_s: float) -> float | None:
+        """Take the measured sample period T [s], and convert the fast correction's memory τ_f [s] at it.
+
+        Besides what every learner converts
+        (:meth:`~semiparam_ros.core.learners.contract.Learner.on_period`).
 
         Raises:
-            ConfigurationError: On a non-positive period.
+            ConfigurationError: On a period that is not a finite number > 0.
         """
+        beta = super().on_period(sample_period_s)
         self.fast.set_forgetting(self._fast_forgetting(sample_period_s))
+        return beta
 
     # ------------------------------------------------------------------ prediction
     def _model_valid(self, xv: np.ndarray, Phi: np.ndarray, rigid: np.ndarray | None = None, *,
@@ -486,7 +490,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         return (self.parametric.rls, self.nonparametric.rls, self.fast)
 
     def adaptive_stages(self) -> tuple[RecursiveRLS, ...]:
-        """Return the two stages' learners (the fast tracker keeps its own memory, ``set_sample_period``)."""
+        """Return the two stages' learners (the fast tracker keeps its own memory: :meth:`on_period`)."""
         return (self.parametric.rls, self.nonparametric.rls)
 
     def predict_held(self, x: Any) -> Prediction:
@@ -614,22 +618,12 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         npm.n_samples_seen += 1
         self.n_samples_seen += 1
 
-    def learn_one(self, x: Any, y: Any) -> None:
-        """Learn one sample (x, y).
-
-        Raises:
-            RejectedSampleError: Bad x, y or regressor output (model unchanged).
-        """
-        self.predict_learn_one(x, y)
-
-    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
-        """Return the a-priori prediction (all parts), then learn (x, y).
-
-        Raises:
-            RejectedSampleError: Bad x, y or regressor output (model unchanged).
-        """
+    def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
+        """Predict x a priori (all parts), then learn (x, y); the prediction when asked for."""
         ctx = self.predict_ahead(x)
         self.learn_ahead(ctx, y)
+        if not want_prediction:
+            return None
         pred = ctx.prediction
         return Prediction(pred.parametric, pred.residual, pred.total, None, pred.correction)
 

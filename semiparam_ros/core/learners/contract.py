@@ -3,14 +3,23 @@
 Every learner of :mod:`semiparam_ros.core.learners.semiparametric` (P, NP, the cascade SP),
 :mod:`~semiparam_ros.core.learners.joint` (SPJ) and :mod:`~semiparam_ros.core.learners.consistent`
 (the consistent SP) satisfies :class:`Learner`; the type checker holds them to it
-(:data:`semiparam_ros.core.estimator.build.Model`). The stages of a semiparametric model talk to each other
-through
-the public methods of :class:`~semiparam_ros.core.learners.semiparametric.ParametricModel` (``phi_fresh``,
-``predict_phi``, ``prior_output``, …), :class:`~semiparam_ros.core.learners.semiparametric.NonparametricModel`
+(:data:`semiparam_ros.core.estimator.build.Model`) and ``test/core/learners/test_contract.py`` runs the
+same behavioural checks over each. A learner predicts a :class:`Prediction`; ``predict_ahead`` keeps a
+:class:`PredictionContext` that ``learn_ahead`` consumes.
+
+**The sample period.** A learner is told the measured sample period once, by :meth:`Learner.on_period`,
+and converts there what its configuration gives in seconds (:class:`PeriodSettings`): the forgetting of
+its adaptive stages (β = exp(−T/τ)), the standardizer warm-up and, for the consistent model, the fast
+correction's memory. Until then it runs with its per-sample factors. ``on_period`` is idempotent: telling
+the same period again changes nothing, and a restored checkpoint is told the current one.
+
+The stages of a semiparametric model talk to each other through the public methods of
+:class:`~semiparam_ros.core.learners.semiparametric.ParametricModel` (``phi_fresh``, ``predict_phi``,
+``prior_output``, …), :class:`~semiparam_ros.core.learners.semiparametric.NonparametricModel`
 (``features_of``, ``predict_input``, ``learn_input``) and
-:class:`~semiparam_ros.core.learners.rrls.RecursiveRLS`
-(``predict_checked``, ``checked_step``, ``defer_step``, …): the ``*_checked`` methods take inputs the
-caller already validated (finite, the right shape), so a combination validates once.
+:class:`~semiparam_ros.core.learners.rrls.RecursiveRLS` (``predict_checked``, ``checked_step``,
+``defer_step``, …): the ``*_checked`` methods take inputs the caller already validated (finite, the right
+shape), so a combination validates once.
 
 Units: ``x = [q, q̇, q̈]`` (rad, rad/s, rad/s²); ``y`` a wrench (N, N·m, sensor frame) or joint torques (N·m).
 
@@ -23,13 +32,77 @@ Units: ``x = [q, q̇, q̈]`` (rad, rad/s, rad/s²); ``y`` a wrench (N, N·m, sen
 
 from __future__ import annotations
 
+import os
+from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from semiparam_ros.core.learners.rrls import RecursiveRLS
 
-__all__ = ["Learner"]
+__all__ = ["Learner", "PeriodSettings", "Prediction", "PredictionContext"]
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """One prediction, split into its parts (each (t,), units of y).
+
+    Attributes:
+        parametric: Rigid-body part ``ŷ = Φ(x) π̂`` (zeros for the NP model).
+        residual: Learned residual ``Δŷ`` (zeros for the P model, and for NP/SP during the warm-up).
+        total: ``ŷ + Δŷ``.
+        variance: Optional relative predictive variance per output, ``z A⁻¹ zᵀ`` summed over the stages
+            (multiply by the noise variance of y in its units²); None unless requested.
+        correction: The fast error tracker's part of ``residual`` (units of y), for a model that has one
+            (:mod:`semiparam_ros.core.learners.consistent`): ``total − correction`` is the model's
+            prediction from the state alone. None for the others.
+    """
+
+    parametric: np.ndarray
+    residual: np.ndarray
+    total: np.ndarray
+    variance: np.ndarray | None = None
+    correction: np.ndarray | None = None
+
+
+class PredictionContext:
+    """An a-priori prediction together with what learning the same sample needs.
+
+    Made by a model's ``predict_ahead(x)`` and consumed by the same model's ``learn_ahead(context, y)``;
+    it is only valid while the model has learned nothing else (checked: a stale or consumed context is
+    a programming error, :class:`ValueError`).
+
+    Attributes:
+        prediction: The prediction of ``predict_one(x, return_variance=True)``, its ``variance`` the
+            relative predictive variance ``v ≥ 0`` per output (a residual stage still in its standardizer
+            warm-up counts 0, as in :func:`~semiparam_ros.core.learners.uncertainty.predict_with_variance`).
+    """
+
+    __slots__ = ("Phi", "model", "phi", "prediction", "seen", "x")
+
+    def __init__(self, prediction: Prediction, model: Any, x: np.ndarray, Phi: np.ndarray | None,
+                 phi: np.ndarray | None) -> None:
+        self.prediction = prediction
+        self.model: object | None = model  # the learner that made it (None once consumed)
+        self.seen = model.n_samples_seen
+        self.x = x  # validated input (of the model)
+        self.Phi = Phi  # rigid-body regressor rows (t, p), or None (NP)
+        self.phi = phi  # random features (1, D), or None (P, or a residual stage in its warm-up)
+
+
+@dataclass(frozen=True)
+class PeriodSettings:
+    """What a learner converts at the measured sample period (:meth:`Learner.on_period`).
+
+    Attributes:
+        time_constant_s: τ [s] of the adaptive stages' forgetting, β = exp(−T/τ); 0 keeps the per-sample
+            factors the learner was built with.
+        standardizer_warmup_s: The residual standardizer's warm-up [s] (converted to samples, if the
+            warm-up is still running); ``None`` when it is given in samples.
+    """
+
+    time_constant_s: float = 0.0
+    standardizer_warmup_s: float | None = None
 
 
 @runtime_checkable
@@ -39,33 +112,41 @@ class Learner(Protocol):
     Attributes:
         n_outputs: Length of y.
         n_samples_seen: Samples learned so far (a prediction context is valid only while it is unchanged).
+        period_settings: What :meth:`on_period` converts.
+        sample_period_s: The period [s] last announced by :meth:`on_period` (None before).
     """
 
     n_outputs: int
     n_samples_seen: int
+    period_settings: PeriodSettings
+    sample_period_s: float | None
 
-    def predict_one(self, x: Any, *, return_variance: bool = False) -> Any:
-        """Predict y at x (a :class:`~semiparam_ros.core.learners.semiparametric.Prediction`)."""
+    def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
+        """Predict y at x; with ``return_variance`` the relative predictive variance per output."""
         ...
 
     def learn_one(self, x: Any, y: Any) -> None:
         """Learn one sample."""
         ...
 
-    def predict_learn_one(self, x: Any, y: Any) -> Any:
+    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
         """Predict y at x a priori, then learn (x, y); returns the prediction."""
         ...
 
-    def predict_ahead(self, x: Any) -> Any:
+    def predict_ahead(self, x: Any) -> PredictionContext:
         """Predict x with its variance and keep what learning x needs (a prediction context)."""
         ...
 
-    def learn_ahead(self, context: Any, y: Any) -> None:
+    def learn_ahead(self, context: PredictionContext, y: Any) -> None:
         """Learn y for the input of this model's last context."""
         ...
 
-    def predict_held(self, x: Any) -> Any:
+    def predict_held(self, x: Any) -> Prediction:
         """Predict x cheaply for a sample that will not be learned."""
+        ...
+
+    def on_period(self, sample_period_s: float) -> float | None:
+        """Take the measured sample period T [s]; returns the adaptive stages' β if τ set it."""
         ...
 
     def has_pending(self) -> bool:
@@ -84,6 +165,14 @@ class Learner(Protocol):
         """Return the learners whose forgetting ``adaptation.time_constant`` sets (parametric stage first)."""
         ...
 
+    def set_standardizer_warmup(self, warmup: int) -> None:
+        """Set the residual standardizer's warm-up [samples] if it is still running."""
+        ...
+
+    def copy(self) -> Any:
+        """Return a deep copy of the learned state (sharing the injected regressor callable)."""
+        ...
+
     def reset(self) -> None:
         """Forget everything learned."""
         ...
@@ -94,4 +183,8 @@ class Learner(Protocol):
 
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
         """Restore the state written by :meth:`state_dict`."""
+        ...
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the learned state to one ``.npz`` file atomically."""
         ...

@@ -49,12 +49,11 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.learners.contract import Prediction, PredictionContext
 from semiparam_ros.core.learners.features import Standardizer
 from semiparam_ros.core.learners.semiparametric import (
     NonparametricModel,
     ParametricModel,
-    Prediction,
-    PredictionContext,
     Regressor,
     _TwoStageModel,
 )
@@ -185,7 +184,7 @@ class JointSemiparametricModel(_TwoStageModel):
         assert Phi is not None  # a two-stage context always holds the regressor
         self._learn_valid(context.x, yv, Phi, context.phi)
 
-    def _step(self, x: Any, y: Any) -> Prediction:
+    def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction:
         xv, yv, Phi = self._check(x, y)
         assert yv is not None
         phi = self.nonparametric.features_of(xv) if self.nonparametric.standardizer.ready else None
@@ -231,22 +230,6 @@ class JointSemiparametricModel(_TwoStageModel):
         npm.n_samples_seen += 1
         self.n_samples_seen += 1
         return pred
-
-    def learn_one(self, x: Any, y: Any) -> None:
-        """Learn one sample (x, y).
-
-        Raises:
-            RejectedSampleError: Bad x, y or regressor output (model unchanged).
-        """
-        self._step(x, y)
-
-    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
-        """Return the a-priori prediction (both parts), then learn (x, y); one pass per learner.
-
-        Raises:
-            RejectedSampleError: Bad x, y or regressor output (model unchanged).
-        """
-        return self._step(x, y)
 
     @property
     def parameters(self) -> np.ndarray:

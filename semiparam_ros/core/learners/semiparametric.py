@@ -34,9 +34,9 @@ model unchanged: every check runs before any state is touched.
 from __future__ import annotations
 
 import copy as _copy
+import math
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -44,72 +44,97 @@ import numpy as np
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.core.learners._kernels import within
 from semiparam_ros.core.learners._step_kernels import standardized_features
+from semiparam_ros.core.learners.adaptation import forgetting_factor
+from semiparam_ros.core.learners.contract import PeriodSettings, Prediction, PredictionContext
 from semiparam_ros.core.learners.features import RandomFourierFeatures, Standardizer
 from semiparam_ros.core.learners.rrls import RecursiveRLS
+from semiparam_ros.core.stream.rate import samples_in
 from semiparam_ros.core.validation import MAX_ABS_INPUT, check_finite_array, check_positive_int
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
 __all__ = [
-    "NonparametricModel", "ParametricModel", "Prediction", "PredictionContext", "SemiparametricModel",
+    "NonparametricModel", "ParametricModel", "SemiparametricModel",
     "rigid_body_part",
 ]
 
 Regressor = Callable[[np.ndarray], np.ndarray]
 
 
-@dataclass(frozen=True)
-class Prediction:
-    """One prediction, split into its parts (each (t,), units of y).
-
-    Attributes:
-        parametric: Rigid-body part ``ŷ = Φ(x) π̂`` (zeros for the NP model).
-        residual: Learned residual ``Δŷ`` (zeros for the P model, and for NP/SP during the warm-up).
-        total: ``ŷ + Δŷ``.
-        variance: Optional relative predictive variance per output, ``z A⁻¹ zᵀ`` summed over the stages
-            (multiply by the noise variance of y in its units²); None unless requested.
-        correction: The fast error tracker's part of ``residual`` (units of y), for a model that has one
-            (:mod:`semiparam_ros.core.learners.consistent`): ``total − correction`` is the model's
-            prediction from the state alone. None for the others.
-    """
-
-    parametric: np.ndarray
-    residual: np.ndarray
-    total: np.ndarray
-    variance: np.ndarray | None = None
-    correction: np.ndarray | None = None
-
-
-class PredictionContext:
-    """An a-priori prediction together with what learning the same sample needs.
-
-    Made by a model's ``predict_ahead(x)`` and consumed by the same model's ``learn_ahead(context, y)``;
-    it is only valid while the model has learned nothing else (checked: a stale or consumed context is
-    a programming error, :class:`ValueError`).
-
-    Attributes:
-        prediction: The prediction of ``predict_one(x, return_variance=True)``, its ``variance`` the
-            relative predictive variance ``v ≥ 0`` per output (a residual stage still in its standardizer
-            warm-up counts 0, as in :func:`~semiparam_ros.core.learners.uncertainty.predict_with_variance`).
-    """
-
-    __slots__ = ("Phi", "model", "phi", "prediction", "seen", "x")
-
-    def __init__(self, prediction: Prediction, model: _Model, x: np.ndarray, Phi: np.ndarray | None,
-                 phi: np.ndarray | None) -> None:
-        self.prediction = prediction
-        self.model: _Model | None = model
-        self.seen = model.n_samples_seen
-        self.x = x  # validated input (of the model)
-        self.Phi = Phi  # rigid-body regressor rows (t, p), or None (NP)
-        self.phi = phi  # random features (1, D), or None (P, or a residual stage in its warm-up)
-
-
 class _Model:
-    """Shared persistence plumbing; subclasses define ``_kind``, ``_components`` and ``_shape_key``."""
+    """What every learner shares: learning, the sample period, persistence.
+
+    Subclasses define ``_kind``, ``_learn`` (one sample, with or without its a-priori prediction),
+    ``_check_x``, ``predict_ahead_checked``, ``learn_ahead_checked``, ``rls_stages`` and the state.
+    """
 
     _kind = ""
     n_outputs: int
     n_samples_seen: int
+    #: What :meth:`on_period` converts (set by the builder from the configuration).
+    period_settings = PeriodSettings()
+    #: The period [s] last announced by :meth:`on_period` (None before).
+    sample_period_s: float | None = None
+
+    def learn_one(self, x: Any, y: Any) -> None:
+        """Learn one sample (x, y).
+
+        Raises:
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
+        """
+        self._learn(x, y, False)
+
+    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
+        """Return the a-priori prediction for x, then learn (x, y) (one pass over each stage's factor).
+
+        Raises:
+            RejectedSampleError: Bad x, y or regressor output (model unchanged).
+        """
+        prediction = self._learn(x, y, True)
+        assert prediction is not None  # asked for
+        return prediction
+
+    def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:  # pragma: no cover
+        raise NotImplementedError
+
+    def on_period(self, sample_period_s: float) -> float | None:
+        """Take the measured sample period T [s] and convert what :attr:`period_settings` gives in seconds.
+
+        The standardizer warm-up given in seconds becomes ``max(1, round(d/T))`` samples (if it is still
+        running), and with a time constant τ > 0 every adaptive stage forgets with β = exp(−T/τ).
+        Idempotent: the same T again changes nothing.
+
+        Args:
+            sample_period_s: T > 0 [s].
+
+        Returns:
+            β if the time constant set it, else ``None``.
+
+        Raises:
+            ConfigurationError: On a period that is not a finite number > 0.
+
+        Example:
+            >>> import numpy as np
+            >>> model = NonparametricModel(3, 1, n_features=8)
+            >>> model.period_settings = PeriodSettings(time_constant_s=20.0)
+            >>> round(model.on_period(0.001), 9) == round(float(np.exp(-0.001 / 20.0)), 9)
+            True
+        """
+        period = float(sample_period_s)
+        if not (math.isfinite(period) and period > 0.0):
+            raise ConfigurationError(f"sample period must be a finite number > 0 s, got {sample_period_s!r}")
+        settings = self.period_settings
+        if settings.standardizer_warmup_s is not None:
+            self.set_standardizer_warmup(samples_in(settings.standardizer_warmup_s, sample_period_s))
+        beta = None
+        if settings.time_constant_s > 0.0:
+            beta = forgetting_factor(settings.time_constant_s, sample_period_s)
+            for rls in self.adaptive_stages():
+                rls.set_forgetting(beta)
+        self.sample_period_s = period
+        return beta
+
+    def set_standardizer_warmup(self, warmup: int) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
 
     def _take(self, context: PredictionContext) -> PredictionContext:
         """Check that ``context`` was made by this model in its current state.
@@ -428,27 +453,15 @@ class ParametricModel(_Model):
         yp, var = self.predict_phi(Phi, return_variance)
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy(), var)
 
-    def learn_one(self, x: Any, y: Any) -> None:
-        """Update π̂ with one sample (t rows, one time step).
-
-        Raises:
-            RejectedSampleError: Bad x, y or regressor output (model unchanged).
-        """
+    def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
+        """Update π̂ with one sample (t rows, one time step); the a-priori prediction in the same pass."""
         xv, yv = self._check(x, y)
         assert yv is not None  # _check returns y checked when it is given
         Phi = self.phi_cached(xv)
-        self.update_phi(Phi, yv)
-        self.n_samples_seen += 1
-
-    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
-        """Return the a-priori prediction for x, then learn (x, y), in one pass over the factor.
-
-        Raises:
-            RejectedSampleError: Bad x, y or regressor output (model unchanged).
-        """
-        xv, yv = self._check(x, y)
-        assert yv is not None  # _check returns y checked when it is given
-        Phi = self.phi_cached(xv)
+        if not want_prediction:
+            self.update_phi(Phi, yv)
+            self.n_samples_seen += 1
+            return None
         yp = self.predict_update_phi(Phi, yv)
         self.n_samples_seen += 1
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy())
@@ -615,28 +628,13 @@ class NonparametricModel(_Model):
         r, var = self.predict_input(xv, return_variance)
         return Prediction(np.zeros(self.n_outputs), r, r.copy(), var)
 
-    def learn_one(self, x: Any, y: Any) -> None:
-        """Learn one sample (during the warm-up: only feed the standardizer).
-
-        Raises:
-            RejectedSampleError: Bad x or y (model unchanged).
-        """
+    def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
+        """Learn one sample (during the warm-up: only feed the standardizer); its a-priori prediction."""
         xv = check_finite_array("x", x, (self.n_inputs,))
         yv = check_finite_array("y", y, (self.n_outputs,))
-        self.learn_input(xv, yv, False)
+        r = self.learn_input(xv, yv, want_prediction)
         self.n_samples_seen += 1
-
-    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
-        """Return the a-priori prediction for x, then learn (x, y) (one pass over the factor).
-
-        Raises:
-            RejectedSampleError: Bad x or y (model unchanged).
-        """
-        xv = check_finite_array("x", x, (self.n_inputs,))
-        yv = check_finite_array("y", y, (self.n_outputs,))
-        r = self.learn_input(xv, yv, True)
-        self.n_samples_seen += 1
-        return Prediction(np.zeros(self.n_outputs), r, r.copy())
+        return Prediction(np.zeros(self.n_outputs), r, r.copy()) if want_prediction else None
 
     @property
     def parameters(self) -> None:
@@ -920,7 +918,7 @@ class SemiparametricModel(_TwoStageModel):
 
     def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
         """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
-        # learn_one's _step with the regressor, ŷ and features of the prediction; both stages' rows are
+        # learn_one's _learn with the regressor, ŷ and features of the prediction; both stages' rows are
         # checked before either learner changes, so a refused value leaves the model as it was
         par, npm = self.parametric, self.nonparametric
         Phi, phi = self._take(context).Phi, context.phi
@@ -931,7 +929,7 @@ class SemiparametricModel(_TwoStageModel):
         target = yv.copy() if y0 is None else yv - y0
         par_step = par.rls.checked_step(Phi, target.reshape(-1, 1), owned=True)
         if phi is None:
-            # warm-up (see _step and the class docstring for the ŷ block's statistics)
+            # warm-up (see _learn and the class docstring for the ŷ block's statistics)
             xv = context.x
             measured = self.yhat_statistics == "measured"
             npm.standardizer.partial_fit(np.concatenate([xv, yv if measured else yp]))
@@ -944,7 +942,7 @@ class SemiparametricModel(_TwoStageModel):
         npm.n_samples_seen += 1
         self.n_samples_seen += 1
 
-    def _step(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
+    def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
         xv, yv, Phi = self._check(x, y)
         assert yv is not None
         yp = self.parametric.predict_update_phi(Phi, yv)
@@ -959,21 +957,3 @@ class SemiparametricModel(_TwoStageModel):
         self.nonparametric.n_samples_seen += 1
         self.n_samples_seen += 1
         return Prediction(yp, r, yp + r) if want_prediction else None
-
-    def learn_one(self, x: Any, y: Any) -> None:
-        """Learn one sample: parametric stage, then the residual of its a-priori prediction.
-
-        Raises:
-            RejectedSampleError: Bad x, y or regressor output (model unchanged).
-        """
-        self._step(x, y, False)
-
-    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
-        """Return the a-priori prediction (both parts), then learn (x, y); one pass per stage.
-
-        Raises:
-            RejectedSampleError: Bad x, y or regressor output (model unchanged).
-        """
-        out = self._step(x, y, True)
-        assert out is not None
-        return out

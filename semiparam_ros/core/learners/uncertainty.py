@@ -29,7 +29,7 @@ from typing import Any, TypeGuard
 import numpy as np
 
 from semiparam_ros.core.learners._step_kernels import noise_std, noise_update
-from semiparam_ros.core.learners.semiparametric import Prediction
+from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
 __all__ = ["NoiseScale", "predict_with_variance"]

@@ -44,11 +44,20 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
-from semiparam_ros.core.learners._step_kernels import exceeds
 from semiparam_ros.errors import ConfigurationError
 
-__all__ = ["ContactGate", "GateConfig", "Verdict"]
+__all__ = ["ContactGate", "GateConfig", "Verdict", "exceeds"]
+
+
+@njit(cache=True, nogil=True)
+def exceeds(e: np.ndarray, s: np.ndarray, threshold: float) -> bool:
+    """``any(|e_k| > threshold · s_k)`` (no division: σ may be 0 or inf; a NaN compares false)."""
+    for k in range(e.shape[0]):
+        if abs(e[k]) > threshold * s[k]:
+            return True
+    return False
 
 
 class Verdict(enum.Enum):

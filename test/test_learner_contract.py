@@ -1,0 +1,131 @@
+"""The learner contract, run over every learner the builder makes (P, NP, and SP as cascade, joint fit and
+consistent model): inputs are not mutated, a checkpoint round trip predicts and learns on identically,
+the seed fixes the random features, ``on_period`` converts seconds as the formulas say and is idempotent,
+``learn_one`` and ``predict_learn_one`` leave the same state, and a restored learner takes the period
+again through ``on_period`` (the fast correction's memory and the warm-up included)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.estimator.build import build_model, build_regressor
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.learners.contract import Learner, PeriodSettings
+from semiparam_ros.core.stream.messages import Sample
+
+LEARNERS = [("P", "cascade"), ("NP", "cascade"), ("SP", "cascade"), ("SP", "joint"), ("SP", "consistent")]
+TAU_S, WARMUP_S = 5.0, 0.3
+
+
+def config(combination: str, **overrides: object) -> EstimatorConfig:
+    base = {"semiparametric.combination": combination, "nonparametric.n_features": 16,
+            "adaptation.time_constant": TAU_S, "nonparametric.standardizer_warmup_s": WARMUP_S,
+            "nonparametric.standardizer_warmup": 0, "gate.enabled": False}
+    if combination == "joint":  # the joint fit needs one forgetting factor for both stages
+        base["nonparametric.forgetting"] = EstimatorConfig.defaults()["parametric.forgetting"]
+    return EstimatorConfig.defaults().with_overrides({**base, **overrides})
+
+
+@pytest.fixture(scope="module")
+def regressor():
+    return build_regressor(EstimatorConfig.defaults())
+
+
+def stream(n: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    rng = np.random.default_rng(seed)
+    n_joints = len(EstimatorConfig.defaults()["robot.joints"])
+    return [(rng.uniform(-1, 1, 3 * n_joints), rng.normal(0, 2, 6)) for _ in range(n)]
+
+
+def states_equal(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> bool:
+    return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+
+@pytest.mark.parametrize(("kind", "combination"), LEARNERS)
+def test_inputs_are_not_mutated_and_learn_one_equals_predict_learn_one(kind, combination, regressor):
+    cfg = config(combination)
+    a, b, c = (build_model(cfg, kind, regressor) for _ in range(3))
+    assert isinstance(a, Learner)
+    for x, y in stream(60, 1):
+        x0, y0 = x.copy(), y.copy()
+        a.learn_one(x, y)
+        b.predict_learn_one(x, y)
+        c.predict_one(x, return_variance=True)
+        c.learn_ahead(c.predict_ahead(x), y)
+        c.predict_held(x)
+        assert np.array_equal(x, x0) and np.array_equal(y, y0)
+    assert a.n_samples_seen == b.n_samples_seen == 60
+    a.apply_pending()
+    b.apply_pending()
+    assert states_equal(a.state_dict(), b.state_dict())
+
+
+@pytest.mark.parametrize(("kind", "combination"), LEARNERS)
+def test_a_checkpoint_round_trip_predicts_and_learns_on_identically(kind, combination, regressor):
+    cfg = config(combination)
+    model = build_model(cfg, kind, regressor, sample_period_s=0.01)
+    for x, y in stream(80, 2):
+        model.learn_one(x, y)
+    restored = build_model(cfg, kind, regressor, sample_period_s=0.01)
+    restored.load_state_dict({k: v.copy() for k, v in model.state_dict().items()})
+    for x, y in stream(30, 3):
+        got, want = restored.predict_learn_one(x, y), model.predict_learn_one(x, y)
+        assert np.array_equal(got.total, want.total)
+
+
+@pytest.mark.parametrize(("kind", "combination"), [k for k in LEARNERS if k[0] != "P"])
+def test_the_seed_fixes_the_random_features(kind, combination, regressor):
+    preds = {}
+    for seed in (0, 0, 1):
+        model = build_model(config(combination, **{"nonparametric.seed": seed}), kind, regressor)
+        for x, y in stream(120, 4):
+            out = model.predict_learn_one(x, y)
+        preds.setdefault(seed, []).append(out.total)
+    assert np.array_equal(preds[0][0], preds[0][1])
+    assert not np.array_equal(preds[0][0], preds[1][0])
+
+
+@pytest.mark.parametrize(("kind", "combination"), LEARNERS)
+def test_on_period_converts_seconds_and_is_idempotent(kind, combination, regressor):
+    cfg = config(combination)
+    once = build_model(cfg, kind, regressor)
+    assert once.period_settings == PeriodSettings(TAU_S, WARMUP_S)
+    twice = once.copy()
+    period = 0.002
+    beta = once.on_period(period)
+    assert beta == twice.on_period(period) == twice.on_period(period)
+    assert beta == pytest.approx(math.exp(-period / TAU_S), rel=1e-15)
+    assert all(rls.forgetting == beta for rls in once.adaptive_stages())
+    assert once.sample_period_s == twice.sample_period_s == period
+    if kind != "P":  # the standardizer warm-up in seconds became samples at T
+        npm = getattr(once, "nonparametric", once)
+        assert npm.standardizer.warmup == round(WARMUP_S / period)
+    assert states_equal(once.state_dict(), twice.state_dict())
+    with pytest.raises(ValueError, match="sample period"):
+        once.on_period(0.0)
+
+
+def test_a_restored_consistent_model_takes_the_streams_period_in_every_part():
+    """The estimator announces the measured period to a learner loaded from a checkpoint: the adaptive
+    stages' β, the fast correction's memory and the warm-up equal those of a learner built at that period,
+    although the checkpoint was written before its writer had measured any (provisional 100 Hz values)."""
+    cfg = config("consistent")
+    early = OnlineEstimator(cfg)
+    for i, (x, y) in enumerate(stream(5, 5)):  # fewer stamps than the rate needs
+        early.step(Sample(10**9 + i * 2_000_000, x[:4], x[4:8], x[8:], y))
+    assert early.sample_period_s is None
+    state = early.checkpoint_state()
+    loader = OnlineEstimator(cfg)
+    for i, (x, y) in enumerate(stream(12, 6)):  # the loader measures the same period first
+        loader.step(Sample(10**9 + i * 2_000_000, x[:4], x[4:8], x[8:], y))
+    loader.load_state(state)
+    fresh = build_model(cfg, "SP", loader.regressor, sample_period_s=0.002)
+    provisional = build_model(cfg, "SP", loader.regressor)
+    assert loader.model.fast.forgetting == fresh.fast.forgetting != provisional.fast.forgetting
+    assert [r.forgetting for r in loader.model.adaptive_stages()] == \
+        [r.forgetting for r in fresh.adaptive_stages()]
+    assert loader.model.nonparametric.standardizer.warmup == fresh.nonparametric.standardizer.warmup
