@@ -26,7 +26,6 @@ from semiparam_ros.eval.options import DEFAULT_SPLITS
 __all__ = ["build_parser", "main"]
 
 _ROOT = Path(__file__).resolve().parents[2]
-KUKA_FRICTION_JOINTS = ("lwr_0_joint", "lwr_4_joint", "lwr_5_joint", "lwr_6_joint")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="URDF (default: --data/kuka_lwr4_cogimon.urdf if present, else the configuration's)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
                    help="override a parameter (repeatable)")
-    p.add_argument("--friction-joints", nargs="*", default=list(KUKA_FRICTION_JOINTS),
+    p.add_argument("--friction-joints", nargs="*", default=None,
                    help="joints of the friction criterion (default: the KUKA's lwr_0, lwr_4, lwr_5, lwr_6)")
     p.add_argument("--splits", type=int, default=DEFAULT_SPLITS,
                    help="test parts of the protocol (default %(default)s)")
@@ -72,11 +71,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     horizons = DEFAULT_HORIZONS if args.horizons is None else (args.horizons or None)
 
-    urdf = args.urdf
-    if urdf is None and (args.data / "kuka_lwr4_cogimon.urdf").is_file():
-        urdf = args.data / "kuka_lwr4_cogimon.urdf"
     try:
-        text = run_comparison(data=args.data, config=args.config, train=args.train, test=args.test, urdf=urdf,
+        text = run_comparison(data=args.data, config=args.config, train=args.train, test=args.test,
+                              urdf=args.urdf,
                               overrides=parse_overrides(args.overrides), friction_joints=args.friction_joints,
                               splits=args.splits, inject=not args.no_inject,
                               horizons=horizons, json_path=args.json,

@@ -451,9 +451,16 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
     return text
 
 
+#: A URDF shipped beside the logs (the KUKA logs' own), used when none is given.
+LOG_URDF = "kuka_lwr4_cogimon.urdf"
+#: The KUKA LWR4+'s friction-dominated joints (its logs' README): the friction criterion's default.
+KUKA_FRICTION_JOINTS = ("lwr_0_joint", "lwr_4_joint", "lwr_5_joint", "lwr_6_joint")
+
+
 def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", test: str = "measurements_3",
                    urdf: Path | None = None, overrides: Mapping[str, Any] | None = None,
-                   friction_joints: Sequence[str] = (), splits: int = DEFAULT_SPLITS, inject: bool = True,
+                   friction_joints: Sequence[str] | None = None, splits: int = DEFAULT_SPLITS,
+                   inject: bool = True,
                    horizons: Sequence[float | str] | None = DEFAULT_HORIZONS,
                    json_path: Path | None = None, markdown_path: Path | None = None,
                    figure_path: Path | None = None, progress: bool = True) -> str:
@@ -464,9 +471,10 @@ def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", t
         config: Parameter file (joint torques).
         train: Training bag, relative to ``data``.
         test: Test bag, relative to ``data``.
-        urdf: URDF overriding ``robot.urdf`` (``None``: the configuration's).
+        urdf: URDF overriding ``robot.urdf`` (``None``: the logs' own :data:`LOG_URDF` in ``data`` when
+            present, as the KUKA logs ship it, else the configuration's).
         overrides: Further parameter overrides (dotted names).
-        friction_joints: Joints of the friction criterion.
+        friction_joints: Joints of the friction criterion (``None``: :data:`KUKA_FRICTION_JOINTS`).
         splits: Test parts.
         inject: Run the external-torque measurement.
         horizons: Horizons of the age table [s] (0 = one step, ``"frozen"``); ``None`` = not run.
@@ -488,6 +496,10 @@ def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", t
     if not Path(data).is_dir():
         raise ConfigurationError(f"data folder {data} does not exist")
     over = dict(overrides or {})
+    if friction_joints is None:
+        friction_joints = KUKA_FRICTION_JOINTS
+    if urdf is None and (Path(data) / LOG_URDF).is_file():
+        urdf = Path(data) / LOG_URDF
     if urdf is not None:
         over["robot.urdf"] = str(urdf)
     cfg = load_evaluation_config(config, over)
