@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from semiparam_ros.sim.arms import arm_preset_configs, arm_regressor, simulate_arm
+from semiparam_ros.sim.arms import arm_regressor, simulate_arm
+from semiparam_ros.sim.presets import preset_configs
 
 
 def _rms(x: np.ndarray) -> np.ndarray:
@@ -24,7 +25,7 @@ def _rms(x: np.ndarray) -> np.ndarray:
 def main() -> None:
     """Print the table."""
     for robot in ("panda", "ur5"):
-        (config,) = arm_preset_configs(robot, ("contacts",), rate=100.0)
+        (config,) = preset_configs(robot, ("contacts",), rate=100.0)
         rec = simulate_arm(config)
         reg = arm_regressor(robot)
         phi = reg.regressor(rec.q, rec.dq, rec.ddq)

@@ -299,10 +299,10 @@ def source_bag(tmp_root: Path, name: str = "icub_xy") -> Path:
         return committed
     if name not in _BAG_CACHE:
         from semiparam_ros.sim.generate import generate
-        from semiparam_ros.sim.scenario import preset_configs
+        from semiparam_ros.sim.presets import preset_configs
 
         scenario = name.removeprefix("icub_")
-        _BAG_CACHE[name] = generate(tmp_root, preset_configs("default", (scenario,), duration=8.0),
+        _BAG_CACHE[name] = generate(tmp_root, preset_configs("icub", (scenario,), duration=8.0),
                                     progress=False)[0]
     return _BAG_CACHE[name]
 

@@ -17,12 +17,12 @@ from semiparam_ros.sim.arms import (
     ARM_ROBOTS,
     ArmScenarioConfig,
     ParameterPerturbation,
-    arm_preset_configs,
     arm_regressor,
     perturb_parameters,
     simulate_arm,
 )
 from semiparam_ros.sim.contacts import ContactConfig
+from semiparam_ros.sim.presets import preset_configs
 from semiparam_ros.sim.writer import write_recording
 
 ROBOTS = ("panda", "ur5")
@@ -215,7 +215,7 @@ def test_bag_reads_back_with_the_project_reader(tmp_path):
 
 
 def test_perturbation_is_consistent_bounded_and_shared_by_the_bags_of_one_robot():
-    a, b = arm_preset_configs("panda", ("excitation", "payload"), rate=100.0, duration=1.0)
+    a, b = preset_configs("panda", ("excitation", "payload"), rate=100.0, duration=1.0)
     ra, rb = simulate_arm(a), simulate_arm(b)
     np.testing.assert_array_equal(ra.parameters_before, rb.parameters_before)  # one physical robot
     assert not np.array_equal(ra.q, rb.q)  # two different excitations
@@ -335,7 +335,7 @@ def test_invalid_arm_configs_raise():
     with pytest.raises(ValueError):
         ParameterPerturbation(mass=1.5)
     with pytest.raises(ValueError):
-        arm_preset_configs("panda", ("xy",))
+        preset_configs("panda", ("xy",))
 
 
 @pytest.mark.parametrize("robot", ROBOTS)

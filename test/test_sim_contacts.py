@@ -16,7 +16,8 @@ from semiparam_ros.io.bags import read_topic_arrays
 from semiparam_ros.sim.contacts import ContactConfig, ContactEpisode, contact_forces, draw_episodes
 from semiparam_ros.sim.effects import SENSOR_FRAME
 from semiparam_ros.sim.ik import ARM_JOINTS
-from semiparam_ros.sim.scenario import CONTACTS_DURATION_S, ScenarioConfig, preset_configs, simulate
+from semiparam_ros.sim.presets import preset_configs
+from semiparam_ros.sim.scenario import CONTACTS_DURATION_S, ScenarioConfig, simulate
 from semiparam_ros.sim.writer import write_recording
 
 HAND = "r_hand_dh_frame"
@@ -144,7 +145,7 @@ def test_icub_contact_bag_reads_back(icub_pair, tmp_path):
 
 
 def test_contacts_scenario_puts_the_pickup_after_the_last_contact():
-    (config,) = preset_configs("default", ("contacts",))
+    (config,) = preset_configs("icub", ("contacts",))
     assert config.name == "icub_contacts" and config.duration == CONTACTS_DURATION_S
     assert config.contacts is not None and config.payload_mass == 0.5
     start, end = config.contacts.span(config.duration)

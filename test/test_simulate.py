@@ -24,11 +24,11 @@ from semiparam_ros.sim import scenario as scenario_module
 from semiparam_ros.sim.effects import DEFAULT_EFFECTS, NOMINAL_RMS, SENSOR_FRAME
 from semiparam_ros.sim.frames import frame_in_body
 from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics
+from semiparam_ros.sim.presets import preset_configs
 from semiparam_ros.sim.scenario import (
     CIRCLES,
     PUBLISHED_JOINT_ORDER,
     ScenarioConfig,
-    preset_configs,
     simulate,
 )
 from semiparam_ros.sim.trajectories import CartesianCircle, FourierTrajectory, multisine
@@ -266,7 +266,7 @@ def test_paper_rates_and_delay(bags):
     np.testing.assert_array_equal(w.stamp_ns - js.stamp_ns[20:520:10], 3_000_000)
     # the acceleration warm-up costs no wrench: every wrench becomes a learning sample
     assert len(list(iter_samples(bag, SamplePipeline(ARM_JOINTS, acceleration=AccelerationConfig())))) == 50
-    configs = preset_configs("paper")
+    configs = preset_configs("icub", preset="paper")
     assert [c.name for c in configs] == ["icub_xy", "icub_xz", "icub_payload"]
     assert all(round(c.duration * c.wrench_rate) == 10_000 and c.joint_rate == 100.0 for c in configs)
 

@@ -29,6 +29,7 @@ The measurement model, at every joint-state stamp t (s from the first stamp), jo
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -37,9 +38,7 @@ import numpy as np
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, is_physically_consistent
 from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 from semiparam_ros.sim.contacts import (
-    ContactConfig,
     ContactEpisode,
-    contacts_timing,
 )
 from semiparam_ros.sim.ik import ArmKinematics
 from semiparam_ros.sim.pipeline import (
@@ -60,12 +59,12 @@ from semiparam_ros.sim.trajectories import multisine
 __all__ = [
     "ARM_ROBOTS",
     "ARM_SCENARIOS",
+    "DEFAULT_DURATION_S",
     "ArmRecording",
     "ArmRobot",
     "ArmScenarioConfig",
     "JointFriction",
     "ParameterPerturbation",
-    "arm_preset_configs",
     "arm_regressor",
     "perturb_parameters",
     "simulate_arm",
@@ -345,15 +344,14 @@ ARM_ROBOTS: dict[str, ArmRobot] = {
     ),
 }
 
-#: Scenarios of :func:`arm_preset_configs`: ``excitation`` (no payload), ``payload`` (pickup at the middle),
-#: ``contacts`` (contact episodes in [0.15, 0.65]·T, then a pickup at 0.75·T; 120 s unless given).
+#: Scenarios of the arms (:func:`semiparam_ros.sim.presets.preset_configs`): ``excitation`` (no payload),
+#: ``payload`` (pickup at the middle), ``contacts`` (contact episodes in [0.15, 0.65]·T, then a pickup at
+#: 0.75·T; 120 s unless given).
 ARM_SCENARIOS: tuple[str, ...] = ("excitation", "payload", "contacts")
-
-_DEFAULT_PERTURBATION = ParameterPerturbation()
 
 #: Default length of the ``excitation`` and ``payload`` scenarios (s); ``contacts``: see
 #: :func:`~semiparam_ros.sim.contacts.contacts_timing`.
-_DEFAULT_DURATION = 60.0
+DEFAULT_DURATION_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -373,7 +371,7 @@ class ArmScenarioConfig(RecordingConfig):
         noise_scale: Factor on every noise σ (0 removes noise).
     """
 
-    duration: float = _DEFAULT_DURATION
+    duration: float = DEFAULT_DURATION_S
     robot: str = "panda"
     rate: float = 1000.0
     perturbation: ParameterPerturbation | None = field(default_factory=ParameterPerturbation)
@@ -395,6 +393,18 @@ class ArmScenarioConfig(RecordingConfig):
                 raise ValueError(f"{attr} must be finite and >= 0, got {value!r}")
         if self.armature is not None and not (np.isfinite(self.armature) and self.armature >= 0):
             raise ValueError(f"armature must be finite and >= 0 kg·m², got {self.armature!r}")
+
+    def record(self, *, progress: Callable[[int], None] | None = None) -> ArmRecording:
+        """Simulate this recording (:func:`simulate_arm`): joint torques.
+
+        Args:
+            progress: Accepted for the common interface; an arm reports no progress while simulating.
+        """
+        return simulate_arm(self)
+
+    def progress_units(self) -> tuple[int, str]:
+        """Return what the progress of writing counts: joint-state stamps."""
+        return round(self.duration * self.rate), "stamp"
 
     def true_friction(self) -> JointFriction:
         """Return the friction of this recording (the robot's, armature replaced if given, scaled)."""
@@ -619,69 +629,3 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
         contact_episodes=episodes,
         info=info,
     )
-
-
-def _rate_label(rate: float) -> str:
-    return f"{int(rate)}hz" if float(rate).is_integer() else f"{rate:g}hz".replace(".", "p")
-
-
-def arm_preset_configs(
-    robot: str,
-    scenarios: tuple[str, ...] = ("excitation", "payload"),
-    *,
-    rate: float = 1000.0,
-    duration: float | None = None,
-    payload_mass: float | None = None,
-    payload_time: float | None = None,
-    contacts: ContactConfig | None = None,
-    perturbation: ParameterPerturbation | None = _DEFAULT_PERTURBATION,
-    **overrides: Any,
-) -> list[ArmScenarioConfig]:
-    """Return the scenario configurations of an arm; bag names ``<robot>_<scenario>_<rate>hz``.
-
-    Args:
-        robot: Key of :data:`ARM_ROBOTS`.
-        scenarios: Any of :data:`ARM_SCENARIOS`.
-        rate: Joint-state rate (Hz).
-        duration: Length (s); default 60 s (``contacts``: 120 s).
-        payload_mass: Payload of ``payload`` and ``contacts`` (kg); default the robot's.
-        payload_time: Pickup time (s); default the middle (``contacts``: 0.75·T).
-        contacts: How ``contacts`` draws its episodes (default :class:`ContactConfig`).
-        perturbation: True parameters vs the URDF's (None: the URDF's exactly).
-        **overrides: Other :class:`ArmScenarioConfig` fields (seed, friction_scale,
-            armature, noise_scale, start_ns); None values are ignored.
-
-    Returns:
-        One configuration per scenario.
-
-    Raises:
-        ValueError: On an unknown robot or scenario, or invalid values.
-    """
-    if robot not in ARM_ROBOTS:
-        raise ValueError(f"robot must be one of {sorted(ARM_ROBOTS)}, got {robot!r}")
-    unknown = [s for s in scenarios if s not in ARM_SCENARIOS]
-    if unknown:
-        raise ValueError(f"unknown arm scenarios {unknown}; choose from {list(ARM_SCENARIOS)}")
-    mass = ARM_ROBOTS[robot].payload_mass if payload_mass is None else float(payload_mass)
-    extra = {k: v for k, v in overrides.items() if v is not None}
-    out = []
-    for scenario in scenarios:
-        kwargs: dict[str, Any] = dict(extra)
-        if scenario == "contacts":
-            length, pickup = contacts_timing(duration, payload_time)
-            kwargs.update(
-                payload_mass=mass,
-                payload_time=pickup,
-                contacts=contacts if contacts is not None else ContactConfig(),
-            )
-        else:
-            length = float(duration) if duration is not None else _DEFAULT_DURATION
-            if scenario == "payload":
-                kwargs.update(payload_mass=mass, payload_time=payload_time)
-        name = f"{robot}_{scenario}_{_rate_label(rate)}"
-        out.append(
-            ArmScenarioConfig(
-                name=name, robot=robot, duration=length, rate=float(rate), perturbation=perturbation, **kwargs
-            )
-        )
-    return out

@@ -13,14 +13,15 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from semiparam_ros.sim.arms import ArmRecording, ArmScenarioConfig, simulate_arm
-from semiparam_ros.sim.scenario import LEAD_IN_S, ScenarioConfig, SimulatedRecording, simulate
+from semiparam_ros.sim.arms import ArmRecording
+from semiparam_ros.sim.pipeline import RecordingConfig
+from semiparam_ros.sim.scenario import SimulatedRecording
 from semiparam_ros.sim.writer import write_recording
 
 __all__ = ["generate", "simulate_recording"]
 
 
-def simulate_recording(config: ScenarioConfig | ArmScenarioConfig, *,
+def simulate_recording(config: RecordingConfig, *,
                        progress: Callable[[int], None] | None = None) -> SimulatedRecording | ArmRecording:
     """Simulate one recording: the iCub's F/T sensor or an arm's joint torques, as the configuration says.
 
@@ -34,14 +35,12 @@ def simulate_recording(config: ScenarioConfig | ArmScenarioConfig, *,
     Raises:
         ValueError: If the trajectory cannot be tracked within the joint limits.
     """
-    if isinstance(config, ArmScenarioConfig):
-        return simulate_arm(config)
-    return simulate(config, progress=progress)
+    return config.record(progress=progress)
 
 
 def generate(
     out_dir: str | Path,
-    configs: Sequence[ScenarioConfig | ArmScenarioConfig],
+    configs: Sequence[RecordingConfig],
     *,
     overwrite: bool = False,
     compress: bool = True,
@@ -51,8 +50,7 @@ def generate(
 
     Args:
         out_dir: Parent folder (created if missing).
-        configs: The scenarios: iCub (:func:`~semiparam_ros.sim.scenario.preset_configs`) or joint-torque
-            arms (:func:`~semiparam_ros.sim.arms.arm_preset_configs`).
+        configs: The recordings, of any robot (:func:`semiparam_ros.sim.presets.preset_configs`).
         overwrite: Replace existing bag folders of the same names.
         compress: zstd-compress the MCAP chunks.
         progress: Show a tqdm progress bar on stderr (only when stderr is a terminal).
@@ -76,14 +74,7 @@ def generate(
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for config in configs:
-        if isinstance(config, ArmScenarioConfig):
-            count = round(config.duration * config.rate)
-            unit = "stamp"
-        else:  # wrench samples simulated + messages written (lead-in and lead-out joint states)
-            n_joint = round((config.duration + 2.0 * LEAD_IN_S) * config.joint_rate)
-            n_wrench = round(config.duration * config.wrench_rate)
-            count = n_wrench + 2 * n_joint + (3 if config.contacts is None else 5) * n_wrench
-            unit = "msg"
+        count, unit = config.progress_units()
         with tqdm(total=count, desc=config.name, unit=unit, disable=not show, leave=True) as bar:
             recording = simulate_recording(config, progress=bar.update)
             paths.append(write_recording(recording, out / config.name, overwrite=overwrite, compress=compress,

@@ -108,6 +108,14 @@ class RecordingConfig:
         if self.contacts is not None and not isinstance(self.contacts, ContactConfig):
             raise ValueError("contacts must be a ContactConfig or None")
 
+    def record(self, *, progress: Callable[[int], None] | None = None) -> Any:  # pragma: no cover - abstract
+        """Simulate this recording with its robot's measurement model (F/T wrench or joint torques)."""
+        raise NotImplementedError
+
+    def progress_units(self) -> tuple[int, str]:  # pragma: no cover - abstract
+        """Return the count and unit of the progress that simulating and writing this recording reports."""
+        raise NotImplementedError
+
     @property
     def pickup_time(self) -> float | None:
         """Pickup time [s from the start], or None without payload."""

@@ -35,7 +35,7 @@ and the wrench are exactly consistent at every stamp.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
 
@@ -45,9 +45,7 @@ from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.urdf import icub_urdf_path
 from semiparam_ros.sim.contacts import (
     CONTACTS_DURATION_S,
-    ContactConfig,
     ContactEpisode,
-    contacts_timing,
 )
 from semiparam_ros.sim.effects import (
     DEFAULT_EFFECTS,
@@ -86,14 +84,12 @@ __all__ = [
     "DEFAULT_VARIABILITY",
     "LEAD_IN_S",
     "OTHER_JOINTS",
-    "PRESETS",
     "PUBLISHED_JOINT_ORDER",
     "CircleSetup",
     "ScenarioConfig",
     "SimulatedRecording",
     "TrajectoryVariability",
     "hand_contact_wrenches",
-    "preset_configs",
     "simulate",
 ]
 
@@ -271,6 +267,20 @@ class ScenarioConfig(RecordingConfig):
             raise ValueError("start_ns + delay must be >= 0")
         if self.variability is not None and not isinstance(self.variability, TrajectoryVariability):
             raise ValueError("variability must be a TrajectoryVariability or None")
+
+    def record(self, *, progress: Callable[[int], None] | None = None) -> SimulatedRecording:
+        """Simulate this recording (:func:`simulate`): the F/T sensor's wrench.
+
+        Args:
+            progress: Called with the count of finished wrench samples.
+        """
+        return simulate(self, progress=progress)
+
+    def progress_units(self) -> tuple[int, str]:
+        """Return what the progress of simulating and writing counts: wrench samples and messages."""
+        n_joint = round((self.duration + 2.0 * LEAD_IN_S) * self.joint_rate)
+        n_wrench = round(self.duration * self.wrench_rate)
+        return n_wrench + 2 * n_joint + (3 if self.contacts is None else 5) * n_wrench, "msg"
 
 
 @dataclass(frozen=True)
@@ -605,80 +615,3 @@ def hand_contact_wrenches(
         transmitted[i, 3:] = np.cross(Rs.T @ (ph - ps), f_s)
         applied[i, :3] = Rh.T @ force[i]
     return applied, transmitted
-
-
-#: Presets: stream rates and length of the bags ``simulate --preset`` writes.
-PRESETS: dict[str, dict[str, float]] = {
-    "default": {"joint_rate": 100.0, "wrench_rate": 100.0, "duration": 60.0},
-    # The paper's logs: 10 000 wrench samples at 10 Hz; joint states at 100 Hz for the q̈ estimate.
-    "paper": {"joint_rate": 100.0, "wrench_rate": 10.0, "duration": 1000.0},
-}
-
-_SCENARIO_NAMES = {
-    "xy": "icub_xy",
-    "xz": "icub_xz",
-    "payload": "icub_payload",
-    "multisine": "icub_multisine",
-    "contacts": "icub_contacts",
-}
-
-
-
-def preset_configs(
-    preset: str = "default",
-    scenarios: tuple[str, ...] = ("xy", "xz", "payload"),
-    *,
-    effects: EffectParameters = DEFAULT_EFFECTS,
-    payload_mass: float = 0.5,
-    payload_trajectory: str = "xy",
-    contacts: ContactConfig | None = None,
-    **overrides: Any,
-) -> list[ScenarioConfig]:
-    """Return the scenario configurations of a preset.
-
-    Args:
-        preset: ``"default"`` (60 s, both streams 100 Hz) or ``"paper"`` (1000 s, wrench 10 Hz, joint
-            states 100 Hz).
-        scenarios: Any of ``"xy"``, ``"xz"``, ``"payload"``, ``"multisine"``, ``"contacts"``; bag names
-            are ``icub_<scenario>``. ``contacts`` is the payload scenario with contact episodes at the hand
-            before the pickup: :data:`CONTACTS_DURATION_S` long unless a duration is given, contacts in
-            ``[0.15, 0.65]·T``, pickup at ``0.75·T`` unless ``payload_time`` is given.
-        effects: Effect parameters (already scaled).
-        payload_mass: Payload of the ``payload`` scenario (kg).
-        payload_trajectory: Trajectory of the ``payload`` and ``contacts`` scenarios.
-        contacts: How the ``contacts`` scenario draws its episodes (default :class:`ContactConfig`).
-        **overrides: Any :class:`ScenarioConfig` field (duration, rates, delay, radius, speed, seed,
-            payload_time, start_ns); None values are ignored.
-
-    Returns:
-        One configuration per scenario.
-
-    Raises:
-        ValueError: On an unknown preset or scenario, or invalid values.
-    """
-    if preset not in PRESETS:
-        raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")
-    unknown = [s for s in scenarios if s not in _SCENARIO_NAMES]
-    if unknown:
-        raise ValueError(f"unknown scenarios {unknown}; choose from {sorted(_SCENARIO_NAMES)}")
-    base: dict[str, Any] = dict(PRESETS[preset])
-    base.update({k: v for k, v in overrides.items() if v is not None})
-    out = []
-    for scenario in scenarios:
-        kwargs = dict(base)
-        if scenario == "payload":
-            kwargs.update(trajectory=payload_trajectory, payload_mass=payload_mass)
-        elif scenario == "contacts":
-            given = overrides.get("duration") or None
-            duration, pickup = contacts_timing(given, overrides.get("payload_time"))
-            kwargs.update(
-                trajectory=payload_trajectory,
-                payload_mass=payload_mass,
-                duration=duration,
-                payload_time=pickup,
-                contacts=contacts if contacts is not None else ContactConfig(),
-            )
-        else:
-            kwargs.update(trajectory=scenario, payload_mass=0.0)
-        out.append(replace(ScenarioConfig(name=_SCENARIO_NAMES[scenario]), effects=effects, **kwargs))
-    return out
