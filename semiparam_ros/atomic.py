@@ -22,7 +22,8 @@ from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["atomic_open", "atomic_write_bytes", "atomic_write_text", "remove_stale_temporaries"]
+__all__ = ["atomic_open", "atomic_savefig", "atomic_write_bytes", "atomic_write_text",
+           "remove_stale_temporaries"]
 
 
 def atomic_open(path: str | os.PathLike[str], mode: str = "w") -> AbstractContextManager[IO[Any]]:
@@ -109,6 +110,30 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     """
     with atomic_open(path, "w") as fh:
         fh.write(text)
+
+
+def atomic_savefig(fig: Any, path: str | os.PathLike[str], *, dpi: int = 100, fmt: str | None = None) -> Path:
+    """Write a matplotlib figure to ``path`` atomically (format: ``fmt``, else the suffix's).
+
+    The parent folder is created. The figure is not closed (the caller owns it).
+
+    Args:
+        fig: A ``matplotlib.figure.Figure`` (anything with ``savefig(file, dpi=, format=)``).
+        path: Destination.
+        dpi: Resolution [dots per inch].
+        fmt: Image format (``None``: the suffix's, PNG without one).
+
+    Returns:
+        The destination.
+
+    Raises:
+        OSError: If the file cannot be written (the destination is then unchanged).
+    """
+    dest = Path(path)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_open(dest, "wb") as fh:
+        fig.savefig(fh, dpi=dpi, format=fmt or dest.suffix.lstrip(".").lower() or "png")
+    return dest
 
 
 def _fsync_dir(directory: Path) -> None:

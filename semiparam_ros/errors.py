@@ -3,7 +3,9 @@
 Callers catch what they mean: :class:`ConfigurationError` for invalid parameters, :class:`RejectedSampleError`
 for one bad input sample (the estimator counts it as a drop and goes on), :class:`CheckpointError` for a
 checkpoint that cannot be read or does not fit the model, :class:`BagError` for a bag that cannot be read
-or written. Every subclass also derives from :class:`ValueError`, so code written against the earlier
+or written, :class:`ClusterError` for a Dask cluster that cannot run the jobs, :class:`StartupError` and
+:class:`DescriptionTimeoutError` for a node that cannot start. The data errors also derive from
+:class:`ValueError` (the node's from :class:`RuntimeError`), so code written against the earlier
 ``ValueError`` contract keeps working. Anything else raised inside the package (``TypeError``,
 ``IndexError``, a plain ``ValueError`` from NumPy, …) is a programming error and is never counted as a
 drop.
@@ -16,8 +18,10 @@ __all__ = [
     "CheckpointError",
     "ClusterError",
     "ConfigurationError",
+    "DescriptionTimeoutError",
     "RejectedSampleError",
     "SemiparamError",
+    "StartupError",
 ]
 
 
@@ -55,3 +59,11 @@ class ClusterError(SemiparamError, ValueError):
     Raised for an unreachable scheduler, workers without the package, or failed jobs; the message names the
     scheduler, the workers, or each failed job and the worker it ran on.
     """
+
+
+class StartupError(SemiparamError, RuntimeError):
+    """The node cannot start (invalid parameters, incompatible checkpoint); the message says why."""
+
+
+class DescriptionTimeoutError(SemiparamError, RuntimeError):
+    """No robot description arrived in time, or the context shut down meanwhile."""

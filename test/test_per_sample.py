@@ -28,7 +28,7 @@ def bags(tmp_path_factory):
 def test_per_sample_csv_and_figure(bags, tmp_path):
     out, fig = tmp_path / "samples.csv", tmp_path / "samples.png"
     code = evaluate_cli.main([
-        "--train", str(bags / "train"), "--test", str(bags / "test"), "--config", str(CONFIG),
+        "paper", "--train", str(bags / "train"), "--test", str(bags / "test"), "--config", str(CONFIG),
         "--set", "robot.output=joint_torques", "--set", "nonparametric.n_features=30",
         "--models", "P", "SP", "--splits", "2", "--window", "0.5", "--no-progress",
         "--per-sample", str(out), "--per-sample-plot", str(fig)])
@@ -65,7 +65,7 @@ def test_per_sample_csv_and_figure(bags, tmp_path):
 
 def test_a_joint_the_bag_lacks_is_named_with_the_bags_names(bags, capsys):
     code = evaluate_cli.main([
-        "--train", str(bags / "train"), "--test", str(bags / "test"), "--config", str(CONFIG),
+        "paper", "--train", str(bags / "train"), "--test", str(bags / "test"), "--config", str(CONFIG),
         "--set", "robot.output=joint_torques",
         "--set", "robot.joints=[r_shoulder_pitch, r_elbow, r_wrist_yaw]",
         "--set", "robot.locked_joints=[r_wrist_prosup, r_wrist_pitch]",
@@ -86,7 +86,7 @@ def test_evaluate_on_a_truncated_bag_says_so_in_the_json_and_the_report(bags, tm
     cut.write_bytes(raw[: int(0.7 * len(raw))])
     out = tmp_path / "report.json"
     code = evaluate_cli.main([
-        "--train", str(bags / "train"), "--test", str(cut), "--config", str(CONFIG),
+        "paper", "--train", str(bags / "train"), "--test", str(cut), "--config", str(CONFIG),
         "--set", "robot.output=joint_torques", "--set", "nonparametric.n_features=30",
         "--models", "P", "--splits", "2", "--window", "0.5", "--no-progress", "--json", str(out)])
     assert code == 0

@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.atomic import atomic_savefig
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.protocol import SampleArrays
 
@@ -376,5 +377,7 @@ def horizon_figure(report: HorizonReport, path: Any, *, title: str = "") -> None
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        atomic_savefig(fig, path, dpi=110)
+    finally:
+        plt.close(fig)

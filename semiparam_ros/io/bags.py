@@ -23,7 +23,9 @@ Every other failure to read or write a bag raises :class:`~semiparam_ros.errors.
 from __future__ import annotations
 
 import contextlib
+import os
 import shutil
+import tempfile
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -643,8 +645,9 @@ class BagWriter:
     """Write a rosbag2 bag (version 9, MCAP storage, ROS 2 Jazzy message definitions embedded).
 
     Use as a context manager; the bag is complete (MCAP index + ``metadata.yaml``) when the block
-    exits normally. If the block raises, the writer is aborted and the partial folder is left without
-    ``metadata.yaml``.
+    exits normally. It is written in a hidden folder beside ``path`` and renamed into place when finished,
+    so ``path`` holds either the previous bag or the whole new one, never a partial bag: if the block
+    raises, the writer is aborted, the hidden folder removed and ``path`` left as it was.
 
     Example::
 
@@ -667,6 +670,7 @@ class BagWriter:
         self._overwrite = overwrite
         self._compress = compress
         self._writer: Writer | None = None
+        self._staging: Path | None = None  # the hidden parent folder the bag is written in
         self._connections: dict[str, Connection] = {}
         self.counts: dict[str, int] = {}
 
@@ -695,15 +699,17 @@ class BagWriter:
                     f"refusing to overwrite {str(self.path)!r}: not a bag folder (only metadata.yaml and "
                     ".mcap/.db3 files may be inside)"
                 )
-            shutil.rmtree(self.path)
         try:
-            writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._staging = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.partial-", dir=self.path.parent))
+            writer = Writer(self._staging / self.path.name, version=9, storage_plugin=StoragePlugin.MCAP)
             if self._compress:
                 from rosbags.rosbag2 import CompressionFormat, CompressionMode
 
                 writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             writer.open()
         except Exception as err:
+            self._remove_staging()
             raise BagError(f"cannot create bag {str(self.path)!r}: {err}") from err
         self._writer = writer
         return self
@@ -719,14 +725,28 @@ class BagWriter:
             return
         try:
             writer.close()
+            assert self._staging is not None  # set by open
+            if self.path.exists():  # a previous bag folder (checked by open): replaced only now
+                shutil.rmtree(self.path)
+            os.replace(self._staging / self.path.name, self.path)
         except Exception as err:
             raise BagError(f"cannot finish bag {str(self.path)!r}: {err}") from err
+        finally:
+            self._remove_staging()
 
     def abort(self) -> None:
         """Stop writing without finishing the bag (no index, no ``metadata.yaml``)."""
         writer, self._writer = self._writer, None
-        if writer is not None:
-            writer.abort()
+        try:
+            if writer is not None:
+                writer.abort()
+        finally:
+            self._remove_staging()
+
+    def _remove_staging(self) -> None:
+        staging, self._staging = self._staging, None
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
 
     def __enter__(self) -> BagWriter:
         return self.open()

@@ -25,7 +25,7 @@ matplotlib.use("Agg")  # before pyplot: headless, deterministic PNGs
 import matplotlib.pyplot as plt
 import numpy as np
 
-from semiparam_ros.atomic import atomic_open
+from semiparam_ros.atomic import atomic_savefig
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.eval.contacts import ContactReport, ContactRun, GroundTruthEpisodes, external_truth
 from semiparam_ros.eval.options import Variant
@@ -61,13 +61,10 @@ def _ylabel(report: ProtocolReport | AdaptationReport, group: str) -> str:
 
 
 def _save(fig: Any, path: str | Path, dpi: int) -> Path:
-    path = Path(path)
     try:
-        with atomic_open(path, "wb") as fh:
-            fig.savefig(fh, dpi=dpi, format="png")
+        return atomic_savefig(fig, path, dpi=dpi, fmt="png")
     finally:
         plt.close(fig)
-    return path
 
 
 def plot_protocol(report: ProtocolReport, path: str | Path, *, truth: bool = False,

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semiparam_ros.atomic import atomic_open
+from semiparam_ros.atomic import atomic_open, atomic_savefig
 from semiparam_ros.core.learners.uncertainty import NoiseScale
 from semiparam_ros.eval.protocol import ProtocolResult
 
@@ -121,6 +121,7 @@ def per_sample_figure(result: ProtocolResult, path: str | Path, *, title: str = 
     if title:
         axes[0, 0].set_title(title)
     fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    try:
+        atomic_savefig(fig, path, dpi=100)
+    finally:
+        plt.close(fig)

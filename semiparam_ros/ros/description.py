@@ -11,15 +11,12 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
+from semiparam_ros.errors import DescriptionTimeoutError
 from semiparam_ros.ros.diagnostics import diagnostic_array
 
-__all__ = ["DescriptionTimeoutError", "wait_for_description"]
+__all__ = ["wait_for_description"]
 
 _NOTE_PERIOD_S = 5.0
-
-
-class DescriptionTimeoutError(RuntimeError):
-    """No robot description arrived in time, or the context shut down meanwhile."""
 
 
 def wait_for_description(node: Node, topic: str, timeout_s: float) -> str:

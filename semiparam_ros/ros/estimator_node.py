@@ -39,9 +39,15 @@ from semiparam_ros.core.estimator.build import build_regressor, rmse_window_samp
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.rigid_body.urdf import TOPIC_SCHEME
 from semiparam_ros.core.stream.messages import WrenchData
-from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
+from semiparam_ros.errors import (
+    CheckpointError,
+    ConfigurationError,
+    DescriptionTimeoutError,
+    RejectedSampleError,
+    StartupError,
+)
 from semiparam_ros.ros import conversions as cv
-from semiparam_ros.ros.description import DescriptionTimeoutError, wait_for_description
+from semiparam_ros.ros.description import wait_for_description
 from semiparam_ros.ros.diagnostics import NodeStatistics, diagnostic_array, estimator_statistics
 from semiparam_ros.ros.inputs import GONE, INPUT_QOS, InputStreams, ThrottledWarnings, take
 from semiparam_ros.ros.outputs import PARAMETERS_QOS, Outputs
@@ -86,10 +92,6 @@ def _quiet_at_shutdown(method: _Callback) -> _Callback:
             return None
 
     return guarded  # type: ignore[return-value]
-
-
-class StartupError(RuntimeError):
-    """The node cannot start (invalid parameters, incompatible checkpoint); the message says why."""
 
 
 class EstimatorNode(Node):

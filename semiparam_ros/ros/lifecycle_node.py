@@ -26,7 +26,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_msgs.msg import String
 
 from semiparam_ros.core.rigid_body.urdf import TOPIC_SCHEME
-from semiparam_ros.ros.estimator_node import EstimatorNode, StartupError
+from semiparam_ros.errors import StartupError
+from semiparam_ros.ros.estimator_node import EstimatorNode
 
 __all__ = ["LifecycleEstimatorNode"]
 

@@ -21,7 +21,8 @@ from rclpy.signals import SignalHandlerOptions
 from threadpoolctl import threadpool_limits
 
 from semiparam_ros.core.config import describe_parameters
-from semiparam_ros.ros.estimator_node import EstimatorNode, StartupError
+from semiparam_ros.errors import StartupError
+from semiparam_ros.ros.estimator_node import EstimatorNode
 from semiparam_ros.ros.parameter_files import command_line_assignments, parameter_files
 
 __all__ = ["EXECUTORS", "main", "parse_node_args", "spin"]
