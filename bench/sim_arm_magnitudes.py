@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from semiparam_ros.sim.arms import arm_regressor, simulate_arm
-from semiparam_ros.sim.presets import preset_configs
+from semiparam_ros.sim.generate import preset_configs
 
 
 def _rms(x: np.ndarray) -> np.ndarray:

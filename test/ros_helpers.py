@@ -298,8 +298,7 @@ def source_bag(tmp_root: Path, name: str = "icub_xy") -> Path:
     if (committed / "metadata.yaml").is_file():
         return committed
     if name not in _BAG_CACHE:
-        from semiparam_ros.sim.generate import generate
-        from semiparam_ros.sim.presets import preset_configs
+        from semiparam_ros.sim.generate import generate, preset_configs
 
         scenario = name.removeprefix("icub_")
         _BAG_CACHE[name] = generate(tmp_root, preset_configs("icub", (scenario,), duration=8.0),

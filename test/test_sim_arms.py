@@ -22,7 +22,7 @@ from semiparam_ros.sim.arms import (
     simulate_arm,
 )
 from semiparam_ros.sim.contacts import ContactConfig
-from semiparam_ros.sim.presets import preset_configs
+from semiparam_ros.sim.generate import preset_configs
 from semiparam_ros.sim.writer import write_recording
 
 ROBOTS = ("panda", "ur5")

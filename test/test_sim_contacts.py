@@ -15,8 +15,8 @@ from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, icub_urdf
 from semiparam_ros.io.bags import read_topic_arrays
 from semiparam_ros.sim.contacts import ContactConfig, ContactEpisode, contact_forces, draw_episodes
 from semiparam_ros.sim.effects import SENSOR_FRAME
+from semiparam_ros.sim.generate import preset_configs
 from semiparam_ros.sim.ik import ARM_JOINTS
-from semiparam_ros.sim.presets import preset_configs
 from semiparam_ros.sim.scenario import CONTACTS_DURATION_S, ScenarioConfig, simulate
 from semiparam_ros.sim.writer import write_recording
 

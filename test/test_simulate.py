@@ -23,8 +23,8 @@ from semiparam_ros.io.bags import iter_samples, read_messages, read_topic_arrays
 from semiparam_ros.sim import scenario as scenario_module
 from semiparam_ros.sim.effects import DEFAULT_EFFECTS, NOMINAL_RMS, SENSOR_FRAME
 from semiparam_ros.sim.frames import frame_in_body
+from semiparam_ros.sim.generate import preset_configs
 from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics
-from semiparam_ros.sim.presets import preset_configs
 from semiparam_ros.sim.scenario import (
     CIRCLES,
     PUBLISHED_JOINT_ORDER,

@@ -152,7 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = vars(build_parser().parse_args(argv))
     out, overwrite, compress, quiet = args.pop("out"), args.pop("overwrite"), not args.pop("no_compress"), \
         args.pop("quiet")
-    from semiparam_ros.sim.presets import SimulationOptions, simulate_bags  # heavy imports after parsing
+    from semiparam_ros.sim.generate import SimulationOptions, simulate_bags  # heavy imports after parsing
 
     try:
         options = SimulationOptions(**{k: tuple(v) if isinstance(v, list) else v for k, v in args.items()})

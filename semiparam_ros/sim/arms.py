@@ -344,7 +344,7 @@ ARM_ROBOTS: dict[str, ArmRobot] = {
     ),
 }
 
-#: Scenarios of the arms (:func:`semiparam_ros.sim.presets.preset_configs`): ``excitation`` (no payload),
+#: Scenarios of the arms (:func:`semiparam_ros.sim.generate.preset_configs`): ``excitation`` (no payload),
 #: ``payload`` (pickup at the middle), ``contacts`` (contact episodes in [0.15, 0.65]·T, then a pickup at
 #: 0.75·T; 120 s unless given).
 ARM_SCENARIOS: tuple[str, ...] = ("excitation", "payload", "contacts")
