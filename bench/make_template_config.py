@@ -3,7 +3,7 @@
     PYTHONPATH=$PWD .venv/bin/python bench/make_template_config.py
 
 Every parameter but the three a user must give is listed commented, with its description, range and
-default; test/test_real_arms.py checks that uncommenting them gives exactly the defaults.
+default; test/core/rigid_body/test_real_arms.py checks that uncommenting them gives exactly the defaults.
 """
 
 import textwrap

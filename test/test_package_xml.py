@@ -11,7 +11,7 @@ import ast
 import sys
 import xml.etree.ElementTree as ET
 
-from ros_helpers import REPO
+from helpers import REPO
 
 #: Keys of the rosdep database used here (ros/rosdistro 8468e88ccd523427f9131e39d2af0938f1c298b2).
 VALID_KEYS = frozenset({
@@ -50,7 +50,7 @@ def _imports(folder: str) -> set[str]:
                 names.update(a.name.split(".")[0] for a in node.names)
             elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
                 names.add(node.module.split(".")[0])
-    tests = {p.stem for p in (REPO / "test").glob("*.py")}
+    tests = {p.stem for p in (REPO / "test").rglob("*.py")} | {"helpers"}
     return {n for n in names if n not in sys.stdlib_module_names and n not in LOCAL and n not in tests}
 
 

@@ -6,7 +6,7 @@ import doctest
 import re
 
 import numpy as np
-from ros_helpers import REPO
+from helpers import REPO
 
 from semiparam_ros.cli import learn as learn_cli
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm

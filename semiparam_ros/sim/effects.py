@@ -36,7 +36,7 @@ was chosen on P alone — the learners being compared (NP, SP) played no part in
 
 Default magnitudes (:data:`DEFAULT_EFFECTS`; component-averaged RMS — the mean over fx, fy, fz (tx, ty,
 tz) of each component's RMS, as the paper's error metric — over a 60 s bag at 0.6 m/s; also in
-:data:`NOMINAL_RMS` and ``bags/README.md``, checked by ``test/test_simulate.py``):
+:data:`NOMINAL_RMS` and ``bags/README.md``, checked by ``test/sim/test_simulate.py``):
 
 =========== ================================ ===================================================
 trajectory  non-rigid part (all effects)     left by a rigid-body least-squares fit of that bag

@@ -1,0 +1,260 @@
+"""The public model API: ``learn`` → self-contained checkpoint → ``load_model`` → ``predict`` / ``gravity``.
+
+Checked against independent computations: Pinocchio's RNEA and generalized gravity on the URDF (the CAD
+model before any data), the simulator's true parameters (after learning), the estimator's own single-state
+prediction (the vectorised path), and message-by-message driving of :class:`OnlineEstimator` (``learn``).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import warnings
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from helpers import REPO
+
+from semiparam_ros import load_model
+from semiparam_ros.cli import learn as learn_cli
+from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
+from semiparam_ros.core.config import load_config
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.stream.messages import JointStateData
+from semiparam_ros.errors import CheckpointError, RejectedSampleError
+from semiparam_ros.io.bags import read_messages
+from semiparam_ros.service.learn import learn_bags
+from semiparam_ros.sim.arms import ArmScenarioConfig, arm_regressor, simulate_arm
+from semiparam_ros.sim.writer import write_recording
+
+PANDA = REPO / "config" / "panda.yaml"
+SMALL = {"nonparametric.n_features": 100}
+
+
+@pytest.fixture(scope="module")
+def panda(tmp_path_factory):
+    """A 20 s, 200 Hz simulated Panda recording (known truth), its bag and a learned checkpoint."""
+    root = tmp_path_factory.mktemp("serving")
+    rec = simulate_arm(ArmScenarioConfig(name="panda_train", robot="panda", duration=20.0, rate=200.0,
+                                         seed=3))
+    bag = write_recording(rec, root / "panda_train")
+    config = load_config(PANDA).with_overrides(SMALL)
+    est, report = learn_bags([bag], config, checkpoint=root / "panda.npz")
+    return {"root": root, "rec": rec, "bag": bag, "config": config, "est": est, "report": report,
+            "ckpt": root / "panda.npz"}
+
+
+def _states(rng, n, k):
+    q = rng.uniform(-1.0, 1.0, (k, n))
+    q[:, 3] = rng.uniform(-2.5, -0.5, k)  # the Panda's elbow lives in [-3.07, -0.07]
+    return q, rng.uniform(-1.0, 1.0, (k, n)), rng.uniform(-3.0, 3.0, (k, n))
+
+
+def test_fresh_model_is_the_cad_model_rnea_and_gravity(tmp_path):
+    """Before any data (URDF prior), predict = rigid-body part = RNEA with the URDF's inertias."""
+    config = load_config(PANDA).with_overrides(SMALL)
+    est = OnlineEstimator(config)
+    est.save(tmp_path / "fresh.npz")
+    model = load_model(tmp_path / "fresh.npz")
+    pmodel = est.regressor.pinocchio_model
+    data = pmodel.createData()
+    rng = np.random.default_rng(0)
+    q, dq, ddq = _states(rng, 7, 20)
+    total, std = model.predict(q, dq, ddq, consistent=False)
+    parts = model.predict_parts(q, dq, ddq, consistent=False)
+    # the default predicts with the consistent projection, which returns the (consistent) CAD values to the
+    # interior-point solver's accuracy
+    projected = model.predict(q, dq, ddq)[0]
+    assert np.abs(projected - total).max() <= 1e-3 * np.abs(total).max()
+    for i in range(20):
+        rnea = pin.rnea(pmodel, data, q[i], dq[i], ddq[i])
+        scale = 1.0 + np.abs(rnea).max()
+        np.testing.assert_allclose(total[i], rnea, rtol=0, atol=1e-9 * scale)
+        np.testing.assert_allclose(model.cad(q[i], dq[i], ddq[i]), rnea, rtol=0, atol=1e-9 * scale)
+        gravity = pin.computeGeneralizedGravity(pmodel, data, q[i])
+        np.testing.assert_allclose(model.gravity(q[i]), gravity, rtol=0,
+                                   atol=1e-9 * (1 + np.abs(gravity).max()))
+    np.testing.assert_array_equal(parts.residual, 0.0)
+    assert np.isinf(std).all()  # no noise estimate yet: honest +inf
+    assert not model.ready and model.n_samples_learned == 0
+
+
+def test_learned_model_recovers_the_true_robot(panda):
+    """After 20 s of excitation: gravity and torques of the true (perturbed) robot, friction included."""
+    model = load_model(panda["ckpt"])
+    rec = panda["rec"]
+    assert model.ready and model.n_samples_learned == panda["report"].learned > 3500
+    idx = np.arange(0, len(rec.q), 37)
+    q, dq, ddq = rec.q[idx], rec.dq[idx], rec.ddq[idx]
+    truth = rec.rigid_torques[idx] + rec.friction_torques[idx]
+    pred, std = model.predict(q, dq, ddq, consistent=False)
+    rms = np.sqrt(np.mean((pred - truth) ** 2, axis=0))
+    noise = np.asarray(rec.robot.torque_noise_std)
+    assert (rms < 1.5 * noise).all(), (rms, noise)  # the model error is below the measurement noise
+    assert np.isfinite(std).all() and (std > 0).all()
+    # gravity of the identified inertias vs the true robot's (Pinocchio on the true parameters)
+    rigid = arm_regressor("panda")  # the simulator's own, without friction columns
+    true_gravity = rigid.regressor(q, np.zeros_like(q), np.zeros_like(q)) @ rec.parameters_before
+    err = np.sqrt(np.mean((model.gravity(q) - true_gravity) ** 2, axis=0))
+    assert (err < 0.1 + 0.01 * np.sqrt(np.mean(true_gravity**2, axis=0))).all(), err
+
+
+def test_vectorised_equals_single_states(panda):
+    model = load_model(panda["ckpt"])
+    rng = np.random.default_rng(1)
+    q, dq, ddq = _states(rng, 7, 50)
+    batch = model.predict_parts(q, dq, ddq)
+    for i in range(50):
+        one = model.predict_parts(q[i], dq[i], ddq[i])
+        scale = 1.0 + np.abs(one.total).max()
+        # same mathematics, BLAS-3 instead of one forward substitution: rounding ≈ cond(R)·ε relative
+        for a, b in ((batch.total[i], one.total), (batch.rigid_body[i], one.rigid_body),
+                     (batch.residual[i], one.residual)):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-8 * scale)
+        np.testing.assert_allclose(batch.std[i], one.std, rtol=1e-8)
+    assert batch.total.shape == (50, 7) and one.total.shape == (7,)
+
+
+def test_predict_refuses_bad_input_without_changing_anything(panda):
+    model = load_model(panda["ckpt"])
+    q = np.zeros(7)
+    before = model.predict(q, q, q)[0]
+    for args in ((np.zeros(6), q, q), (q, np.zeros((2, 7)), q), (np.full(7, np.nan), q, q),
+                 (q, np.full(7, np.inf), q), (np.zeros((0, 7)), np.zeros((0, 7)), np.zeros((0, 7)))):
+        with pytest.raises(RejectedSampleError):
+            model.predict(*args)
+    np.testing.assert_array_equal(model.predict(q, q, q)[0], before)
+
+
+def test_checkpoint_is_self_contained_and_refuses_foreign_files(panda, tmp_path):
+    # learn with a URDF copy, then remove it: the checkpoint carries its own
+    urdf = tmp_path / "panda.urdf"
+    shutil.copy(panda["config"].urdf_path(), urdf)
+    config = panda["config"].with_overrides({"robot.urdf": str(urdf)})
+    est = OnlineEstimator(config)
+    est.save(tmp_path / "own.npz")
+    urdf.unlink()
+    model = load_model(tmp_path / "own.npz")
+    assert model.joints == tuple(config["robot.joints"])
+    assert model.versions["semiparam_ros"] and model.versions["pinocchio"]
+    ckpt = panda["ckpt"]
+    raw = ckpt.read_bytes()
+    (tmp_path / "cut.npz").write_bytes(raw[: len(raw) // 2])
+    with pytest.raises(CheckpointError):
+        load_model(tmp_path / "cut.npz")
+    with pytest.raises(CheckpointError):
+        load_model(tmp_path / "missing.npz")
+    np.savez(tmp_path / "foreign.npz", a=np.zeros(3))
+    with pytest.raises(CheckpointError, match=r"not a semiparam_ros checkpoint"):
+        load_model(tmp_path / "foreign.npz")
+    old = {k: v for k, v in load_npz(ckpt).items() if k not in ("meta.config", "meta.urdf")}
+    atomic_save_npz(tmp_path / "old.npz", old)
+    with pytest.raises(CheckpointError, match="older version"):
+        load_model(tmp_path / "old.npz")
+    bad = load_npz(ckpt)
+    bad["meta.config"] = np.array(json.dumps({"nonparametric.n_feature": 3}))  # misspelt
+    atomic_save_npz(tmp_path / "bad.npz", bad)
+    with pytest.raises(CheckpointError, match=r"nonparametric\.n_feature"):
+        load_model(tmp_path / "bad.npz")
+
+
+def test_checkpoint_of_another_robot_is_refused(panda, tmp_path):
+    """Same joints and structure, other inertias in the URDF: the warm start names the difference."""
+    text = panda["config"].urdf_path().read_text()
+    changed = text.replace('<mass value="4.970684"/>', '<mass value="5.970684"/>', 1)
+    assert changed != text
+    urdf = tmp_path / "other.urdf"
+    urdf.write_text(changed)
+    other = OnlineEstimator(panda["config"].with_overrides({"robot.urdf": str(urdf)}))
+    with pytest.raises(CheckpointError, match="other inertial parameters"):
+        other.load(panda["ckpt"])
+
+
+def test_noise_state_and_snapshot(panda):
+    est = panda["est"]
+    model = load_model(panda["ckpt"])
+    np.testing.assert_array_equal(model.estimator.noise.s2, est.noise.s2)  # σ does not warm up again
+    live = load_model(panda["ckpt"])
+    frozen = live.snapshot()
+    q, dq, ddq = panda["rec"].q[500], panda["rec"].dq[500], panda["rec"].ddq[500]
+    before = frozen.predict(q, dq, ddq)[0]
+    rec = panda["rec"]
+    joints = tuple(rec.joint_names)
+    live.estimator.gate_enabled = False  # the shifted torques would be a contact to the (restored) gate
+    for i in range(0, 400):  # more learning on the live estimator (stamps after the checkpoint's)
+        live.estimator.process_joint_state(JointStateData(
+            int(rec.stamps[-1]) + (i + 1) * 5_000_000, joints, rec.q_measured[i], rec.dq_measured[i],
+            rec.measured_torques[i] + 0.5))
+    np.testing.assert_array_equal(frozen.predict(q, dq, ddq)[0], before)
+    assert not np.array_equal(live.predict(q, dq, ddq)[0], before)
+
+
+def test_learn_equals_driving_the_estimator_message_by_message(panda):
+    """``learn`` is the node's data path: the same parameters bit for bit as feeding the messages."""
+    est = OnlineEstimator(panda["config"])
+    for msg in read_messages(panda["bag"], joint_states_topic="/joint_states", wrench_topic=None):
+        est.process_joint_state(msg)
+    np.testing.assert_array_equal(est.parameters, panda["est"].parameters)
+    assert est.n_samples_learned == panda["report"].learned
+    report = panda["report"]
+    assert report.samples == report.learned + sum(report.not_learned.values())
+    assert report.log_s == pytest.approx(20.0, abs=0.3) and report.realtime_factor > 0
+
+
+def test_learn_cli_two_bags_init_and_errors(panda, tmp_path, capsys):
+    bag = panda["bag"]
+    cfg = tmp_path / "panda.yaml"
+    shutil.copy(PANDA, cfg)
+    out = tmp_path / "two.npz"
+    code = learn_cli.main([str(bag), str(bag), "--config", str(cfg), "--set", "nonparametric.n_features=100",
+                           "--checkpoint", str(out), "--json", str(tmp_path / "r.json"), "--quiet"])
+    assert code == 0, capsys.readouterr()
+    report = json.loads((tmp_path / "r.json").read_text())
+    # the second bag's stamps start before the first one's end: learned, not dropped as out of order
+    assert report["learned"] == 2 * panda["report"].learned
+    assert "joint_state_backwards_stamp" not in report["drops"]
+    assert load_model(out).n_samples_learned == report["learned"]
+    # continue from it
+    code = learn_cli.main([str(bag), "--config", str(cfg), "--set", "nonparametric.n_features=100",
+                           "--init", str(out), "--checkpoint", str(tmp_path / "three.npz"), "--quiet"])
+    assert code == 0
+    assert load_model(tmp_path / "three.npz").n_samples_learned == 3 * panda["report"].learned
+    # errors: one line, exit 2
+    assert learn_cli.main([str(tmp_path / "nope"), "--config", str(cfg), "--checkpoint", str(out)]) == 2
+    assert learn_cli.main([str(bag), "--config", str(cfg), "--set", "nonparametric.n_feature=3",
+                           "--checkpoint", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "learn: error:" in err and "Traceback" not in err
+
+
+def test_learn_reports_a_truncated_bag(panda, tmp_path):
+    mcap = next(panda["bag"].glob("*.mcap"))
+    cut = tmp_path / "cut.mcap"
+    raw = mcap.read_bytes()
+    cut.write_bytes(raw[: int(0.6 * len(raw))])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing leaks: the report says it
+        _, report = learn_bags([cut], panda["config"])
+    assert report.recovered == [str(cut)]
+    assert 0 < report.learned < panda["report"].learned
+
+
+def test_excited_marks_the_states_the_training_data_cover(panda, tmp_path):
+    """The trained model covers its own recording's states; a fresh model (URDF prior only) covers none.
+
+    Reference: the rigid-body learner's relative variance by one ``predict_one`` per state.
+    """
+    model = load_model(panda["ckpt"])
+    rec = panda["rec"]
+    idx = np.arange(0, len(rec.q), 97)
+    inside = model.excited(rec.q[idx], rec.dq[idx], rec.ddq[idx])
+    par = model.estimator.model.parametric
+    reference = [par.predict_one(np.r_[rec.q[i], rec.dq[i], rec.ddq[i]], return_variance=True).variance.max()
+                 <= 1.0 for i in idx]
+    assert inside.tolist() == reference
+    assert inside.mean() > 0.95  # the states it learned from
+    assert bool(model.excited(rec.q[0], rec.dq[0], rec.ddq[0])) == reference[0]  # one state: a bool
+    OnlineEstimator(panda["config"]).save(tmp_path / "fresh.npz")
+    fresh = load_model(tmp_path / "fresh.npz")
+    assert not fresh.excited(rec.q[idx], rec.dq[idx], rec.ddq[idx]).any()
