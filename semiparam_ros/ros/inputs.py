@@ -133,7 +133,7 @@ class InputStreams:
         ahead of the other by more than one message (a joint-state stream far ahead would outrun the
         pipeline's pairing buffer). Not public rclpy API: Jazzy has no public take, so this makes the call
         the executor makes; measured ≈ 8× cheaper per queued message than an executor wait each
-        (bench/bench_drain.py); test/ros/test_node_drain.py fails if the call changes.
+        (bench/node/bench_drain.py); test/ros/test_node_drain.py fails if the call changes.
         """
         order = self._order[kind]
         for _ in range(MAX_DRAIN):

@@ -375,7 +375,7 @@ class LearnedModel:
         """``(τ, σ)``: the model at one state (n,) → (t,), or N states (N, n) → (N, t).
 
         Many states in one call are far cheaper per state than single calls (one matrix product and one
-        triangular solve for all of them; measured in ``bench/bench_serving.py``).
+        triangular solve for all of them; measured in ``bench/node/bench_serving.py``).
 
         Args:
             q: Positions (n,) or (N, n) [rad], in the order of :attr:`joints`.

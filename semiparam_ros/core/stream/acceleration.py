@@ -43,7 +43,7 @@ estimator, so they are decided as usual (only later). The median ignores a few j
 the window then stays fixed (a rate change later is absorbed by the true-stamp fit). ``window_s = 0.08``
 (the node's default) is 9 samples at 100 Hz, 17 at 200 Hz and 81 at 1 kHz; the savgol estimate then
 refers to the stamp ``window_s / 2 = 40 ms`` before the newest joint state. Measurements behind the
-default: ``bench/accel_window.py`` (``bench/results/accel_window.md``).
+default: ``bench/stream/accel_window.py`` (``bench/results/accel_window.md``).
 """
 
 from __future__ import annotations

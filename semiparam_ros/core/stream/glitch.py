@@ -27,7 +27,7 @@ starts after five accepted increments (the running means settle).
 
 The ratio is dimensionless and the memory in seconds, so the rule means the same at 100 Hz and 1 kHz;
 its false-drop rate on clean logs (real, quantized, at rest, point to point) is measured by
-``bench/bench_glitch.py`` (docs/reliability.md).
+``bench/stream/bench_glitch.py`` (docs/reliability.md).
 
 Example:
     >>> import numpy as np

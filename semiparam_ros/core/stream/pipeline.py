@@ -33,7 +33,7 @@ and returns the :class:`~semiparam_ros.core.stream.messages.Sample` objects they
    ``JointState.effort`` (N·m) of the configured joints; wrenches are ignored (counted).
 
 Cost: O(1) per message (bounded buffers, an O(window) acceleration estimate); measured by
-``bench/bench_pipeline.py`` (``bench/results/bench_pipeline.json``).
+``bench/stream/bench_pipeline.py`` (``bench/results/bench_pipeline.json``).
 
 Drops never raise. Memory is bounded: joint states are kept for ``buffer_s`` seconds (and at most
 ``max_buffer`` of them), pending wrenches at most ``max_buffer``.

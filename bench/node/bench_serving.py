@@ -1,6 +1,6 @@
 """Benchmark: the public model API — vectorised vs single-state prediction, and ``learn`` vs real time.
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_serving.py [--repeats 5]
+    PYTHONPATH=$PWD .venv/bin/python bench/node/bench_serving.py [--repeats 5]
 
 1. ``load_model(ckpt).predict`` at N = 1000 states: one call with (N, n) arrays vs N calls with (n,)
    arrays, side by side, median of ``--repeats`` (7-joint Panda, D = 500, the consistent SP default).
@@ -31,7 +31,7 @@ from semiparam_ros.service.learn import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 KUKA = ROOT.parent / "shared" / "data" / "kuka_lwr4"
 
 
@@ -99,7 +99,7 @@ def main() -> None:
         print(f"| {r['data']} | {r['samples']} | {r['wall_s']:.1f} | {r['log_s']:.1f} | "
               f"{r['us_per_sample']:.0f} | {r['realtime_factor']:.2f} |")
     out = {
-        "command": "PYTHONPATH=$PWD .venv/bin/python bench/bench_serving.py",
+        "command": "PYTHONPATH=$PWD .venv/bin/python bench/node/bench_serving.py",
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                     "processor": platform.processor() or platform.machine(),
                     "blas": [{k: i.get(k) for k in ("internal_api", "num_threads")}

@@ -2,7 +2,7 @@
 
 Starts the node as a separate process (``config/icub_right_arm.yaml``, default parameters: D = 500,
 ``overload.max_delay`` 1 ms) and publishes, from this process, a periodic synthetic stream (the motion
-and wrench of ``bench/bench_node.py``'s bag, whose frequencies repeat every 60 s, with stamps that keep
+and wrench of ``bench/node/bench_node.py``'s bag, whose frequencies repeat every 60 s, with stamps that keep
 increasing) at ``--hz`` for ``--seconds``. Every ``--window`` seconds it records: the node's RSS and CPU
 (psutil), the latency of each prediction (pair published → prediction received, by stamp: includes the
 acceleration estimator's centring delay), predictions received, and the node's diagnostics (samples
@@ -10,7 +10,7 @@ learned, learning skipped, drops, queue length). Prints a table and writes ``ben
 
 Usage::
 
-    .venv/bin/python bench/soak.py [--seconds 3600] [--hz 1000] [--window 60] [--output PATH]
+    .venv/bin/python bench/node/soak.py [--seconds 3600] [--hz 1000] [--window 60] [--output PATH]
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "config" / "icub_right_arm.yaml"
 RESULTS = REPO / "bench" / "results" / "soak.json"
 JOINTS = ("r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow")

@@ -15,7 +15,7 @@ position spikes of ±(0.05–0.5) rad, at random moving or resting states): the 
 The *old* rule is ``core/stream/pipeline.py`` at ``--baseline`` (the commit before the hold-and-decide rule),
 extracted with ``git show`` and imported beside the current one. Usage::
 
-    .venv/bin/python bench/bench_glitch.py [--baseline REV] [--json PATH]
+    .venv/bin/python bench/stream/bench_glitch.py [--baseline REV] [--json PATH]
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from semiparam_ros.sim.arms import ARM_ROBOTS, arm_regressor
 from semiparam_ros.sim.encoders import encoder_readings
 from semiparam_ros.sim.trajectories import PointToPoint
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_glitch.json"
 KUKA = ROOT.parent / "shared" / "data" / "kuka_lwr4"
 KUKA_JOINTS = tuple(f"lwr_{i}_joint" for i in range(7))

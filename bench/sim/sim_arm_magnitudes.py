@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    PYTHONPATH=$PWD .venv/bin/python bench/sim_arm_magnitudes.py
+    PYTHONPATH=$PWD .venv/bin/python bench/sim/sim_arm_magnitudes.py
 
 Simulates the 120 s ``contacts`` scenario of each arm at 100 Hz (seed 0) and prints, per joint, the RMS of
 the measured torque, its rigid-body part, the CAD error (RNEA with the URDF's parameters minus RNEA with the

@@ -13,7 +13,7 @@ duration) to the measured wrench, and reports per run:
 
 Usage (one JSON line per run on stdout)::
 
-    PYTHONPATH=$PWD .venv/bin/python bench/adaptation.py BAG [--set name=value ...] [--pickup S]
+    PYTHONPATH=$PWD .venv/bin/python bench/learners/adaptation.py BAG [--set name=value ...] [--pickup S]
         [--contact START:DURATION:FX,FY,FZ ...] [--window NAME:A:B ...]
 """
 
@@ -34,7 +34,7 @@ from semiparam_ros.core.stream.gate import Verdict
 from semiparam_ros.core.stream.messages import WrenchData
 from semiparam_ros.io.bags import read_messages
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def run(bag: str, overrides: dict, *, contacts: list[tuple[float, float, np.ndarray]], config_path: Path,

@@ -7,7 +7,8 @@ this trains P, NP and the consistent SP for each λ, then scores the frozen SP f
 weight exp(−(ν/ν₀)²) only enters the prediction: the raw residual and ν are recorded per test sample).
 Mean RMSE over the outputs on the whole test log. Prints a table and writes JSON.
 
-    PYTHONPATH=$PWD .venv/bin/python bench/consistent_selection.py [--data ../shared/data/kuka_lwr4] \
+    PYTHONPATH=$PWD .venv/bin/python bench/learners/consistent_selection.py \
+        [--data ../shared/data/kuka_lwr4] \
         [--out bench/results/consistent_selection.json] [--lams 0.001 0.01 0.1]
 
 About 20 min on 2 cores (the 1 kHz arms dominate); bags are simulated into a temporary folder.
@@ -29,7 +30,7 @@ from semiparam_ros.core.stream.rate import measured_period_s
 from semiparam_ros.eval.protocol import train
 from semiparam_ros.eval.replay import build_models, load_samples
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 NU0 = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
 
 

@@ -7,7 +7,7 @@ standardizer and gate warm-ups). Robots: the iCub F/T set-up on ``bags/icub_xy``
 and a 7-joint arm on a simulated Panda log (200 Hz excitation, joint torques). D ∈ {500, 1000}. Reported:
 median and p99 per step [µs] and the ratio of the medians. One BLAS thread. Usage::
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_consistent.py [--quick] [--json PATH]
+    PYTHONPATH=$PWD .venv/bin/python bench/learners/bench_consistent.py [--quick] [--json PATH]
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.eval.replay import load_samples
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_consistent.json"
 
 

@@ -8,7 +8,7 @@ Two measurements, printed as tables:
    difference of q̈̂ against a non-causal reference (zero-phase 4th-order Butterworth at 4 Hz on q̇, then a
    central difference), for the same grid.
 
-    PYTHONPATH=$PWD .venv/bin/python bench/accel_window.py [--kuka /work/shared/data/kuka_lwr4]
+    PYTHONPATH=$PWD .venv/bin/python bench/stream/accel_window.py [--kuka /work/shared/data/kuka_lwr4]
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ included in its ``node`` time, as it is in its executor).
 
 Usage::
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_node_overhead.py [--features 500] [--seconds 3]
+    PYTHONPATH=$PWD .venv/bin/python bench/node/bench_node_overhead.py [--features 500] [--seconds 3]
         [--repeats 3] [--compare-with DIR] [--output FILE.json]
 """
 
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "config" / "icub_right_arm.yaml"
 
 

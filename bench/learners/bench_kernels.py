@@ -14,7 +14,7 @@ short repeats; medians of the mean µs per call. The ratio ``update+query / upda
 kernel's share of issue 15's predict-then-update target (the Python side adds ≈ 2–4 µs to the habit).
 One BLAS thread. Usage::
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_kernels.py [--baseline REV] [--json PATH]
+    PYTHONPATH=$PWD .venv/bin/python bench/learners/bench_kernels.py [--baseline REV] [--json PATH]
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from threadpoolctl import threadpool_limits
 import semiparam_ros.core.learners._kernels as new_kernels
 from semiparam_ros.core.learners.rrls import RecursiveRLS
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_kernels.json"
 T_OUT = 6
 

@@ -14,7 +14,7 @@ The first ``--warmup`` samples (the standardizer and gate warm-ups) are stepped 
 median and p99 per step, the ratio of the medians, and how far the two estimators' predictions and σ
 drift apart (max relative difference over the timed samples). One BLAS thread. Usage::
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_step.py [--quick] [--baseline REV] [--json PATH]
+    PYTHONPATH=$PWD .venv/bin/python bench/learners/bench_step.py [--quick] [--baseline REV] [--json PATH]
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.eval.replay import Topics
 from semiparam_ros.io.bags import read_messages
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_step.json"
 CONFIG = ROOT / "config" / "icub_right_arm.yaml"
 BAG = ROOT / "bags" / "icub_xy"

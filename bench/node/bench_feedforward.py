@@ -11,7 +11,7 @@ own measure, stamp → feed-forward published (``feedforward.age_*`` of its diag
 wait behind learning, the prediction, the publish). Runs learning on and off side by side; prints a table
 and writes ``bench/results/bench_feedforward.json``. Target: p99 < 1 ms at 1 kHz.
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_feedforward.py [--seconds 20] [--hz 1000]
+    PYTHONPATH=$PWD .venv/bin/python bench/node/bench_feedforward.py [--seconds 20] [--hz 1000]
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "config" / "panda.yaml"
 RESULTS = REPO / "bench" / "results" / "bench_feedforward.json"
 
@@ -193,7 +193,7 @@ def main() -> None:
               f"{lat['p999']:.2f} / {lat['max']:.1f} | {nl['p50_median_of_periods']:.2f} / "
               f"{nl['p99_median_of_periods']:.2f} / {nl['p99_max_of_periods']:.2f} | "
               f"{r['node_cpu_percent']:.0f} % |")
-    out = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/bench_feedforward.py",
+    out = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/node/bench_feedforward.py",
            "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                        "processor": platform.processor() or platform.machine()},
            "target": "p99 < 1 ms at 1 kHz", "runs": runs}

@@ -1,7 +1,7 @@
 """Taking N messages already queued on a subscription: one executor wait per message (public API) against
 the node's ``InputStreams.drain`` loop of ``sub.handle.take_message`` (the call the executor itself makes).
 
-Usage: ``PYTHONPATH=. .venv/bin/python bench/bench_drain.py [--n 500] [--repeats 7] [--json PATH]``.
+Usage: ``PYTHONPATH=. .venv/bin/python bench/node/bench_drain.py [--n 500] [--repeats 7] [--json PATH]``.
 Prints the median time per message of each way and their ratio, from the same run.
 """
 

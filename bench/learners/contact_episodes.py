@@ -5,7 +5,7 @@ log (pickup at 60 s), run through OnlineEstimator with the gate on and off; dete
 ``~/external_wrench`` beyond 5 σ (core/stream/episodes.py), after the 10 s warm-up. Prints one JSON line per
 run.
 
-    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD .venv/bin/python bench/contact_episodes.py BAG
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=$PWD .venv/bin/python bench/learners/contact_episodes.py BAG
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ def main(bag: str) -> None:
     big = np.array([np.linalg.norm(f) for *_, f in contacts]) >= 10.0
     for gate in (True, False):
         res = run(bag, {"gate.enabled": gate}, contacts=contacts,
-                  config_path=Path(__file__).resolve().parents[1] / "config" / "icub_right_arm.yaml")
+                  config_path=Path(__file__).resolve().parents[2] / "config" / "icub_right_arm.yaml")
         t, e = res["t"], res["y"] - res["yhat"]
         warm = t >= 10.0
         score = score_episodes(t[warm], flag_samples(e, res["std"], 5.0)[warm], episodes, tolerance_s=0.2)

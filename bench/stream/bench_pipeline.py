@@ -17,7 +17,7 @@ Also timed: ``estimator.update`` alone (Savitzky–Golay, window 9, polyorder 2,
 Timings are medians over repeats of the mean per call of back-to-back blocks (short blocks, so that
 preemption on the shared 2-core machine hits few of them). One BLAS thread. Usage::
 
-    .venv/bin/python bench/bench_pipeline.py [--quick] [--baseline REV] [--json PATH]
+    .venv/bin/python bench/stream/bench_pipeline.py [--quick] [--baseline REV] [--json PATH]
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ import semiparam_ros.core.stream.acceleration as new_acceleration
 import semiparam_ros.core.stream.pipeline as new_pipeline
 from semiparam_ros.core.stream.messages import JointStateData, WrenchData
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_pipeline.json"
 DEFAULT_BASELINE = "d123a1e"  # last commit before the pipeline speed-up
 CONFIGURED = ("r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow")

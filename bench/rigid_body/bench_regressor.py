@@ -5,7 +5,7 @@ Measures, for the iCub right arm (4 joints, F/T sensor in the upper arm) and for
 Pinocchio call they wrap (``computeJointTorqueRegressor`` on preallocated vectors: the floor for this
 design), and the construction cost. Prints a markdown table and writes bench/results/bench_regressor.json.
 
-Usage: ``.venv/bin/python bench/bench_regressor.py [--quick]``
+Usage: ``.venv/bin/python bench/rigid_body/bench_regressor.py [--quick]``
 """
 
 from __future__ import annotations

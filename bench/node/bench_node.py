@@ -21,7 +21,7 @@ the columns of one run, not runs of different days. Prints markdown tables and w
 ``bench/results/bench_node.json``. ``--quick`` plays 3 s instead of 15 s (the full run takes ≈ 3 min).
 Usage::
 
-    .venv/bin/python bench/bench_node.py [--quick] [--seconds S] [--hz 1000] [--features 500 1000]
+    .venv/bin/python bench/node/bench_node.py [--quick] [--seconds S] [--hz 1000] [--features 500 1000]
         [--executors events single_threaded] [--acceleration savgol kalman]
         [--save-every S] [--compare-with DIR]
 """
@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "config" / "icub_right_arm.yaml"
 RESULTS = REPO / "bench" / "results" / "bench_node.json"
 JOINTS = ("r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow")

@@ -11,11 +11,12 @@ then the update) of:
   rotated-out rows.
 
 The regressor is the real Pinocchio base regressor of the iCub right arm (its ≈9 µs is included in every
-model but NP; ``bench/bench_regressor.py`` times it alone). Samples come from a simulated XY bag-like
-stream (circles, all joints moving). One BLAS thread; medians over repeats of the mean of back-to-back
+model but NP; ``bench/rigid_body/bench_regressor.py`` times it alone). Samples come from a simulated XY
+bag-like stream (circles, all joints moving). One BLAS thread; medians over repeats of the mean of
+back-to-back
 calls, process CPU time next to the wall time (the machine is shared). Usage::
 
-    .venv/bin/python bench/bench_models.py [--quick] [--json PATH]
+    .venv/bin/python bench/learners/bench_models.py [--quick] [--json PATH]
 """
 
 from __future__ import annotations

@@ -7,7 +7,8 @@ code). Two errors per estimator, both as RMS of (estimate − reference) relativ
   emitted (what a consumer that needs q̈ *now* gets: for S-G the delay turns into error).
 
 Data:
-1. Synthetic: sums of sines ≤ 1.5 Hz (as bench/accel_window.py), white velocity noise σ_v, 100 Hz and 1 kHz.
+1. Synthetic: sums of sines ≤ 1.5 Hz (as bench/stream/accel_window.py), white velocity noise σ_v, 100 Hz and
+   1 kHz.
 2. Simulated Panda (semiparam_ros.sim.arms, excitation scenario, the simulator's own noise), 1 kHz and 100 Hz,
    exact q̈ known.
 3. Real KUKA LWR4+ logs 1 and 3 (200 Hz): no true q̈ exists. Reference: a NON-CAUSAL estimate, zero-phase
@@ -18,7 +19,7 @@ Data:
    KUKA (config/kuka_lwr4.yaml, train log 1, test log 3) — both against the measured torque at the sample's
    own stamp and at the newest stamp.
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_acceleration.py [--kuka DIR] [--quick] [--no-sp]
+    PYTHONPATH=$PWD .venv/bin/python bench/stream/bench_acceleration.py [--kuka DIR] [--quick] [--no-sp]
 
 Writes bench/results/bench_acceleration.json and bench/results/bench_acceleration.md.
 """
@@ -36,7 +37,7 @@ from scipy.signal import butter, filtfilt
 
 from semiparam_ros.core.stream.acceleration import AccelerationConfig, make_estimator
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results"
 
 
@@ -219,7 +220,7 @@ def main() -> None:
     p.add_argument("--quick", action="store_true", help="shorter Panda recordings (smoke run)")
     p.add_argument("--no-sp", action="store_true", help="q̈ tables only")
     args = p.parse_args()
-    results: dict = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/bench_acceleration.py"
+    results: dict = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/stream/bench_acceleration.py"
                      + (" --quick" if args.quick else "") + (" --no-sp" if args.no_sp else "")}
     md: list[str] = ["# q̈ estimators: error vs delay, and SP's prediction error with each", "",
                      f"Command: `{results['command']}`", ""]

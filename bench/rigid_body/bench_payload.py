@@ -14,7 +14,8 @@ writes ``bench/results/bench_payload.json``.
 
 Usage::
 
-    .venv/bin/python bench/bench_payload.py [--robots panda ur5] [--seeds 0 1 2] [--pickup 20] [--after 10]
+    .venv/bin/python bench/rigid_body/bench_payload.py [--robots panda ur5] [--seeds 0 1 2] [--pickup 20] \
+        [--after 10]
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 RESULTS = REPO / "bench" / "results" / "bench_payload.json"
 
 

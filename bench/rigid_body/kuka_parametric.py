@@ -6,7 +6,8 @@ Coulomb velocity scale v_s; baselines: the CAD model (RNEA with the URDF, no lea
 (the previous measured torque). Optionally NP and SP with the package defaults. Errors: per-joint RMSE
 [N·m] over the whole test log and over its second half ("regime"), and nMSE = MSE / var(τ_measured).
 
-    PYTHONPATH=$PWD .venv/bin/python bench/kuka_parametric.py [--data /work/shared/data/kuka_lwr4] [--sp]
+    PYTHONPATH=$PWD .venv/bin/python bench/rigid_body/kuka_parametric.py [--data ../shared/data/kuka_lwr4] \
+        [--sp]
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.build import build_model
 from semiparam_ros.eval.replay import load_samples
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def run(model, train, test) -> tuple[np.ndarray, np.ndarray]:

@@ -30,7 +30,7 @@ All runs use one BLAS thread (``threadpoolctl.threadpool_limits(1)``). Timings a
 the mean of back-to-back calls (short repeats, so that preemption on the shared machine hits few of them);
 the process CPU time per call and the CPU share (CPU time / wall time) are reported next to them. Usage::
 
-    .venv/bin/python bench/bench_core.py [--quick] [--json PATH]
+    .venv/bin/python bench/learners/bench_core.py [--quick] [--json PATH]
 """
 
 from __future__ import annotations
@@ -62,8 +62,8 @@ from semiparam_ros.core.learners.features import Standardizer
 from semiparam_ros.core.learners.rrls import RecursiveRLS
 from semiparam_ros.core.learners.semiparametric import NonparametricModel
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "test"))
-from reference_rrls import ReferenceQRRLS
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "test"))
+from helpers.reference_rrls import ReferenceQRRLS
 
 T_OUT = 6
 N_INPUTS = 12
@@ -249,7 +249,7 @@ def load_old_rrls(rev: str, tmp: pathlib.Path) -> type[RecursiveRLS]:
     ``rrls.py`` with its kernel import pointing at the old kernels), so old and new run in the same
     process on the same rows.
     """
-    root = pathlib.Path(__file__).resolve().parents[1]
+    root = pathlib.Path(__file__).resolve().parents[2]
 
     def show(path: str) -> str:
         return subprocess.run(["git", "-C", str(root), "show", f"{rev}:{path}"],

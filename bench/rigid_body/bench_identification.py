@@ -1,7 +1,7 @@
 """Benchmark and evidence: the physically consistent projection — its cost, and frozen rigid-body models
 (consistent vs unconstrained vs CAD) on motion not seen.
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_identification.py
+    PYTHONPATH=$PWD .venv/bin/python bench/rigid_body/bench_identification.py
 
 1. Real KUKA LWR4+ (../shared/data/kuka_lwr4): the estimator learns log 1 (``learn``, shipped
    ``config/kuka_lwr4.yaml``); its rigid-body part, frozen, predicts logs 2 (the same motion) and 3 (a
@@ -32,7 +32,7 @@ from semiparam_ros.service.serving import LearnedModel
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 KUKA = ROOT.parent / "shared" / "data" / "kuka_lwr4"
 
 
@@ -47,7 +47,7 @@ def _cost(est) -> list[float]:
 
 
 def main() -> None:
-    out: dict = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/bench_identification.py"}
+    out: dict = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/rigid_body/bench_identification.py"}
     rows = []
     if KUKA.is_dir():
         cfg = load_config(ROOT / "config" / "kuka_lwr4.yaml").with_overrides(

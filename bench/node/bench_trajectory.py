@@ -7,7 +7,7 @@ deserialisation of the message, the conversion to arrays, the model at every poi
 call), writing the efforts into the message, rclpy's serialisation. Medians over repeats, one BLAS
 thread. Usage::
 
-    .venv/bin/python bench/bench_trajectory.py [--points 10 100 1000 10000] [--json PATH]
+    .venv/bin/python bench/node/bench_trajectory.py [--points 10 100 1000 10000] [--json PATH]
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from semiparam_ros.service.learn import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_trajectory.json"
 
 

@@ -1,7 +1,7 @@
 """Closed-loop proof of the learned feed-forward: a simulated torque-controlled Panda tracking a motion it
 was not trained on, with low PD gains (a compliant robot).
 
-    PYTHONPATH=$PWD .venv/bin/python bench/closed_loop.py [--duration 30] [--train-duration 60] [--quick]
+    PYTHONPATH=$PWD .venv/bin/python bench/node/closed_loop.py [--duration 30] [--train-duration 60] [--quick]
 
 1. Simulate a 1 kHz joint-torque recording of the Panda (the simulator's perturbed inertias, friction,
    offsets and noise; ``simulate`` preset ``panda_excitation``), write it as a bag, learn it with
@@ -34,7 +34,7 @@ from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.closed_loop import ArmPlant, desired_trajectory, pd_gains, run_loop
 from semiparam_ros.sim.writer import write_recording
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TEST_SEED = 20261126  # the reference motion's multi-sine seed (the training bag's comes from its name)
 
 
@@ -134,7 +134,7 @@ def main() -> None:
     out = {
         "machine": {"python": platform.python_version(), "processor": platform.processor(),
                     "node": platform.node()},
-        "command": "PYTHONPATH=$PWD .venv/bin/python bench/closed_loop.py",
+        "command": "PYTHONPATH=$PWD .venv/bin/python bench/node/closed_loop.py",
         "robot": "panda", "rate_hz": rate, "duration_s": args.duration, "skip_s": skip_s,
         "train": {"bag": "panda_excitation (simulate_arm, seed 0)", "duration_s": args.train_duration,
                   "samples_learned": report.learned, "learn_wall_s": learn_s,

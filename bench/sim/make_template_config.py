@@ -1,6 +1,6 @@
 """Write config/template.yaml from the parameter table (run from the repository root after changing it).
 
-    PYTHONPATH=$PWD .venv/bin/python bench/make_template_config.py
+    PYTHONPATH=$PWD .venv/bin/python bench/sim/make_template_config.py
 
 Every parameter but the three a user must give is listed commented, with its description, range and
 default; test/core/rigid_body/test_real_arms.py checks that uncommenting them gives exactly the defaults.
