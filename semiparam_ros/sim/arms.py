@@ -42,6 +42,7 @@ from semiparam_ros.sim.contacts import (
 )
 from semiparam_ros.sim.ik import ArmKinematics
 from semiparam_ros.sim.pipeline import (
+    Measurement,
     RecordingConfig,
     add_payload,
     arm_kinematics,
@@ -64,6 +65,7 @@ __all__ = [
     "ArmRobot",
     "ArmScenarioConfig",
     "JointFriction",
+    "JointTorqueMeasurement",
     "ParameterPerturbation",
     "arm_regressor",
     "perturb_parameters",
@@ -493,6 +495,44 @@ def true_parameters(config: ArmScenarioConfig) -> np.ndarray:
     return perturb_parameters(params_urdf, config.perturbation, robot_rng)
 
 
+@dataclass(frozen=True)
+class JointTorqueMeasurement:
+    """An arm's joint torque sensors (a :class:`~semiparam_ros.sim.pipeline.MeasurementModel`).
+
+    The reading is ``rigid + friction(q̇, q̈) − Jᵀ F`` (viscous and Coulomb friction, offsets, armature;
+    a contact force F at the end effector) plus white noise per joint drawn from ``rng``.
+
+    Args:
+        kin: The arm's kinematics (the end effector's Jacobian for contacts).
+        end_effector: The frame contacts act at.
+        friction: The joints' friction, offsets and armature.
+        noise_std: Noise standard deviation per joint [N·m].
+    """
+
+    kin: ArmKinematics
+    end_effector: str
+    friction: JointFriction
+    noise_std: np.ndarray
+    output: str = "joint_torques"
+
+    def measure(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, t: np.ndarray, rigid: np.ndarray,
+                force: np.ndarray | None, rng: np.random.Generator) -> Measurement:
+        """See :meth:`semiparam_ros.sim.pipeline.MeasurementModel.measure` (joint torques in N·m)."""
+        count, n = rigid.shape
+        tau_f = self.friction.torques(dq, ddq)
+        contact_wrench = np.zeros((count, 6))
+        external = np.zeros((count, n))
+        if force is not None:
+            for i in np.flatnonzero(np.any(force != 0.0, axis=1)):
+                _, J = self.kin.position_jacobian(q[i])
+                external[i] = -(J.T @ force[i])
+                ((R, _p),) = self.kin.frame_poses(q[i], [self.end_effector])
+                contact_wrench[i, :3] = R.T @ force[i]
+        truth = rigid + tau_f + external
+        noise = self.noise_std * rng.standard_normal((count, n))
+        return Measurement(truth, truth + noise, noise, tau_f, external, contact_wrench)
+
+
 def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     """Simulate one arm recording (module docstring).
 
@@ -508,7 +548,6 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     spec = ARM_ROBOTS[config.robot]
     reg = arm_regressor(config.robot)
     kin = _kinematics(config.robot)
-    n = len(spec.joints)
     # Physical robot: (robot, seed) → true_parameters. Recording: (seed, name) → trajectory, noise, contacts.
     rng_traj, rng_joint, rng_torque, rng_contact = recording_seeds(config.seed, config.name)
 
@@ -540,20 +579,12 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     rigid = rigid_outputs(reg, q, dq, ddq, after, params_before, params_after, chunk=2000)
 
     friction = config.true_friction()
-    tau_f = friction.torques(dq, ddq)
-
     episodes, force = draw_contacts(config.contacts, config.duration, t, rng_contact)
-    contact_wrench = np.zeros((count, 6))
-    external = np.zeros((count, n))
-    for i in np.flatnonzero(np.any(force != 0.0, axis=1)):
-        _, J = kin.position_jacobian(q[i])
-        external[i] = -(J.T @ force[i])
-        ((R, _p),) = kin.frame_poses(q[i], [spec.end_effector])
-        contact_wrench[i, :3] = R.T @ force[i]
-
-    truth = rigid + tau_f + external
-    noise = config.noise_scale * np.asarray(spec.torque_noise_std) * rng_torque.standard_normal((count, n))
-    measured = truth + noise
+    sensors = JointTorqueMeasurement(kin, spec.end_effector, friction,
+                                     config.noise_scale * np.asarray(spec.torque_noise_std))
+    reading = sensors.measure(q, dq, ddq, t, rigid, force, rng_torque)
+    tau_f, truth, measured, noise = reading.non_rigid, reading.true, reading.measured, reading.noise
+    external, contact_wrench = reading.external, reading.contact_wrench
     q_meas = q + config.noise_scale * spec.position_noise_std * rng_joint.standard_normal(q.shape)
     dq_meas = dq + config.noise_scale * spec.velocity_noise_std * rng_joint.standard_normal(dq.shape)
 

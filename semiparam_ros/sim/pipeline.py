@@ -25,7 +25,7 @@ import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -36,6 +36,8 @@ from semiparam_ros.sim.ik import ArmKinematics
 
 __all__ = [
     "DEFAULT_START_NS",
+    "Measurement",
+    "MeasurementModel",
     "RecordingConfig",
     "add_payload",
     "arm_kinematics",
@@ -122,6 +124,51 @@ class RecordingConfig:
         if self.payload_mass <= 0:
             return None
         return 0.5 * self.duration if self.payload_time is None else float(self.payload_time)
+
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """What a robot's sensors report over one recording, with its parts ((N, t) arrays, units of y).
+
+    Attributes:
+        true: The noise-free reading (rigid body, the sensors' own effects and contacts).
+        measured: ``true + noise``.
+        noise: The sensor noise drawn.
+        non_rigid: What the sensors add besides the rigid body and contacts: the F/T sensor's harness, or
+            the joints' friction, offsets and armature.
+        external: The contacts' part of the reading (None without contact episodes, F/T).
+        contact_wrench: The contact as applied at the end effector (None without contact episodes, F/T).
+    """
+
+    true: np.ndarray
+    measured: np.ndarray
+    noise: np.ndarray
+    non_rigid: np.ndarray
+    external: np.ndarray | None = None
+    contact_wrench: np.ndarray | None = None
+
+
+class MeasurementModel(Protocol):
+    """A robot's sensors: what they read of the rigid-body output along a recording.
+
+    The F/T sensor's wrench (:class:`~semiparam_ros.sim.scenario.FTSensorMeasurement`) or the joint
+    torques (:class:`~semiparam_ros.sim.arms.JointTorqueMeasurement`).
+
+    ``output`` is ``"wrench"`` or ``"joint_torques"``; :meth:`measure` turns the rigid-body output along
+    the trajectory into the reading, drawing its noise from ``rng`` only.
+    """
+
+    output: str
+
+    def measure(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, t: np.ndarray, rigid: np.ndarray,
+                force: np.ndarray | None, rng: np.random.Generator) -> Measurement:
+        """Return the reading at the samples' states (rad, rad/s, rad/s²) and times t [s].
+
+        ``rigid`` is the rigid-body output (N, t); ``force`` the contact force at the end effector (N, 3)
+        [N, base frame], or None when the recording has no contact episodes.
+        """
+        ...
 
 
 @lru_cache(maxsize=16)

@@ -57,6 +57,7 @@ from semiparam_ros.sim.effects import (
 from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics, ClikResult, clik_periodic_orbit
 from semiparam_ros.sim.pipeline import (
     DEFAULT_START_NS,
+    Measurement,
     RecordingConfig,
     add_payload,
     arm_kinematics,
@@ -86,6 +87,7 @@ __all__ = [
     "OTHER_JOINTS",
     "PUBLISHED_JOINT_ORDER",
     "CircleSetup",
+    "FTSensorMeasurement",
     "ScenarioConfig",
     "SimulatedRecording",
     "TrajectoryVariability",
@@ -516,21 +518,16 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
     after = np.zeros(n_wrench, dtype=bool) if pickup is None else t_wrench >= pickup
     rigid = rigid_outputs(reg, wq, wdq, wddq, after, params_before, params_after, chunk=500,
                           progress=progress)
-    cables = harness_wrench(kin, wq, wdq, fx)
     contact_info: dict[str, Any] | None = None
-    contact_w: np.ndarray | None = None
-    external: np.ndarray | None = None
     episodes, force = draw_contacts(config.contacts, config.duration, t_wrench, rng_contact)
     if config.contacts is not None:
-        contact_w, external = hand_contact_wrenches(kin, wq, force)
         contact_info = contacts_info(
             config.contacts, _HAND_FRAME, "force the environment applies to the hand at the frame origin; "
             "direction fixed in the root frame during an episode", episodes)
-    truth = sensor_reading(rigid + cables if external is None else rigid + cables + external, t_wrench, fx)
-    noise = np.empty((n_wrench, 6))
-    noise[:, :3] = fx.force_noise_std * rng_wrench.standard_normal((n_wrench, 3))
-    noise[:, 3:] = fx.torque_noise_std * rng_wrench.standard_normal((n_wrench, 3))
-    measured = truth + noise
+    sensor = FTSensorMeasurement(kin, fx)
+    reading = sensor.measure(wq, wdq, wddq, t_wrench, rigid,
+                             force if config.contacts is not None else None, rng_wrench)
+    cables, truth, noise, measured = reading.non_rigid, reading.true, reading.noise, reading.measured
 
     other = dict.fromkeys(OTHER_JOINTS, 0.0)
     other.update({k: v for k, v in kin.locked_positions.items() if k in other})
@@ -583,9 +580,42 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
         parameters_after=params_after,
         info=info,
         contact_episodes=episodes,
-        contact_wrench=contact_w,
-        external_wrench=external,
+        contact_wrench=reading.contact_wrench,
+        external_wrench=reading.external,
     )
+
+
+@dataclass(frozen=True)
+class FTSensorMeasurement:
+    """The iCub's six-axis F/T sensor in the upper arm.
+
+    A :class:`~semiparam_ros.sim.pipeline.MeasurementModel`.
+    The reading is ``sensor_reading(rigid + harness + contacts)`` (calibration, offset and drift of
+    :mod:`semiparam_ros.sim.effects`) plus white noise, force then torque drawn from ``rng``.
+
+    Args:
+        kin: The arm's kinematics (harness and hand contacts).
+        effects: The sensor's and harness's effect parameters.
+    """
+
+    kin: ArmKinematics
+    effects: EffectParameters
+    output: str = "wrench"
+
+    def measure(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, t: np.ndarray, rigid: np.ndarray,
+                force: np.ndarray | None, rng: np.random.Generator) -> Measurement:
+        """See :meth:`~semiparam_ros.sim.pipeline.MeasurementModel.measure` (N, N·m, sensor frame)."""
+        fx = self.effects
+        cables = harness_wrench(self.kin, q, dq, fx)
+        contact_w = external = None
+        if force is not None:
+            contact_w, external = hand_contact_wrenches(self.kin, q, force)
+        truth = sensor_reading(rigid + cables if external is None else rigid + cables + external, t, fx)
+        n = len(t)
+        noise = np.empty((n, 6))
+        noise[:, :3] = fx.force_noise_std * rng.standard_normal((n, 3))
+        noise[:, 3:] = fx.torque_noise_std * rng.standard_normal((n, 3))
+        return Measurement(truth, truth + noise, noise, cables, external, contact_w)
 
 
 def hand_contact_wrenches(
