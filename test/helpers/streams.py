@@ -6,7 +6,6 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-import pytest
 
 from helpers import REPO
 from semiparam_ros.core.config import EstimatorConfig, load_config
@@ -48,16 +47,11 @@ PAPER = {"adaptation.time_constant": 0.0, "parametric.forgetting": 1.0, "nonpara
          "semiparametric.novelty_scale": 1e6}
 
 
-# ----------------------------------------------------------------------------- fixtures and stream
-@pytest.fixture(scope="module")
-def config() -> EstimatorConfig:
+# ----------------------------------------------------------------------------- configuration and stream
+def paper_config() -> EstimatorConfig:
+    """The iCub configuration with the paper's learners, a small D and a short warm-up."""
     return load_config(CONFIG_PATH).with_overrides(
         {"nonparametric.n_features": N_FEATURES, "nonparametric.standardizer_warmup": WARMUP, **PAPER})
-
-
-@pytest.fixture(scope="module")
-def regressor(config: EstimatorConfig):
-    return build_regressor(config)
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from helpers.streams import (
     assert_same_state,
     feed,
     make_trajectory,
+    paper_config,
     rich_stream,
     snapshot,
 )
@@ -43,6 +44,16 @@ from semiparam_ros.core.estimator.online import OnlineEstimator, StepResult
 from semiparam_ros.core.stream.messages import JointStateData, Sample, WrenchData
 from semiparam_ros.errors import CheckpointError, RejectedSampleError
 from semiparam_ros.io.bags import iter_samples
+
+
+@pytest.fixture(scope="module")
+def config() -> EstimatorConfig:
+    return paper_config()
+
+
+@pytest.fixture(scope="module")
+def regressor(config: EstimatorConfig):
+    return build_regressor(config)
 
 
 def rigid_stream() -> Stream:
