@@ -8,7 +8,6 @@ runs for the fleet, and ``load_model`` on a checkpoint of ``learn`` for the vali
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import time
@@ -18,6 +17,7 @@ import cloudpickle
 import numpy as np
 import pytest
 from helpers import REPO
+from helpers.jobs import square_or_die_once
 from threadpoolctl import threadpool_limits
 
 from semiparam_ros import load_model
@@ -73,19 +73,10 @@ def test_evaluate_on_a_local_cluster_equals_the_serial_run():
                             (hc.rmse, hc.rmse_inside, hc.rmse_outside))
 
 
-def _square_or_die_once(x: int, marker: str) -> int:
-    """A job that kills its worker process the first time it runs with x == 3."""
-    time.sleep(0.3)
-    if x == 3 and not os.path.exists(marker):
-        Path(marker).write_text("killed")
-        os._exit(1)  # the worker dies mid-run, its nanny starts another
-    return x * x
-
-
 def test_a_worker_killed_mid_run_loses_nothing(tmp_path):
     marker = str(tmp_path / "killed")
     with connect("local:2") as client:
-        results = run_on_cluster(client, _square_or_die_once, [(x, marker) for x in range(10)])
+        results = run_on_cluster(client, square_or_die_once, [(x, marker) for x in range(10)])
     assert Path(marker).exists()  # a worker did die
     assert results == [x * x for x in range(10)]
 
