@@ -39,7 +39,7 @@ PIP_ONLY = {"threadpoolctl": "threadpoolctl", "zstandard": "zstandard", "lz4": "
             "distributed": "distributed", "cloudpickle": "cloudpickle"}
 #: Keys needed without a Python import of ours: the launch file's packages; rclpy.lifecycle's messages.
 NOT_IMPORTED = {"launch", "launch_ros", "lifecycle_msgs"}
-LOCAL = {"semiparam_ros", "ros_helpers", "reference_rrls", "__future__", "docs"}  # docs: docs/tools
+LOCAL = {"semiparam_ros", "helpers", "__future__", "docs"}  # docs: docs/tools
 
 
 def _imports(folder: str) -> set[str]:

@@ -11,7 +11,8 @@ For D ∈ {100, 250, 500, 1000, 2000} features and 6 outputs, the time of one te
   median of the per-pair ratios (target ≤ 1.3 at D = 500 and 1000);
 * ``ours+RFF``      — ``NonparametricModel.predict_learn_one`` on a 12-d input: standardize, random
   features, predict_update (the whole NP budget per sample);
-* ``numpy Givens``  — the pure-numpy reference (test/reference_rrls.py): one Python loop over the b rows;
+* ``numpy Givens``  — the pure-numpy reference (test/helpers/reference_rrls.py): one Python loop over the
+  b rows;
 * ``Sherman–Morrison`` — RLS on the inverse ``P = A⁻¹`` with BLAS ``dsymv`` + ``dsyr`` (in place),
   6 outputs sharing P;
 * ``padasip``       — ``padasip.filters.FilterRLS`` (1.2.2) ``predict`` + ``adapt``. padasip filters have a
