@@ -125,6 +125,16 @@ _SCENARIO_NAMES = {
 }
 
 
+def _icub_preset(preset: str) -> dict[str, float]:
+    """Return the rates and length of an iCub preset.
+
+    Raises:
+        ValueError: On an unknown preset.
+    """
+    if preset not in ICUB_PRESETS:
+        raise ValueError(f"preset must be one of {sorted(ICUB_PRESETS)}, got {preset!r}")
+    return ICUB_PRESETS[preset]
+
 
 def _icub_configs(
     preset: str = "default",
@@ -136,7 +146,7 @@ def _icub_configs(
     contacts: ContactConfig | None = None,
     **overrides: Any,
 ) -> list[ScenarioConfig]:
-    """Return the iCub scenario configurations of a preset.
+    """Return the iCub scenario configurations of a preset (scenarios checked by :func:`preset_configs`).
 
     Args:
         preset: ``"default"`` (60 s, both streams 100 Hz) or ``"paper"`` (1000 s, wrench 10 Hz, joint
@@ -158,12 +168,7 @@ def _icub_configs(
     Raises:
         ValueError: On an unknown preset or scenario, or invalid values.
     """
-    if preset not in ICUB_PRESETS:
-        raise ValueError(f"preset must be one of {sorted(ICUB_PRESETS)}, got {preset!r}")
-    unknown = [s for s in scenarios if s not in _SCENARIO_NAMES]
-    if unknown:
-        raise ValueError(f"unknown scenarios {unknown}; choose from {sorted(_SCENARIO_NAMES)}")
-    base: dict[str, Any] = dict(ICUB_PRESETS[preset])
+    base: dict[str, Any] = dict(_icub_preset(preset))
     base.update({k: v for k, v in overrides.items() if v is not None})
     out = []
     for scenario in scenarios:
@@ -202,7 +207,9 @@ def _arm_configs(
     perturbation: ParameterPerturbation | None = ParameterPerturbation(),  # noqa: B008 - frozen
     **overrides: Any,
 ) -> list[ArmScenarioConfig]:
-    """Return the scenario configurations of an arm; bag names ``<robot>_<scenario>_<rate>hz``.
+    """Return an arm's scenario configurations; bag names ``<robot>_<scenario>_<rate>hz``.
+
+    The robot and the scenarios are checked by :func:`preset_configs`.
 
     Args:
         robot: Key of :data:`ARM_ROBOTS`.
@@ -220,13 +227,8 @@ def _arm_configs(
         One configuration per scenario.
 
     Raises:
-        ValueError: On an unknown robot or scenario, or invalid values.
+        ValueError: On invalid values.
     """
-    if robot not in ARM_ROBOTS:
-        raise ValueError(f"robot must be one of {sorted(ARM_ROBOTS)}, got {robot!r}")
-    unknown = [s for s in scenarios if s not in ARM_SCENARIOS]
-    if unknown:
-        raise ValueError(f"unknown arm scenarios {unknown}; choose from {list(ARM_SCENARIOS)}")
     mass = ARM_ROBOTS[robot].payload_mass if payload_mass is None else float(payload_mass)
     extra = {k: v for k, v in overrides.items() if v is not None}
     out = []
@@ -254,7 +256,7 @@ def _arm_configs(
 
 #: Each robot's scenarios, the defaults first (what ``simulate`` writes when none is named).
 SCENARIOS: dict[str, tuple[str, ...]] = {
-    "icub": ("xy", "xz", "payload", "multisine", "contacts"),
+    "icub": tuple(_SCENARIO_NAMES),
     **{robot: ARM_SCENARIOS for robot in ARM_ROBOTS},
 }
 _DEFAULT_SCENARIOS = {"icub": ("xy", "xz", "payload"), **{r: ("excitation", "payload") for r in ARM_ROBOTS}}
@@ -368,9 +370,7 @@ def options_configs(options: SimulationOptions) -> list[RecordingConfig]:
         wrench_rate = o.wrench_rate if o.wrench_rate is not None else o.rate
         duration = o.duration
         if o.samples is not None:
-            if o.preset not in ICUB_PRESETS:
-                raise ValueError(f"preset must be one of {sorted(ICUB_PRESETS)}, got {o.preset!r}")
-            duration = o.samples / (wrench_rate or ICUB_PRESETS[o.preset]["wrench_rate"])
+            duration = o.samples / (wrench_rate or _icub_preset(o.preset)["wrench_rate"])
         return preset_configs(
             "icub", o.scenario, preset=o.preset,
             effects=DEFAULT_EFFECTS.scaled(0.0 if o.no_effects else o.effects_scale,
