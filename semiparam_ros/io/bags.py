@@ -726,9 +726,16 @@ class BagWriter:
         try:
             writer.close()
             assert self._staging is not None  # set by open
-            if self.path.exists():  # a previous bag folder (checked by open): replaced only now
-                shutil.rmtree(self.path)
-            os.replace(self._staging / self.path.name, self.path)
+            previous = None
+            if self.path.exists():  # a previous bag folder (checked by open): set aside only now
+                previous = self._staging / ".previous"
+                os.replace(self.path, previous)
+            try:
+                os.replace(self._staging / self.path.name, self.path)
+            except OSError:
+                if previous is not None:  # put the previous bag back
+                    os.replace(previous, self.path)
+                raise
         except Exception as err:
             raise BagError(f"cannot finish bag {str(self.path)!r}: {err}") from err
         finally:

@@ -541,3 +541,30 @@ def test_read_messages_is_lazy(good_bag, monkeypatch):
     next(iterator)
     assert len(calls) == 1
     iterator.close()
+
+
+def test_an_overwrite_that_cannot_finish_keeps_the_previous_bag(tmp_path, monkeypatch):
+    """The new bag is renamed into place only when finished; if that rename fails, the previous bag is
+    put back whole (same files, same messages) and no hidden staging folder is left behind."""
+    import os
+
+    bag = tmp_path / "bag"
+    with BagWriter(bag) as w:
+        w.write_joint_state("/joint_states", JointStateData(T0, ("a",), [1.0]))
+    files = sorted(p.name for p in bag.iterdir())
+    real, calls = os.replace, []
+
+    def replace_failing_the_new_bag(src, dst):
+        calls.append((src, dst))
+        if len(calls) == 2:  # 1: the previous bag set aside, 2: the new one into place
+            raise OSError("no space left on device")
+        return real(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace_failing_the_new_bag)
+    with pytest.raises(BagError, match="no space left"):
+        with BagWriter(bag, overwrite=True) as w:
+            w.write_joint_state("/joint_states", JointStateData(T0 + 10**9, ("a",), [2.0]))
+    monkeypatch.undo()
+    assert sorted(p.name for p in bag.iterdir()) == files
+    assert [m.stamp_ns for m in read_messages(bag, wrench_topic=None)] == [T0]
+    assert [p.name for p in tmp_path.iterdir()] == ["bag"]

@@ -490,10 +490,10 @@ class OnlineEstimator:
         if not finite:
             raise CheckpointError(f"{path}: corrupt checkpoint: its model's prediction at q = q̇ = q̈ = 0 is "
                                   "not finite")
+        if self.sample_period_s is not None:  # the restored learner takes the stream's period too
+            model.on_period(self.sample_period_s)
         self.model = model
         self.noise = noise
         self.gate = gate
         self.payload = payload
         self.n_samples_learned = n_learned
-        if self.sample_period_s is not None:  # the restored learner takes the stream's period too
-            self.model.on_period(self.sample_period_s)
