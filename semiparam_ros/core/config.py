@@ -282,10 +282,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "tracker of the model's error (one step ahead); see core/learners/consistent.py",
                   choices=("cascade", "joint", "consistent"),
                   structural=True, kinds=("SP",), unless="cascade"),
-    ParameterSpec("semiparametric.novelty_scale", "double", 0.01,
-                  "'consistent': the residual is weighted by exp(-(nu/novelty_scale)^2), nu = lambda·v the "
-                  "fraction of its prior variance left at the state (dimensionless; ≈ 0 where the data "
-                  "determines it, → 1 far from the data)",
+    ParameterSpec("semiparametric.novelty_scale", "double", 1.0,
+                  "'consistent': the residual is weighted per output by s^2/(s^2 + sigma^2 v/novelty_scale), "
+                  "s^2 the rigid-body part's recent systematic error variance, sigma^2 v the residual's "
+                  "predictive variance at the state (dimensionless; larger = trust the residual further "
+                  "from its data)",
                   min=0.0, min_exclusive=True, max=1e6),
     ParameterSpec("semiparametric.tracker", "bool", True,
                   "'consistent': add the fast tracker of the model's error to the prediction (false = the "

@@ -279,13 +279,16 @@ def structural_entries(regressor: Regressor, n_inputs: int, n_outputs: int, n_pa
 class _Context(PredictionContext):
     """A prediction context that also keeps the local tracker's reference prediction and weight at x."""
 
-    __slots__ = ("kappa", "model_total")
+    __slots__ = ("fast_candidate", "kappa", "model_total", "raw_residual")
 
     def __init__(self, prediction: Prediction, model: Any, x: np.ndarray, Phi: np.ndarray | None,
-                 phi: np.ndarray | None, model_total: np.ndarray, kappa: float) -> None:
+                 phi: np.ndarray | None, model_total: np.ndarray, kappa: float,
+                 raw_residual: np.ndarray | None, fast_candidate: np.ndarray) -> None:
         super().__init__(prediction, model, x, Phi, phi)
         self.model_total = model_total
         self.kappa = kappa  # the tracker's weight at x
+        self.raw_residual = raw_residual  # r before its weight (None before the residual is ready)
+        self.fast_candidate = fast_candidate  # κ_f Φδ_f at x before its weight (zeros without a tracker)
 
 
 class ConsistentSemiparametricModel(_TwoStageModel):
@@ -344,7 +347,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                  sigma: float = 1.0, forgetting_parametric: float = 1.0,
                  forgetting_nonparametric: float = 1.0, seed: int = 0,
                  standardizer: Standardizer | None = None, standardizer_warmup: int = 0,
-                 standardizer_min_scale: Any = 0.0, prior: Any = None, novelty_scale: float = 0.01,
+                 standardizer_min_scale: Any = 0.0, prior: Any = None, novelty_scale: float = 1.0,
                  tracker: bool = True, tracker_position_scale: float = 0.05,
                  tracker_velocity_scale: float = 0.5, tracker_samples: int = 50,
                  tracker_time_constant: float = 0.3, sample_period_s: float = 0.01) -> None:
@@ -374,6 +377,18 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.fast = RecursiveRLS(p, 1, lam_parametric, forgetting=self._fast_forgetting(sample_period_s))
         self.n_samples_seen = 0
         self._held: tuple[np.ndarray, float] | None = None  # (g·r, its relative variance) last computed
+        self._raw: tuple[np.ndarray, float] | None = None   # (r, v) of the last full prediction
+        self._fast_candidate = np.zeros(t)                     # κ_f Φδ_f of the last full prediction
+        self._recent_beta = self._scale_forgetting(sample_period_s)
+        self._reset_scales()
+
+    def _reset_scales(self) -> None:
+        self._scale_weight = 0.0                       # Σ β^{n−m} over the samples the residual learned
+        self._scale_model = np.zeros(self.n_outputs)   # Σ β^{n−m} (y − ŷ_P − r)²: σ² × the weight
+        self._recent_rigid = np.zeros(self.n_outputs)  # recent mean of (y − ŷ_P)² (SCALE_TIME_CONSTANT)
+        self._recent_n = 0                             # samples in it
+        self._fast_errors = np.zeros((2, self.n_outputs))  # recent mean of g and g², g the fast saving
+        self._fast_n = 0                               # samples in them
 
     #: The fast rigid-body correction fades like the local tracker but over this many times its distances
     #: (it is a rigid-body correction, valid further from where it was learned than a local error).
@@ -382,6 +397,17 @@ class ConsistentSemiparametricModel(_TwoStageModel):
     #: The fast correction remembers at least this many rows per parameter (a statistical floor: p
     #: parameters need several times p equations before a noisy fit is worth adding to the prediction).
     FAST_ROWS_PER_PARAMETER = 10
+
+    #: Memory [s] of the rigid-body part's recent error scale s² in the residual's weight (at least
+    #: :attr:`SCALE_MIN_SAMPLES` samples): how quickly the model trusts its residual more where the rigid
+    #: body turns out poor on a new motion.
+    SCALE_TIME_CONSTANT = 1.0
+    SCALE_MIN_SAMPLES = 10
+
+    def _scale_forgetting(self, sample_period_s: float) -> float:
+        """β_s = exp(−1/N) of the recent error scale, N = max(SCALE_TIME_CONSTANT/T, SCALE_MIN_SAMPLES)."""
+        samples = max(self.SCALE_TIME_CONSTANT / float(sample_period_s), float(self.SCALE_MIN_SAMPLES))
+        return forgetting_factor(samples, 1.0)
 
     def _fast_forgetting(self, sample_period_s: float) -> float:
         """β_f = exp(−1/N), N = max(τ_f/T, 10·p/t) samples (τ_f in s, T the period in s)."""
@@ -400,6 +426,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """
         beta = super().on_period(sample_period_s)
         self.fast.set_forgetting(self._fast_forgetting(sample_period_s))
+        self._recent_beta = self._scale_forgetting(sample_period_s)
         return beta
 
     # ------------------------------------------------------------------ prediction
@@ -428,11 +455,60 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         pk = P[0]
         delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
         r = pk[:t] - self._expand(pk[t:]) @ delta
-        nu = npm.rls.lam * float(v[0])
-        r *= math.exp(-((nu / self.novelty_scale) ** 2))
+        self._raw = (r.copy(), float(v[0]))
+        r *= self.residual_weight(float(v[0]))
         if rigid is None:
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
         return yp, r, var + float(v[0]), phi
+
+    def residual_weight(self, v: Any) -> np.ndarray:
+        """Weight g ∈ [0, 1] of the residual per output at relative variance v: ``s²/(s² + κ σ² v)``.
+
+        ``s²`` is the variance of the rigid-body part's systematic error (its mean squared a-priori error
+        minus σ²), ``σ²`` the residual's noise variance (the mean squared a-priori error of ŷ_P + r), both
+        over the learned samples with the residual's memory; ``σ² v`` is the residual's predictive variance
+        at x (v = φA⁻¹φᵀ: about 1/λ times the prior's fraction left, ``ν = λv``) and κ =
+        ``1/novelty_scale``. This is the weight that minimises the expected squared error of
+        ``ŷ_P + g r`` when r estimates an error of variance s² with an error of variance κσ²v: where the
+        rigid body is poor (s² ≫ σ²v) a residual of moderate confidence is used, where it is excellent
+        (s² → 0) the model abstains unless the residual is confident. Before any statistics: 1.
+
+        Args:
+            v: The residual's relative predictive variance, a scalar or (N,).
+
+        Returns:
+            g, (t,) for a scalar v, else (N, t).
+        """
+        s2, noise = self.error_scales()
+        v_arr = np.asarray(v, dtype=np.float64)
+        spread = (noise / self.novelty_scale) * v_arr[..., None]
+        total = s2 + spread
+        return np.where(total > 0.0, s2 / np.where(total > 0.0, total, 1.0), 1.0)
+
+    def error_scales(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(s², σ²)`` (t,) each: the rigid-body part's systematic error and the residual's noise variances.
+
+        Units of y². Zero before the residual learned a sample.
+        """
+        w = self._scale_weight
+        if w <= 0.0:
+            return np.zeros(self.n_outputs), np.zeros(self.n_outputs)
+        noise = self._scale_model / w
+        return np.maximum(self._recent_rigid - noise, 0.0), noise
+
+    def _fast_useful(self) -> np.ndarray:
+        """Per output: whether the fast correction recently reduced the one-step squared error significantly.
+
+        The mean saving ``m`` of the recent samples must exceed two of its standard errors, ``2 s/√n``
+        (n the samples averaged, at most about twice ``tracker_samples`` for the running mean): choosing by
+        the smaller of two noisy errors alone would add the correction's noise where it saves nothing.
+        """
+        mean, square = self._fast_errors
+        n = min(self._fast_n, 2 * self.tracker.stats_samples - 1)
+        if n < 2:
+            return np.zeros(self.n_outputs, dtype=bool)
+        spread = np.maximum(square - mean * mean, 0.0)
+        return mean > 2.0 * np.sqrt(spread / n)
 
     def predict_checked(self, xv: np.ndarray, Phi: np.ndarray, *, held: bool = False
                        ) -> tuple[Prediction, np.ndarray, np.ndarray | None, float]:
@@ -446,7 +522,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         P, v = self.fast.predict_checked(Phi, True)
         assert v is not None  # asked for
         c = P[:, 0]
-        fast = model_total + (kappa_fast * self.fast_weight(c, v)) * c
+        applied = kappa_fast * c
+        self._fast_candidate = applied
+        fast = model_total + np.where(self._fast_useful(), self.fast_weight(c, v), 0.0) * applied
         total = fast + kappa * self.tracker.estimate
         return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
 
@@ -575,8 +653,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             full = np.zeros((n, t * p))
             full[:, self._phi_entries] = P[:, t:]
             r = P[:, :t] - full.reshape(n, t, p) @ delta
-            nu = npm.rls.lam * v
-            r *= np.exp(-((nu / self.novelty_scale) ** 2))[:, None]
+            r *= self.residual_weight(v)
             var = var + v[:, None]
         return Prediction(yp, r, yp + r, var)
 
@@ -584,8 +661,11 @@ class ConsistentSemiparametricModel(_TwoStageModel):
     def predict_ahead_checked(self, xv: np.ndarray) -> PredictionContext:
         """Do :meth:`predict_ahead` for an input already checked (finite, the model's shape) and copied."""
         Phi = self.parametric.phi_fresh(xv)
+        self._raw = None
+        self._fast_candidate = np.zeros(self.n_outputs)
         pred, model_total, phi, kappa = self.predict_checked(xv, Phi)
-        return _Context(pred, self, xv, Phi, phi, model_total, kappa)
+        raw = None if phi is None or self._raw is None else self._raw[0]
+        return _Context(pred, self, xv, Phi, phi, model_total, kappa, raw, self._fast_candidate)
 
     def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
         """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
@@ -611,9 +691,23 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             np_step = RecursiveRLS.checked_step(phi, u, owned=True)
             par_model.rls.defer_step(par_step)
             npm.rls.defer_step(np_step)
+            assert ctx.raw_residual is not None  # computed with φ
+            e_rigid = yv - ctx.prediction.parametric
+            e_model = e_rigid - ctx.raw_residual
+            beta = npm.rls.forgetting
+            self._scale_weight = beta * self._scale_weight + 1.0
+            self._scale_model = beta * self._scale_model + e_model * e_model
+            self._recent_n += 1
+            a = max(1.0 / self._recent_n, 1.0 - self._recent_beta)
+            self._recent_rigid += a * (e_rigid * e_rigid - self._recent_rigid)
         if fast_step is not None:
             self.fast.defer_step(fast_step)
             self.tracker.update(xv, yv, ctx.model_total, ctx.kappa)
+            e0 = yv - model_only
+            gain = e0 * e0 - (e0 - ctx.fast_candidate) ** 2  # what the full correction saved, per output
+            self._fast_n += 1
+            a = max(1.0 / self._fast_n, 1.0 / self.tracker.stats_samples)
+            self._fast_errors += a * (np.stack([gain, gain * gain]) - self._fast_errors)
         par_model.n_samples_seen += 1
         npm.n_samples_seen += 1
         self.n_samples_seen += 1
@@ -633,6 +727,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.fast.reset()
         self.tracker.reset()
         self._held = None
+        self._raw = None
+        self._reset_scales()
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the learners' and the tracker's state as arrays."""
@@ -640,6 +736,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         state[f"{prefix}phi_entries"] = self._phi_entries.copy()
         state.update(self.tracker.state_dict(f"{prefix}tracker."))
         state.update(self.fast.state_dict(f"{prefix}fast."))
+        state[f"{prefix}scales"] = np.concatenate([[self._scale_weight, self._recent_n, self._fast_n],
+                                                   self._scale_model, self._recent_rigid,
+                                                   self._fast_errors.reshape(-1)])
         return state
 
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
@@ -662,6 +761,19 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         if fast.n_features != self.n_params or fast.n_outputs != 1:
             raise CheckpointError(f"the fast correction's state has {fast.n_features} parameters, expected "
                                   f"{self.n_params}")
+        scales = state.get(f"{prefix}scales")
+        t = self.n_outputs
+        if scales is None:
+            raise CheckpointError("the checkpoint has no error scales of the residual's weight (written by "
+                                  "an older version: learn it again)")
+        scales = np.asarray(scales, dtype=np.float64)
+        if (scales.shape != (3 + 4 * t,) or not np.isfinite(scales).all()
+                or bool((scales[:3 + 2 * t] < 0.0).any()) or bool((scales[3 + 3 * t:] < 0.0).any())):
+            raise CheckpointError("the residual's error scales have the wrong size or invalid values")
         super().load_state_dict(state, prefix)
         self.tracker, self.fast = tracker, fast
         self._held = None
+        self._raw = None
+        self._scale_weight, self._recent_n, self._fast_n = float(scales[0]), int(scales[1]), int(scales[2])
+        self._scale_model, self._recent_rigid = scales[3:3 + t].copy(), scales[3 + t:3 + 2 * t].copy()
+        self._fast_errors = scales[3 + 2 * t:].reshape(2, t).copy()

@@ -142,7 +142,8 @@ def test_stream_predictions_equal_a_priori_predictions_of_hand_loop(config, regr
     else:
         # 0 in the warm-up (to the rounding of total − parametric − correction: ≤ 1e-15 of ≈ 10 N outputs)
         assert np.abs(residuals[:WARMUP]).max() < 1e-12
-        assert np.abs(residuals[WARMUP + 1:]).max(axis=1).min() > 0
+        # the residual is in use after the warm-up (its weight is 0 until its errors are measured)
+        assert (np.abs(residuals[WARMUP + 1:]).max(axis=1) > 0).mean() > 0.95
     if kind == "NP":
         assert np.all(parametric == 0)
 
@@ -760,7 +761,7 @@ def test_warmup_at_rest_does_not_break_the_residual_stage():
     """A robot that sits still while the residual stage's standardization warms up: the warm-up measures
     only sensor noise; the scale floors (nonparametric.min_scale.*) keep later motion in a useful range,
     so the error after the robot starts moving stays close to a warm-up on motion. Without the floors
-    the same start costs SP several times its error (and NP tens of times)."""
+    the same start costs SP 1.5 times its error (and NP tens of times)."""
     cfg = load_config(CONFIG_PATH).with_overrides(
         {"nonparametric.n_features": 200})
     samples = list(iter_samples(CONFIG_PATH.parents[1] / "bags" / "icub_xy", build_pipeline(cfg)))
@@ -785,7 +786,8 @@ def test_warmup_at_rest_does_not_break_the_residual_stage():
     assert tail_force_rmse(cfg, True) < 1.25 * moving
     no_floor = cfg.with_overrides({f"nonparametric.min_scale.{k}": 0.0
                                    for k in ("position", "velocity", "acceleration", "force", "torque")})
-    assert tail_force_rmse(no_floor, True) > 2.0 * moving
+    # (the residual's weight, which follows the rigid-body part's recent error, limits the damage: 1.5×)
+    assert tail_force_rmse(no_floor, True) > 1.4 * moving
 
 
 # ----------------------------------------------------------------------------- 5. joint semiparametric fit

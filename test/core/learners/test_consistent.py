@@ -44,14 +44,36 @@ def model(**kw) -> ConsistentSemiparametricModel:
 
 def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     """After learning, the residual is the closed-form ridge fit, on the features, of y − Φπ̂ with the
-    *final* π̂ over all samples (never of stale targets), times exp(−(λv/ν₀)²) with v = φA⁻¹φᵀ. Both sides
-    solve the same λ = 0.1 system of condition ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
+    *final* π̂ over all samples (never of stale targets), times its weight g = s²/(s² + σ²v/ν₀) per output
+    (v = φA⁻¹φᵀ). σ² and s² are recomputed here from the a-priori errors: σ² the mean of (y − ŷ_P − r)²,
+    r the ridge fit of the samples before with the parameters of that time, s² the recent mean of
+    (y − ŷ_P)² (memory 1 s at the provisional 100 Hz, i.e. 100 samples) minus σ². Every solve is of a
+    λ = 0.1 system of condition ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
     m = model()
     X, Y = data(400, 0)
-    for x, y in zip(X, Y, strict=True):
-        m.learn_one(x, y)
-    pi = m.parametric.parameters
     Z = np.array([m.nonparametric.features_of(x)[0] for x in X])
+    noise_sum, recent = np.zeros(2), np.zeros(2)
+    beta = math.exp(-1.0 / 100.0)
+    for i, (x, y) in enumerate(zip(X, Y, strict=True)):
+        pi_before = m.parametric.parameters
+        rigid = regressor(x) @ pi_before
+        if i:
+            targets = Y[:i] - np.array([regressor(xk) @ pi_before for xk in X[:i]])
+            A = Z[:i].T @ Z[:i] + 0.1 * np.eye(Z.shape[1])
+            r = Z[i] @ np.linalg.solve(A, Z[:i].T @ targets)
+        else:
+            r = np.zeros(2)
+        np.testing.assert_allclose(m.predict_one(x).parametric, rigid, rtol=1e-12, atol=1e-12)
+        noise_sum += (y - rigid - r) ** 2
+        a = max(1.0 / (i + 1), 1.0 - beta)
+        recent += a * ((y - rigid) ** 2 - recent)
+        m.learn_one(x, y)
+    sigma2 = noise_sum / len(X)
+    s2 = np.maximum(recent - sigma2, 0.0)
+    got_s2, got_sigma2 = m.error_scales()
+    np.testing.assert_allclose(got_sigma2, sigma2, rtol=1e-8)
+    np.testing.assert_allclose(got_s2, s2, rtol=1e-8)
+    pi = m.parametric.parameters
     targets = Y - np.array([regressor(x) @ pi for x in X])
     A = Z.T @ Z + 0.1 * np.eye(Z.shape[1])
     W = np.linalg.solve(A, Z.T @ targets)
@@ -59,11 +81,33 @@ def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     for x in Xt:
         z = m.nonparametric.features_of(x)[0]
         v = z @ np.linalg.solve(A, z)
-        want = math.exp(-((0.1 * v / 0.05) ** 2)) * (z @ W)
+        want = s2 / (s2 + sigma2 * v / 0.05) * (z @ W)
         pred = m.predict_one(x)
-        np.testing.assert_allclose(pred.residual, want, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(pred.residual, want, rtol=1e-8, atol=1e-10)
         np.testing.assert_allclose(pred.parametric, regressor(x) @ pi, rtol=1e-12)
         np.testing.assert_allclose(pred.total, pred.parametric + pred.residual, rtol=1e-15)
+
+
+def test_the_residual_is_trusted_as_far_as_the_rigid_body_part_is_poor():
+    """The residual's weight follows the rigid-body part's own error: with an effect the rigid body cannot
+    express (poor rigid body) the residual is used at moderately novel states; where the rigid body is
+    exact (targets = rigid body + noise), the same states get (almost) none of it."""
+    rng = np.random.default_rng(7)
+    X = rng.uniform(-0.5, 0.5, size=(600, 6))
+    exact = (np.array([regressor(x) @ np.array([2.0, 0.5, -1.0]) for x in X])
+             + 0.01 * rng.normal(size=(600, 2)))
+    poor = np.array([truth(x) for x in X]) + 0.01 * rng.normal(size=(600, 2))
+    weights = {}
+    for name, Y in (("exact", exact), ("poor", poor)):
+        m = model(novelty_scale=1.0)  # the default
+        for x, y in zip(X, Y, strict=True):
+            m.learn_one(x, y)
+        Xt = rng.uniform(0.6, 0.9, size=(50, 6))  # beside the training box: moderately novel
+        v = np.array([m.nonparametric.rls.predict_checked(m.nonparametric.features_of(x), True)[1][0]
+                      for x in Xt])
+        weights[name] = m.residual_weight(v).mean()
+    assert weights["poor"] > 0.3
+    assert weights["exact"] < 0.1 * weights["poor"]
 
 
 def test_parametric_part_is_the_cascade_rigid_body_stage():
@@ -83,7 +127,13 @@ def test_far_from_the_data_the_model_is_its_rigid_body_part_and_helps_inside():
     for x, y in zip(X, Y, strict=True):
         m.learn_one(x, y)
     far = m.predict_one(np.full(6, 8.0))
-    assert np.all(np.abs(far.residual) < 1e-6 * np.abs(far.parametric).max())
+    assert np.all(np.abs(far.residual) < 1e-3 * np.abs(far.parametric).max())
+    # its weight there is a fraction of the weight inside the data (where v is small)
+    npm = m.nonparametric
+    v_far = npm.rls.predict_checked(npm.features_of(np.full(6, 8.0)), True)[1][0]
+    v_in = npm.rls.predict_checked(npm.features_of(np.zeros(6)), True)[1][0]
+    w_far, w_in = m.residual_weight(v_far), m.residual_weight(v_in)
+    assert np.all(w_far <= 0.5 * w_in) and w_in.max() > 0.5
     # inside the training region the residual removes most of what the rigid-body part misses
     Xt, _ = data(200, 4, spread=0.5)
     truth_t = np.array([truth(x) for x in Xt])

@@ -84,7 +84,9 @@ def test_the_seed_fixes_the_random_features(kind, combination, regressor):
         model = build_model(config(combination, **{"nonparametric.seed": seed}), kind, regressor)
         for x, y in stream(120, 4):
             out = model.predict_learn_one(x, y)
-        preds.setdefault(seed, []).append(out.total)
+        # the prediction and every learned weight (the consistent SP may weight its residual by 0 here)
+        weights = np.concatenate([stage.weights.ravel() for stage in model.rls_stages()])
+        preds.setdefault(seed, []).append(np.concatenate([out.total, weights]))
     assert np.array_equal(preds[0][0], preds[0][1])
     assert not np.array_equal(preds[0][0], preds[1][0])
 
