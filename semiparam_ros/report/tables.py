@@ -125,7 +125,10 @@ def checks_table(checks: Sequence[Check], first_s: float = DEFAULT_FIRST_S, *,
         if c.passed and tie_margin is not None and c.value > (1 - tie_margin) * c.limit:
             verdict = f"pass, but a tie (within {100 * tie_margin:g} % of the limit)"
         op = "<" if c.strict else "≤"
-        lines.append(f"| {c.label(first_s)} | `{c.id}` | {c.value:.3f} | {op} {c.limit:g} | {verdict} |")
+        limit = f"{op} {c.limit:g}"
+        if c.paired_p is not None:
+            limit += f" or not behind (paired p = {c.paired_p:.2g})"
+        lines.append(f"| {c.label(first_s)} | `{c.id}` | {c.value:.3f} | {limit} | {verdict} |")
     return "\n".join(lines) + "\n"
 
 
