@@ -255,7 +255,8 @@ def _rmse(err: np.ndarray) -> list[float]:
 
 def evaluate_horizons(models: Mapping[str, Any], train: SampleArrays, test: SampleArrays, *,
                       horizons: Sequence[float | str] = DEFAULT_HORIZONS, fixed: Sequence[str] = (),
-                      components: Sequence[str] | None = None) -> HorizonReport:
+                      components: Sequence[str] | None = None,
+                      frozen_models: Mapping[str, Any] | None = None) -> HorizonReport:
     """Score trained models on a test stream at every horizon (see the module docstring).
 
     Args:
@@ -267,6 +268,9 @@ def evaluate_horizons(models: Mapping[str, Any], train: SampleArrays, test: Samp
         fixed: Names of models that never learn (CAD, a batch fit): predicted once, the same at every
             horizon.
         components: Output names (default ``y0``, ``y1``, …).
+        frozen_models: Per model name, what predicts at the frozen horizon instead of the model itself
+            (e.g. the served model, learned by the node's estimator and loaded from its checkpoint:
+            :class:`~semiparam_ros.eval.served.ServedModel`); it is not trained further.
 
     Returns:
         The :class:`HorizonReport`.
@@ -297,6 +301,8 @@ def evaluate_horizons(models: Mapping[str, Any], train: SampleArrays, test: Samp
                 if fixed_pred is None:
                     fixed_pred = delayed_predictions(model, test.X, test.Y, 0)
                 pred = fixed_pred
+            elif h.frozen and frozen_models is not None and name in frozen_models:
+                pred = delayed_predictions(frozen_models[name], test.X, test.Y, 0)
             else:
                 pred = delayed_predictions(model.copy(), test.X, test.Y, h.delay)
             err = (pred - test.Y)[start:]

@@ -56,7 +56,8 @@ from semiparam_ros.eval.horizon import (
 from semiparam_ros.eval.metrics import OutputSpec
 from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol import SampleArrays, predict_only, run_protocol, test_then_train
-from semiparam_ros.eval.replay import build_models, load_samples
+from semiparam_ros.eval.replay import CASCADE_SP, build_models, load_samples
+from semiparam_ros.eval.served import ServedModel, learn_served
 from semiparam_ros.report.paper import ProtocolReport, protocol_report
 
 __all__ = [
@@ -179,14 +180,18 @@ def _models(config: EstimatorConfig, train: SampleArrays) -> tuple[dict[str, Any
     models[BATCH_ONLINE] = least_squares_model(phi, fit)
     period = measured_period_s(train.stamps_ns)
     models.update(build_models(config, LEARNERS, sample_period_s=period))
-    models.update({k + FROZEN_SUFFIX: m
-                   for k, m in build_models(config, LEARNERS, sample_period_s=period).items()})
+    # each learner frozen is the model a user is served: learned by the node's estimator, saved, loaded
+    for k in LEARNERS:
+        served_config = (config.with_overrides({"semiparametric.combination": "cascade"}) if k == CASCADE_SP
+                         else config)
+        kind = "SP" if k == CASCADE_SP else k
+        models[k + FROZEN_SUFFIX] = ServedModel(learn_served(served_config, train, kind=kind))
     rigid = config.with_overrides({"parametric.friction": False, "parametric.offsets": False,
                                    "parametric.armature": False})
     models[P_RIGID] = build_models(rigid, ("P",), sample_period_s=period)["P"]
     models[PERSISTENCE] = Persistence(train.n_outputs)
     frozen = {CAD, BATCH, *(k + FROZEN_SUFFIX for k in LEARNERS)}
-    return models, frozen, {BATCH, BATCH_ONLINE}
+    return models, frozen, {BATCH, BATCH_ONLINE, *(k + FROZEN_SUFFIX for k in LEARNERS)}
 
 
 def injected_torque_recovery(models: Mapping[str, Any], data: SampleArrays, *, frozen: Sequence[str] = (),
@@ -328,7 +333,8 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
         # the protocol trained every model in place on the training stream
         chosen = {k: models[k] for k in (CAD, BATCH, *LEARNERS, PERSISTENCE)}
         horizon = evaluate_horizons(chosen, train, test, horizons=horizons, fixed=(CAD, BATCH),
-                                    components=joints)
+                                    components=joints,
+                                    frozen_models={k: models[k + FROZEN_SUFFIX] for k in LEARNERS})
     std = dict(zip(joints, (float(s) for s in test.Y.std(axis=0)), strict=True))
     return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected, horizon,
                                excitation_summary(config, models["SP"], test))
