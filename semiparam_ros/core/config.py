@@ -283,10 +283,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   choices=("cascade", "joint", "consistent"),
                   structural=True, kinds=("SP",), unless="cascade"),
     ParameterSpec("semiparametric.novelty_scale", "double", 1.0,
-                  "'consistent': the residual is weighted per output by s^2/(s^2 + sigma^2 v/novelty_scale), "
-                  "s^2 the rigid-body part's recent systematic error variance, sigma^2 v the residual's "
-                  "predictive variance at the state (dimensionless; larger = trust the residual further "
-                  "from its data)",
+                  "'consistent': the residual is weighted per output by S/(S + sigma^2 v/novelty_scale), "
+                  "S = s^2 (1 - nu), s^2 the rigid-body part's recent systematic error variance, nu the "
+                  "residual's prior variance left at the state, sigma^2 v its predictive variance "
+                  "(dimensionless; larger = trust the residual further from its data)",
                   min=0.0, min_exclusive=True, max=1e6),
     ParameterSpec("semiparametric.tracker", "bool", True,
                   "'consistent': add the fast tracker of the model's error to the prediction (false = the "

@@ -293,9 +293,18 @@ def _protocol_of(config: EstimatorConfig, kinds: tuple[str, ...], train_data: Sa
     result = run_protocol(models, train_data, test_data, output=OutputSpec.from_config(config),
                           splits=opts.splits, split_size=opts.split_size, window_s=opts.window_s,
                           first_s=opts.first_s, progress=progress)
-    report = None if horizons is None else evaluate_horizons(
-        models, train_data, test_data, horizons=horizons,
-        components=OutputSpec.from_config(config).components)  # the protocol trained the learners
+    if horizons is None:
+        return result, None
+    # the frozen column is the served model: the node's estimator, its checkpoint, load_model
+    from semiparam_ros.eval.horizon import FROZEN
+    from semiparam_ros.eval.served import served_model
+
+    served = {}
+    if FROZEN in horizons:
+        served = {k: m for k in kinds if (m := served_model(config, k, train_data)) is not None}
+    report = evaluate_horizons(models, train_data, test_data, horizons=horizons,
+                               components=OutputSpec.from_config(config).components,  # trained above
+                               frozen_models=served)
     return result, report
 
 

@@ -29,7 +29,14 @@ from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.eval.protocol import SampleArrays
 from semiparam_ros.service.serving import LearnedModel, load_model
 
-__all__ = ["ServedModel", "learn_served"]
+__all__ = ["SERVED_COMBINATIONS", "ServedModel", "learn_served", "served_model"]
+
+#: The evaluation's model names served by the node's learner kinds: ``(kind, semiparametric.combination or
+#: None for the configuration's)``; the paper's cascade ``SPC`` and the joint fit ``SPJ`` are SP learners.
+SERVED_COMBINATIONS: dict[str, tuple[str, str | None]] = {
+    "P": ("P", None), "NP": ("NP", None), "SP": ("SP", None),
+    "SPC": ("SP", "cascade"), "SPJ": ("SP", "joint"),
+}
 
 
 def learn_served(config: EstimatorConfig, train: SampleArrays, *, kind: str = "SP") -> LearnedModel:
@@ -61,6 +68,29 @@ def learn_served(config: EstimatorConfig, train: SampleArrays, *, kind: str = "S
         path = Path(folder) / "model.npz"
         est.save(path)
         return load_model(path)
+
+
+def served_model(config: EstimatorConfig, name: str, train: SampleArrays) -> ServedModel | None:
+    """Learn the served model of an evaluation's model name (:data:`SERVED_COMBINATIONS`), or ``None``.
+
+    Args:
+        config: The estimator's configuration.
+        name: ``P``, ``NP``, ``SP``, ``SPC`` or ``SPJ`` (other names, e.g. diagnostics, have none).
+        train: The training stream.
+
+    Returns:
+        :class:`ServedModel` of :func:`learn_served`, or ``None``.
+
+    Raises:
+        ConfigurationError: A configuration the combination does not allow (e.g. ``SPJ`` with two
+            different forgetting factors).
+    """
+    if name not in SERVED_COMBINATIONS:
+        return None
+    kind, combination = SERVED_COMBINATIONS[name]
+    if combination is not None:
+        config = config.with_overrides({"semiparametric.combination": combination})
+    return ServedModel(learn_served(config, train, kind=kind))
 
 
 class ServedModel:

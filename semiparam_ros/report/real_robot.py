@@ -56,8 +56,8 @@ from semiparam_ros.eval.horizon import (
 from semiparam_ros.eval.metrics import OutputSpec
 from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol import SampleArrays, predict_only, run_protocol, test_then_train
-from semiparam_ros.eval.replay import CASCADE_SP, build_models, load_samples
-from semiparam_ros.eval.served import ServedModel, learn_served
+from semiparam_ros.eval.replay import build_models, load_samples
+from semiparam_ros.eval.served import served_model
 from semiparam_ros.report.paper import ProtocolReport, protocol_report
 
 __all__ = [
@@ -182,10 +182,7 @@ def _models(config: EstimatorConfig, train: SampleArrays) -> tuple[dict[str, Any
     models.update(build_models(config, LEARNERS, sample_period_s=period))
     # each learner frozen is the model a user is served: learned by the node's estimator, saved, loaded
     for k in LEARNERS:
-        served_config = (config.with_overrides({"semiparametric.combination": "cascade"}) if k == CASCADE_SP
-                         else config)
-        kind = "SP" if k == CASCADE_SP else k
-        models[k + FROZEN_SUFFIX] = ServedModel(learn_served(served_config, train, kind=kind))
+        models[k + FROZEN_SUFFIX] = served_model(config, k, train)
     rigid = config.with_overrides({"parametric.friction": False, "parametric.offsets": False,
                                    "parametric.armature": False})
     models[P_RIGID] = build_models(rigid, ("P",), sample_period_s=period)["P"]

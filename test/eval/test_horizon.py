@@ -163,3 +163,13 @@ def test_evaluate_cli_reports_horizons_in_text_json_and_figure(tmp_path):
     np.testing.assert_allclose(h["mean"]["persistence"]["1 s"], np.mean(np.sqrt(np.mean(err ** 2, axis=0))),
                                rtol=1e-12)
     assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the frozen column is the served model: the node's estimator on the training samples, its checkpoint,
+    # load_model(...).predict on the scored test states
+    from semiparam_ros.eval.served import served_model
+
+    train, _ = load_samples(root / "bags" / "icub_xy", cfg, limit=800)
+    served = served_model(cfg.with_overrides({"nonparametric.n_features": 40}), "SP", train)
+    assert served is not None
+    start = max(x["delay"] for x in h["horizons"])
+    err = served.predict_many(test.X)[start:] - test.Y[start:]
+    np.testing.assert_allclose(h["mean"]["SP"][FROZEN], np.mean(np.sqrt(np.mean(err ** 2, axis=0))), rtol=1e-9)

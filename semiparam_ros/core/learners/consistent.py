@@ -26,9 +26,10 @@ adaptive semiparametric dynamics learning, here exact).
 **3. The residual's weight.** The same forward substitution gives the residual stage's relative
 predictive variance ``v = φA⁻¹φᵀ`` (``ν = λv`` is the fraction of its prior variance left at x: ≈ 0 where
 the data determine the residual, about 1 far from it). The residual is used per output with the weight
-``g = s²/(s² + σ²v/ν₀)`` (:meth:`residual_weight`; ``novelty_scale`` ν₀): s² the variance of the
-rigid-body part's *recent* systematic error, σ² the residual's noise variance, σ²v its predictive
-variance at x. Where the rigid body is poor, a residual of moderate confidence is used; where it is
+``g = s²(1 − ν)/(s²(1 − ν) + σ²v/ν₀)`` (:meth:`residual_weight`; ``novelty_scale`` ν₀): s² the variance
+of the rigid-body part's *recent* systematic error, s²(1 − ν) the part of it the data explain at x, σ²
+the residual's noise variance, σ²v its predictive variance at x. Where the rigid body is poor, a residual
+of moderate confidence is used; where it is
 excellent, the model abstains unless the residual is confident, and far from the data it falls back to
 its rigid-body part instead of extrapolating cosines. The predictive variance reported is unchanged (the
 residual's own), so σ still says how novel the state is. **model(x) = ŷ_P + g·r** is what is used frozen,
@@ -392,6 +393,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._recent_n = 0                             # samples in it
         self._fast_errors = np.zeros((2, self.n_outputs))  # recent mean of g and g², g the fast saving
         self._fast_n = 0                               # samples in them
+        self._weight_cache: tuple[np.ndarray, np.ndarray] | None = None  # (s², σ²/ν₀) until the next learn
+        self._fast_mask: np.ndarray | None = None      # _fast_useful() until the next learn
 
     #: The fast rigid-body correction fades like the local tracker but over this many times its distances
     #: (it is a rigid-body correction, valid further from where it was learned than a local error).
@@ -459,22 +462,23 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
         r = pk[:t] - self._expand(pk[t:]) @ delta
         self._raw = (r.copy(), float(v[0]))
-        r *= self.residual_weight(float(v[0]))
+        r *= self._weight_one(float(v[0]))
         if rigid is None:
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
         return yp, r, var + float(v[0]), phi
 
     def residual_weight(self, v: Any) -> np.ndarray:
-        """Weight g ∈ [0, 1] of the residual per output at relative variance v: ``s²/(s² + κ σ² v)``.
+        """Weight g ∈ [0, 1] of the residual per output at relative variance v.
 
-        ``s²`` is the variance of the rigid-body part's systematic error (its mean squared a-priori error
-        minus σ²), ``σ²`` the residual's noise variance (the mean squared a-priori error of ŷ_P + r), both
-        over the learned samples with the residual's memory; ``σ² v`` is the residual's predictive variance
-        at x (v = φA⁻¹φᵀ: about 1/λ times the prior's fraction left, ``ν = λv``) and κ =
-        ``1/novelty_scale``. This is the weight that minimises the expected squared error of
-        ``ŷ_P + g r`` when r estimates an error of variance s² with an error of variance κσ²v: where the
-        rigid body is poor (s² ≫ σ²v) a residual of moderate confidence is used, where it is excellent
-        (s² → 0) the model abstains unless the residual is confident. Before any statistics: 1.
+        ``g = s²(1 − ν) / (s²(1 − ν) + κ σ² v)``: ``s²`` is the variance of the rigid-body part's recent
+        systematic error (the mean of (y − ŷ_P)² over about :attr:`SCALE_TIME_CONSTANT` minus σ²), ``σ²``
+        the residual's noise variance (the mean squared a-priori error of ŷ_P + r with the residual's
+        memory), ``v = φA⁻¹φᵀ`` and ``ν = λv`` the fraction of the residual's prior variance the data leave
+        at x (so ``s²(1 − ν)`` is the part of the error the data explain there and ``σ² v`` the residual's
+        predictive variance), κ = ``1/novelty_scale``. This is the Wiener weight of an estimate whose
+        signal has variance s²(1 − ν) and whose error has variance κσ²v: where the rigid body is poor
+        (s² ≫ σ²v) a residual of moderate confidence is used, where it is excellent (s² → 0) or the state
+        is novel (ν → 1) the model abstains. Before any statistics: 1 (the residual is then zero).
 
         Args:
             v: The residual's relative predictive variance, a scalar or (N,).
@@ -483,10 +487,22 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             g, (t,) for a scalar v, else (N, t).
         """
         s2, noise = self.error_scales()
-        v_arr = np.asarray(v, dtype=np.float64)
-        spread = (noise / self.novelty_scale) * v_arr[..., None]
-        total = s2 + spread
-        return np.where(total > 0.0, s2 / np.where(total > 0.0, total, 1.0), 1.0)
+        v_arr = np.asarray(v, dtype=np.float64)[..., None]
+        explained = np.clip(1.0 - self.nonparametric.rls.lam * v_arr, 0.0, 1.0)  # 1 − ν
+        signal = s2 * explained
+        total = signal + (noise / self.novelty_scale) * v_arr
+        return np.where(total > 0.0, signal / np.where(total > 0.0, total, 1.0), 1.0)
+
+    def _weight_one(self, v: float) -> np.ndarray:
+        """:meth:`residual_weight` at one scalar v, from the scales cached since the last learned sample."""
+        cache = self._weight_cache
+        if cache is None:
+            s2, noise = self.error_scales()
+            cache = self._weight_cache = (s2, noise / self.novelty_scale)
+        s2, spread = cache
+        signal = s2 * min(1.0, max(0.0, 1.0 - self.nonparametric.rls.lam * v))
+        total = signal + spread * v
+        return np.divide(signal, total, out=np.ones_like(signal), where=total > 0.0)
 
     def error_scales(self) -> tuple[np.ndarray, np.ndarray]:
         """``(s², σ²)`` (t,) each: the rigid-body part's systematic error and the residual's noise variances.
@@ -527,7 +543,10 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         c = P[:, 0]
         applied = kappa_fast * c
         self._fast_candidate = applied
-        fast = model_total + np.where(self._fast_useful(), self.fast_weight(c, v), 0.0) * applied
+        useful = self._fast_mask
+        if useful is None:
+            useful = self._fast_mask = self._fast_useful()
+        fast = model_total + np.where(useful, self.fast_weight(c, v), 0.0) * applied
         total = fast + kappa * self.tracker.estimate
         return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
 
@@ -703,6 +722,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             self._recent_n += 1
             a = max(1.0 / self._recent_n, 1.0 - self._recent_beta)
             self._recent_rigid += a * (e_rigid * e_rigid - self._recent_rigid)
+            self._weight_cache = None
         if fast_step is not None:
             self.fast.defer_step(fast_step)
             self.tracker.update(xv, yv, ctx.model_total, ctx.kappa)
@@ -711,6 +731,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             self._fast_n += 1
             a = max(1.0 / self._fast_n, 1.0 / self.tracker.stats_samples)
             self._fast_errors += a * (np.stack([gain, gain * gain]) - self._fast_errors)
+            self._fast_mask = None
         par_model.n_samples_seen += 1
         npm.n_samples_seen += 1
         self.n_samples_seen += 1
@@ -780,3 +801,4 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._scale_weight, self._recent_n, self._fast_n = float(scales[0]), int(scales[1]), int(scales[2])
         self._scale_model, self._recent_rigid = scales[3:3 + t].copy(), scales[3 + t:3 + 2 * t].copy()
         self._fast_errors = scales[3 + 2 * t:].reshape(2, t).copy()
+        self._weight_cache = self._fast_mask = None

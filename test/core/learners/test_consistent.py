@@ -44,10 +44,11 @@ def model(**kw) -> ConsistentSemiparametricModel:
 
 def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     """After learning, the residual is the closed-form ridge fit, on the features, of y − Φπ̂ with the
-    *final* π̂ over all samples (never of stale targets), times its weight g = s²/(s² + σ²v/ν₀) per output
-    (v = φA⁻¹φᵀ). σ² and s² are recomputed here from the a-priori errors: σ² the mean of (y − ŷ_P − r)²,
-    r the ridge fit of the samples before with the parameters of that time, s² the recent mean of
-    (y − ŷ_P)² (memory 1 s at the provisional 100 Hz, i.e. 100 samples) minus σ². Every solve is of a
+    *final* π̂ over all samples (never of stale targets), times its weight
+    g = s²(1 − ν)/(s²(1 − ν) + σ²v/ν₀) per output (v = φA⁻¹φᵀ, ν = λv). σ² and s² are recomputed here
+    from the a-priori errors: σ² the mean of (y − ŷ_P − r)², r the ridge fit of the samples before with
+    the parameters of that time, s² the recent mean of (y − ŷ_P)² (memory 1 s at the provisional 100 Hz,
+    i.e. 100 samples) minus σ². Every solve is of a
     λ = 0.1 system of condition ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
     m = model()
     X, Y = data(400, 0)
@@ -81,7 +82,8 @@ def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     for x in Xt:
         z = m.nonparametric.features_of(x)[0]
         v = z @ np.linalg.solve(A, z)
-        want = s2 / (s2 + sigma2 * v / 0.05) * (z @ W)
+        signal = s2 * max(0.0, 1.0 - 0.1 * v)  # s² times the explained fraction 1 − ν, ν = λv
+        want = signal / (signal + sigma2 * v / 0.05) * (z @ W)
         pred = m.predict_one(x)
         np.testing.assert_allclose(pred.residual, want, rtol=1e-8, atol=1e-10)
         np.testing.assert_allclose(pred.parametric, regressor(x) @ pi, rtol=1e-12)
