@@ -172,4 +172,5 @@ def test_evaluate_cli_reports_horizons_in_text_json_and_figure(tmp_path):
     assert served is not None
     start = max(x["delay"] for x in h["horizons"])
     err = served.predict_many(test.X)[start:] - test.Y[start:]
-    np.testing.assert_allclose(h["mean"]["SP"][FROZEN], np.mean(np.sqrt(np.mean(err ** 2, axis=0))), rtol=1e-9)
+    want = np.mean(np.sqrt(np.mean(err ** 2, axis=0)))
+    np.testing.assert_allclose(h["mean"]["SP"][FROZEN], want, rtol=1e-9)
