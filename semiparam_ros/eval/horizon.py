@@ -125,7 +125,8 @@ def parse_horizons(values: Sequence[float | str], sample_period_s: float) -> lis
     return out
 
 
-def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int) -> np.ndarray:
+def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int,
+                        stamps_ns: np.ndarray | None = None) -> np.ndarray:
     """Predict each sample with the model that has learned everything up to ``delay`` samples before it.
 
     Args:
@@ -133,6 +134,8 @@ def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int) ->
         X: Inputs (n, d).
         Y: Measured outputs (n, t).
         delay: ``d ≥ 1`` samples; 0 = frozen (nothing learned).
+        stamps_ns: The samples' stamps [ns], given as ``stamp_ns=`` to ``learn_one`` of a model that learns
+            with them (the node's estimator: ``needs_stamps``).
 
     Returns:
         Predictions (n, t).
@@ -152,10 +155,16 @@ def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int) ->
     n = X.shape[0]
     out = np.empty((n, Y.shape[1]))
     learns = delay > 0 and callable(getattr(model, "learn_one", None))
+    stamped = learns and bool(getattr(model, "needs_stamps", False))
+    if stamped and (stamps_ns is None or len(stamps_ns) != n):
+        raise ConfigurationError("this model learns with the samples' stamps: pass stamps_ns, one per sample")
     # frozen, a learner is used as its model: without the fast correction of its recent errors, if it has one
     predict = (getattr(model, "predict_model", None) if delay == 0 else None) or model.predict_one
     for i in range(n):
-        if learns and i >= delay:
+        if stamped and i >= delay:
+            assert stamps_ns is not None  # checked above
+            model.learn_one(X[i - delay], Y[i - delay], stamp_ns=int(stamps_ns[i - delay]))
+        elif learns and i >= delay:
             model.learn_one(X[i - delay], Y[i - delay])
         pred = predict(X[i])
         out[i] = np.asarray(getattr(pred, "total", pred), dtype=np.float64).reshape(-1)
@@ -304,7 +313,7 @@ def evaluate_horizons(models: Mapping[str, Any], train: SampleArrays, test: Samp
             elif h.frozen and frozen_models is not None and name in frozen_models:
                 pred = delayed_predictions(frozen_models[name], test.X, test.Y, 0)
             else:
-                pred = delayed_predictions(model.copy(), test.X, test.Y, h.delay)
+                pred = delayed_predictions(model.copy(), test.X, test.Y, h.delay, test.stamps_ns)
             err = (pred - test.Y)[start:]
             rm_all[name][h.label] = _rmse(err)
             rm_in[name][h.label] = _rmse(err[inside])

@@ -214,11 +214,17 @@ def train(model: OnlineModel, data: SampleArrays, progress: Progress | None = No
     Returns:
         The a-priori predictions during training, shape ``(n, t)``.
     """
-    return test_then_train(model, data.X, data.Y, progress)[0]
+    return test_then_train(model, data.X, data.Y, progress, data.stamps_ns)[0]
+
+
+def needs_stamps(model: Any) -> bool:
+    """Whether a model learns with the samples' stamps (``needs_stamps``: the node's estimator)."""
+    return bool(getattr(model, "needs_stamps", False))
 
 
 def test_then_train(model: OnlineModel, X: np.ndarray, Y: np.ndarray,
-                    progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    progress: Progress | None = None,
+                    stamps_ns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Predict each sample before learning it (the paper's test-and-update), one at a time.
 
     Args:
@@ -226,6 +232,8 @@ def test_then_train(model: OnlineModel, X: np.ndarray, Y: np.ndarray,
         X: Inputs, shape ``(n, d)``.
         Y: Targets, shape ``(n, t)``.
         progress: Called with the number of samples processed since the last call (every 100).
+        stamps_ns: The samples' stamps [ns], passed as ``stamp_ns=`` to a model that
+            :func:`needs_stamps` (required for it).
 
     Returns:
         ``(predictions (n, t), update_ns (n,))``: the a-priori predictions and the wall time of each
@@ -235,9 +243,16 @@ def test_then_train(model: OnlineModel, X: np.ndarray, Y: np.ndarray,
     predictions = np.empty_like(Y, dtype=np.float64)
     update_ns = np.empty(n, dtype=np.int64)
     clock = time.perf_counter_ns
+    stamped = needs_stamps(model)
+    if stamped and (stamps_ns is None or len(stamps_ns) != n):
+        raise ValueError("this model learns with the samples' stamps: pass stamps_ns, one per sample")
     for i in range(n):
         t0 = clock()
-        prediction = model.predict_learn_one(X[i], Y[i])
+        if stamped:
+            assert stamps_ns is not None  # checked above
+            prediction = model.predict_learn_one(X[i], Y[i], stamp_ns=int(stamps_ns[i]))
+        else:
+            prediction = model.predict_learn_one(X[i], Y[i])
         update_ns[i] = clock() - t0
         predictions[i] = _total(prediction)
         if progress is not None and (i + 1) % 100 == 0:
@@ -485,7 +500,7 @@ def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, te
                     pred, ns = predict_only(model, test_data.X[start:stop], tick)
                 else:
                     pred, ns = test_then_train(model.copy(), test_data.X[start:stop],
-                                               test_data.Y[start:stop], tick)
+                                               test_data.Y[start:stop], tick, test_data.stamps_ns[start:stop])
                 preds.append(pred)
                 times.append(ns)
             predictions[kind] = np.stack(preds)

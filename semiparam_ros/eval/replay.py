@@ -287,9 +287,17 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
 def _protocol_of(config: EstimatorConfig, kinds: tuple[str, ...], train_data: SampleArrays,
                  test_data: SampleArrays, opts: ProtocolOptions, horizons: Sequence[float | str] | None,
                  progress: bool = False) -> tuple[ProtocolResult, HorizonReport | None]:
-    """Run the protocol for fresh learners of ``kinds`` (and their errors by age), as one job."""
-    models = build_models(config, kinds, n_train=len(train_data),
+    """Run the protocol for fresh learners of ``kinds`` (and their errors by age), as one job.
+
+    P, NP and the SP combinations run as the node runs them (:class:`~semiparam_ros.eval.served.NodeLearner`:
+    the estimator's step with its gate, σ and rate meter); the diagnostic kinds are bare learners.
+    """
+    from semiparam_ros.eval.served import SERVED_COMBINATIONS, node_learner
+
+    bare = [k for k in kinds if k not in SERVED_COMBINATIONS]
+    models = build_models(config, bare, n_train=len(train_data),
                           sample_period_s=measured_period_s(train_data.stamps_ns))
+    models = {k: models[k] if k in models else node_learner(config, k) for k in kinds}
     result = run_protocol(models, train_data, test_data, output=OutputSpec.from_config(config),
                           splits=opts.splits, split_size=opts.split_size, window_s=opts.window_s,
                           first_s=opts.first_s, progress=progress)

@@ -15,6 +15,7 @@ N·m for a wrench).
 
 from __future__ import annotations
 
+import copy
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -29,7 +30,8 @@ from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.eval.protocol import SampleArrays
 from semiparam_ros.service.serving import LearnedModel, load_model
 
-__all__ = ["SERVED_COMBINATIONS", "ServedModel", "learn_served", "served_model"]
+__all__ = ["SERVED_COMBINATIONS", "NodeLearner", "ServedModel", "learn_served", "node_learner",
+           "served_model"]
 
 #: The evaluation's model names served by the node's learner kinds: ``(kind, semiparametric.combination or
 #: None for the configuration's)``; the paper's cascade ``SPC`` and the joint fit ``SPJ`` are SP learners.
@@ -87,9 +89,7 @@ def served_model(config: EstimatorConfig, name: str, train: SampleArrays) -> Ser
     """
     if name not in SERVED_COMBINATIONS:
         return None
-    kind, combination = SERVED_COMBINATIONS[name]
-    if combination is not None:
-        config = config.with_overrides({"semiparametric.combination": combination})
+    config, kind = _with_combination(config, name)
     return ServedModel(learn_served(config, train, kind=kind))
 
 
@@ -139,3 +139,89 @@ class ServedModel:
     def copy(self) -> ServedModel:
         """Return itself (it never changes)."""
         return self
+
+
+def _with_combination(config: EstimatorConfig, name: str) -> tuple[EstimatorConfig, str]:
+    kind, combination = SERVED_COMBINATIONS[name]
+    if combination is not None:
+        config = config.with_overrides({"semiparametric.combination": combination})
+    return config, kind
+
+
+def node_learner(config: EstimatorConfig, name: str) -> NodeLearner | None:
+    """Build a fresh :class:`NodeLearner` of an evaluation's model name, or ``None`` for another name.
+
+    Args:
+        config: The estimator's configuration.
+        name: ``P``, ``NP``, ``SP``, ``SPC`` or ``SPJ``.
+
+    Returns:
+        The learner, or ``None`` for another name.
+
+    Raises:
+        ConfigurationError: A configuration the combination does not allow.
+    """
+    if name not in SERVED_COMBINATIONS:
+        return None
+    config, kind = _with_combination(config, name)
+    return NodeLearner(OnlineEstimator(config, kind=kind))  # type: ignore[arg-type]  # checked by build
+
+
+class NodeLearner:
+    """The node's per-sample step as an evaluation's online learner: what the node would have published.
+
+    ``predict_learn_one(x, y, stamp_ns=…)`` is :meth:`OnlineEstimator.step` on the sample: the a-priori
+    prediction with the contact gate, the noise estimate and the rate meter exactly as in the node (a
+    sample the gate refuses is predicted, not learned). ``predict_one`` is the learned model at x (the
+    delay line of the horizon table); ``copy`` is an independent estimator (the regressor and the
+    configuration, both read-only, are shared) for another stream: its first sample, like a stamp not after
+    the previous one, begins another recording (:meth:`OnlineEstimator.start_recording`), as ``learn``
+    does between bags.
+
+    Args:
+        estimator: The estimator (learning is switched on).
+    """
+
+    #: The protocol and the horizon table pass the samples' stamps.
+    needs_stamps = True
+
+    def __init__(self, estimator: OnlineEstimator) -> None:
+        self.estimator = estimator
+        estimator.learning_enabled = True
+        self._last_ns: int | None = None
+        self._restart = False  # the next sample begins another recording
+        self._n = len(estimator.config["robot.joints"])
+
+    def _sample(self, x: Any, y: Any, stamp_ns: int) -> Sample:
+        if self._restart or (self._last_ns is not None and stamp_ns <= self._last_ns):
+            self.estimator.start_recording()
+            self._restart = False
+        self._last_ns = int(stamp_ns)
+        xv = np.asarray(x, dtype=np.float64)
+        n = self._n
+        return Sample(int(stamp_ns), xv[:n], xv[n:2 * n], xv[2 * n:], np.asarray(y, dtype=np.float64))
+
+    def predict_learn_one(self, x: Any, y: Any, *, stamp_ns: int) -> Prediction:
+        """Predict the sample a priori, then learn it as the node does (unless the gate refuses it).
+
+        Raises:
+            RejectedSampleError: A sample the learner refuses (nothing changed).
+        """
+        return self.estimator.step(self._sample(x, y, stamp_ns)).prediction
+
+    def learn_one(self, x: Any, y: Any, *, stamp_ns: int) -> None:
+        """Learn the sample as the node does (the a-priori prediction is made and dropped)."""
+        self.estimator.step(self._sample(x, y, stamp_ns))
+
+    def predict_one(self, x: Any) -> Prediction:
+        """Return the learned model's prediction at x (rigid-body part, residual, corrections)."""
+        return self.estimator.model.predict_one(x)
+
+    def copy(self) -> NodeLearner:
+        """Return an independent copy (the estimator's learned and time-based state)."""
+        est = self.estimator
+        memo = {id(est.regressor): est.regressor, id(est.config): est.config}
+        twin = NodeLearner.__new__(NodeLearner)
+        twin.estimator = copy.deepcopy(est, memo)
+        twin._last_ns, twin._n, twin._restart = self._last_ns, self._n, True
+        return twin

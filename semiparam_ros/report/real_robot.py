@@ -37,7 +37,6 @@ import numpy as np
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import Sample
-from semiparam_ros.core.stream.rate import measured_period_s
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.baselines import (
     Persistence,
@@ -56,8 +55,8 @@ from semiparam_ros.eval.horizon import (
 from semiparam_ros.eval.metrics import OutputSpec
 from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol import SampleArrays, predict_only, run_protocol, test_then_train
-from semiparam_ros.eval.replay import build_models, load_samples
-from semiparam_ros.eval.served import served_model
+from semiparam_ros.eval.replay import load_samples
+from semiparam_ros.eval.served import node_learner, served_model
 from semiparam_ros.report.paper import ProtocolReport, protocol_report
 
 __all__ = [
@@ -178,14 +177,14 @@ def _models(config: EstimatorConfig, train: SampleArrays) -> tuple[dict[str, Any
     fit = batch_least_squares(phi, train.X, train.Y)
     models[BATCH] = least_squares_model(phi, fit)
     models[BATCH_ONLINE] = least_squares_model(phi, fit)
-    period = measured_period_s(train.stamps_ns)
-    models.update(build_models(config, LEARNERS, sample_period_s=period))
-    # each learner frozen is the model a user is served: learned by the node's estimator, saved, loaded
+    # each learner online is the node's step (gate, σ, rate meter), and frozen the model a user is served:
+    # learned by the node's estimator, saved, loaded
     for k in LEARNERS:
+        models[k] = node_learner(config, k)
         models[k + FROZEN_SUFFIX] = served_model(config, k, train)
     rigid = config.with_overrides({"parametric.friction": False, "parametric.offsets": False,
                                    "parametric.armature": False})
-    models[P_RIGID] = build_models(rigid, ("P",), sample_period_s=period)["P"]
+    models[P_RIGID] = node_learner(rigid, "P")
     models[PERSISTENCE] = Persistence(train.n_outputs)
     frozen = {CAD, BATCH, *(k + FROZEN_SUFFIX for k in LEARNERS)}
     return models, frozen, {BATCH, BATCH_ONLINE, *(k + FROZEN_SUFFIX for k in LEARNERS)}
@@ -240,8 +239,8 @@ def injected_torque_recovery(models: Mapping[str, Any], data: SampleArrays, *, f
             base = predict_only(model, data.X)[0]
             ext = base  # a frozen model's prediction does not depend on the measured torques
         else:
-            base = test_then_train(model.copy(), data.X, data.Y)[0]
-            ext = test_then_train(model.copy(), data.X, Y_ext)[0]
+            base = test_then_train(model.copy(), data.X, data.Y, None, data.stamps_ns)[0]
+            ext = test_then_train(model.copy(), data.X, Y_ext, None, data.stamps_ns)[0]
         change = ((Y_ext - ext) - (data.Y - base)) / amplitude
         mean_fraction[name] = float(change[idx].mean())
         end_fraction[name] = float(change[end].mean())
@@ -251,7 +250,8 @@ def injected_torque_recovery(models: Mapping[str, Any], data: SampleArrays, *, f
 def _node_predictions(model: Any, config: EstimatorConfig, data: SampleArrays, Y: np.ndarray) -> np.ndarray:
     """A-priori predictions of the node's step (gate, σ, adaptation as configured) from a copy of a model."""
     est = OnlineEstimator(config)
-    est.model = model.copy()
+    learner = getattr(model, "estimator", None)  # a NodeLearner: its estimator's model
+    est.model = (model if learner is None else learner.model).copy()
     n = data.X.shape[1] // 3
     out = np.empty_like(Y)
     for i, (stamp, x, y) in enumerate(zip(data.stamps_ns, data.X, Y, strict=True)):
@@ -342,7 +342,8 @@ def excitation_summary(config: EstimatorConfig, model: Any, test: SampleArrays) 
 
     Args:
         config: The configuration the model was built with.
-        model: A trained learner with a rigid-body part (``parametric`` stage, or a P learner).
+        model: A trained learner with a rigid-body part (``parametric`` stage, or a P learner), or a
+            :class:`~semiparam_ros.eval.served.NodeLearner` of one.
         test: The test stream.
 
     Returns:
@@ -354,6 +355,9 @@ def excitation_summary(config: EstimatorConfig, model: Any, test: SampleArrays) 
     """
     from semiparam_ros.core.estimator.build import build_regressor, column_scale
     from semiparam_ros.core.rigid_body.identification import excitation_report, outside_excited
+
+    estimator = getattr(model, "estimator", None)  # a NodeLearner: its estimator's learner
+    model = model if estimator is None else estimator.model
 
     par = getattr(model, "parametric", model)
     regressor = build_regressor(config)
