@@ -44,3 +44,38 @@ def test_a_frozen_row_on_the_real_kuka_logs_is_learn_then_load_model(tmp_path):
         assert isinstance(models[name], ServedModel) and name in frozen and name in trained
     with pytest.raises(TypeError, match="does not learn"):
         served.learn_one(test.X[0], test.Y[0])
+
+
+def test_node_learner_is_the_node_step_and_the_bare_learner_without_the_gate():
+    """An online row runs the node's step on the samples' stamps. With the gate off and nothing that the
+    rate meter converts (no adaptive forgetting), that step is the paper's predict-then-learn: equal,
+    sample for sample, to the bare learner.
+    With the gate on, some samples are refused and the estimator counts them; a copy is independent; and a
+    node learner without stamps is refused."""
+    from semiparam_ros.core.config import load_config as load
+    from semiparam_ros.core.stream.rate import measured_period_s
+    from semiparam_ros.eval.protocol import test_then_train
+    from semiparam_ros.eval.replay import build_models
+    from semiparam_ros.eval.served import node_learner
+
+    cfg = load(REPO / "config" / "icub_right_arm.yaml").with_overrides(
+        {"nonparametric.n_features": 40, "gate.enabled": False, "adaptation.time_constant": 0.0,
+         "parametric.forgetting": 1.0, "nonparametric.forgetting": 1.0})
+    data, _ = load_samples(REPO / "bags" / "icub_xy", cfg, limit=700)
+    node = node_learner(cfg, "SP")
+    bare = build_models(cfg, ("SP",), sample_period_s=measured_period_s(data.stamps_ns))["SP"]
+    got = test_then_train(node, data.X, data.Y, None, data.stamps_ns)[0]
+    want = test_then_train(bare, data.X, data.Y)[0]
+    np.testing.assert_allclose(got, want, rtol=0.0, atol=1e-9)
+    node.predict_one(data.X[0])  # applies the learner's deferred last step, so the next call is the same
+    twin = node.copy()
+    before = node.predict_one(data.X[0]).total.copy()
+    twin.learn_one(data.X[1], data.Y[1] + 50.0, stamp_ns=int(data.stamps_ns[1]))
+    np.testing.assert_array_equal(node.predict_one(data.X[0]).total, before)
+    with pytest.raises(ValueError, match="stamps"):
+        test_then_train(node, data.X[:3], data.Y[:3])
+    gated = node_learner(cfg.with_overrides({"gate.enabled": True, "gate.warmup": 2.0}), "SP")
+    spiky = data.Y.copy()
+    spiky[500:520] += 40.0  # a contact of 40 N/N·m on every axis for 0.2 s, after the gate's 2 s warm-up
+    test_then_train(gated, data.X, spiky, None, data.stamps_ns)
+    assert gated.estimator.n_samples_learned < len(data)
