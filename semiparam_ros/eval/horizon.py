@@ -40,7 +40,7 @@ import numpy as np
 
 from semiparam_ros.atomic import atomic_savefig
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.protocol import SampleArrays
+from semiparam_ros.eval.protocol import SampleArrays, needs_stamps
 
 __all__ = [
     "DEFAULT_HORIZONS",
@@ -155,7 +155,7 @@ def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int,
     n = X.shape[0]
     out = np.empty((n, Y.shape[1]))
     learns = delay > 0 and callable(getattr(model, "learn_one", None))
-    stamped = learns and bool(getattr(model, "needs_stamps", False))
+    stamped = learns and needs_stamps(model)
     if stamped and (stamps_ns is None or len(stamps_ns) != n):
         raise ConfigurationError("this model learns with the samples' stamps: pass stamps_ns, one per sample")
     # frozen, a learner is used as its model: without the fast correction of its recent errors, if it has one

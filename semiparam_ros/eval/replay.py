@@ -303,13 +303,14 @@ def _protocol_of(config: EstimatorConfig, kinds: tuple[str, ...], train_data: Sa
                           first_s=opts.first_s, progress=progress)
     if horizons is None:
         return result, None
-    # the frozen column is the served model: the node's estimator, its checkpoint, load_model
+    # the frozen column is the served model: the node learners the protocol trained, their checkpoint,
+    # load_model
     from semiparam_ros.eval.horizon import FROZEN
-    from semiparam_ros.eval.served import served_model
+    from semiparam_ros.eval.served import NodeLearner, ServedModel, serve
 
     served = {}
     if FROZEN in horizons:
-        served = {k: m for k in kinds if (m := served_model(config, k, train_data)) is not None}
+        served = {k: ServedModel(serve(m.estimator)) for k, m in models.items() if isinstance(m, NodeLearner)}
     report = evaluate_horizons(models, train_data, test_data, horizons=horizons,
                                components=OutputSpec.from_config(config).components,  # trained above
                                frozen_models=served)

@@ -28,16 +28,17 @@ from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.eval.protocol import SampleArrays
+from semiparam_ros.eval.replay import CASCADE_SP, JOINT_SP
 from semiparam_ros.service.serving import LearnedModel, load_model
 
-__all__ = ["SERVED_COMBINATIONS", "NodeLearner", "ServedModel", "learn_served", "node_learner",
+__all__ = ["SERVED_COMBINATIONS", "NodeLearner", "ServedModel", "learn_served", "node_learner", "serve",
            "served_model"]
 
 #: The evaluation's model names served by the node's learner kinds: ``(kind, semiparametric.combination or
 #: None for the configuration's)``; the paper's cascade ``SPC`` and the joint fit ``SPJ`` are SP learners.
 SERVED_COMBINATIONS: dict[str, tuple[str, str | None]] = {
     "P": ("P", None), "NP": ("NP", None), "SP": ("SP", None),
-    "SPC": ("SP", "cascade"), "SPJ": ("SP", "joint"),
+    CASCADE_SP: ("SP", "cascade"), JOINT_SP: ("SP", "joint"),
 }
 
 
@@ -58,17 +59,27 @@ def learn_served(config: EstimatorConfig, train: SampleArrays, *, kind: str = "S
     Raises:
         ConfigurationError: An invalid configuration.
     """
-    est = OnlineEstimator(config, kind=kind)  # type: ignore[arg-type]  # checked by build_model
-    est.learning_enabled = True
-    n = train.X.shape[1] // 3
+    node = NodeLearner(OnlineEstimator(config, kind=kind))  # type: ignore[arg-type]  # checked by build
     for stamp, x, y in zip(train.stamps_ns, train.X, train.Y, strict=True):
         try:
-            est.step(Sample(int(stamp), x[:n], x[n:2 * n], x[2 * n:], y))
+            node.learn_one(x, y, stamp_ns=int(stamp))
         except RejectedSampleError:
             continue
+    return serve(node.estimator)
+
+
+def serve(estimator: OnlineEstimator) -> LearnedModel:
+    """Write the estimator's checkpoint and load it back with ``load_model``, as a user would.
+
+    Args:
+        estimator: A learned estimator (e.g. a trained :class:`NodeLearner`'s).
+
+    Returns:
+        The served model.
+    """
     with tempfile.TemporaryDirectory(prefix="semiparam-served-") as folder:
         path = Path(folder) / "model.npz"
-        est.save(path)
+        estimator.save(path)
         return load_model(path)
 
 
@@ -116,13 +127,6 @@ class ServedModel:
         return self.served.predict(xv[:n], xv[n:2 * n], xv[2 * n:])[0]
 
     predict_one = predict_model
-
-    def predict_parts(self, x: Any) -> Prediction:
-        """Return the served model's parts at x (total, rigid-body part, residual; no variance)."""
-        xv = np.asarray(x, dtype=np.float64)
-        n = self._n
-        parts = self.served.predict_parts(xv[:n], xv[n:2 * n], xv[2 * n:])
-        return Prediction(parts.rigid_body, parts.residual, parts.total, None)
 
     def predict_many(self, X: Any) -> np.ndarray:
         """Return the served model at N states (N, 3n) → (N, t), in one call."""

@@ -36,7 +36,6 @@ import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
-from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.baselines import (
     Persistence,
@@ -56,7 +55,7 @@ from semiparam_ros.eval.metrics import OutputSpec
 from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol import SampleArrays, predict_only, run_protocol, test_then_train
 from semiparam_ros.eval.replay import load_samples
-from semiparam_ros.eval.served import node_learner, served_model
+from semiparam_ros.eval.served import NodeLearner, node_learner, served_model
 from semiparam_ros.report.paper import ProtocolReport, protocol_report
 
 __all__ = [
@@ -252,12 +251,7 @@ def _node_predictions(model: Any, config: EstimatorConfig, data: SampleArrays, Y
     est = OnlineEstimator(config)
     learner = getattr(model, "estimator", None)  # a NodeLearner: its estimator's model
     est.model = (model if learner is None else learner.model).copy()
-    n = data.X.shape[1] // 3
-    out = np.empty_like(Y)
-    for i, (stamp, x, y) in enumerate(zip(data.stamps_ns, data.X, Y, strict=True)):
-        sample = Sample(int(stamp), x[:n], x[n:2 * n], x[2 * n:], y)
-        out[i] = est.step(sample).prediction.total
-    return out
+    return test_then_train(NodeLearner(est), data.X, Y, None, data.stamps_ns)[0]
 
 
 def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleArrays, *,

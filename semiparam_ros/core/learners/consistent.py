@@ -29,11 +29,10 @@ the data determine the residual, about 1 far from it). The residual is used per 
 ``g = s²(1 − ν)/(s²(1 − ν) + σ²v/ν₀)`` (:meth:`residual_weight`; ``novelty_scale`` ν₀): s² the variance
 of the rigid-body part's *recent* systematic error, s²(1 − ν) the part of it the data explain at x, σ²
 the residual's noise variance, σ²v its predictive variance at x. Where the rigid body is poor, a residual
-of moderate confidence is used; where it is
-excellent, the model abstains unless the residual is confident, and far from the data it falls back to
-its rigid-body part instead of extrapolating cosines. The predictive variance reported is unchanged (the
-residual's own), so σ still says how novel the state is. **model(x) = ŷ_P + g·r** is what is used frozen,
-at desired states and for feed-forward.
+of moderate confidence is used; where it is excellent, the model abstains unless the residual is
+confident, and far from the data it falls back to its rigid-body part instead of extrapolating cosines.
+The predictive variance reported is unchanged (the residual's own), so σ still says how novel the state
+is. **model(x) = ŷ_P + g·r** is what is used frozen, at desired states and for feed-forward.
 
 **4. Fast correction** (the tracker: one step ahead, payloads, contacts). Two parts, both learned only
 from the samples the model learns (the contact gate's refusals are held out of them too):
@@ -315,7 +314,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             zero and the rigid-body part learns alone until it is over.
         standardizer_min_scale: Floors of the warm-up's scales (units of x).
         prior: Prior mean π₀ of the rigid-body parameters (default zero).
-        novelty_scale: ν₀ > 0 of the residual's weight ``s²/(s² + σ²v/ν₀)``.
+        novelty_scale: ν₀ > 0 of the residual's weight ``s²(1 − ν)/(s²(1 − ν) + σ²v/ν₀)``.
         tracker: Whether the fast correction is used (False: the prediction is model(x)).
         tracker_position_scale: ℓ_q [rad] of the tracker's fading weight.
         tracker_velocity_scale: ℓ_q̇ [rad/s] of the tracker's fading weight.
@@ -381,8 +380,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.fast = RecursiveRLS(p, 1, lam_parametric, forgetting=self._fast_forgetting(sample_period_s))
         self.n_samples_seen = 0
         self._held: tuple[np.ndarray, float] | None = None  # (g·r, its relative variance) last computed
-        self._raw: tuple[np.ndarray, float] | None = None   # (r, v) of the last full prediction
-        self._fast_candidate = np.zeros(t)                     # κ_f Φδ_f of the last full prediction
+        self._raw: np.ndarray | None = None  # r, before its weight, of the last full prediction
+        self._fast_candidate = np.zeros(t)   # κ_f Φδ_f of the last full prediction
         self._recent_beta = self._scale_forgetting(sample_period_s)
         self._reset_scales()
 
@@ -391,7 +390,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._scale_model = np.zeros(self.n_outputs)   # Σ β^{n−m} (y − ŷ_P − r)²: σ² × the weight
         self._recent_rigid = np.zeros(self.n_outputs)  # recent mean of (y − ŷ_P)² (SCALE_TIME_CONSTANT)
         self._recent_n = 0                             # samples in it
-        self._fast_errors = np.zeros((2, self.n_outputs))  # recent mean of g and g², g the fast saving
+        self._fast_errors = np.zeros((2, self.n_outputs))  # recent mean of d and d², d the fast saving
         self._fast_n = 0                               # samples in them
         self._weight_cache: tuple[np.ndarray, np.ndarray] | None = None  # (s², σ²/ν₀) until the next learn
         self._fast_mask: np.ndarray | None = None      # _fast_useful() until the next learn
@@ -461,8 +460,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         pk = P[0]
         delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
         r = pk[:t] - self._expand(pk[t:]) @ delta
-        self._raw = (r.copy(), float(v[0]))
-        r *= self._weight_one(float(v[0]))
+        self._raw = r.copy()
+        r *= self.residual_weight(float(v[0]))
         if rigid is None:
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
         return yp, r, var + float(v[0]), phi
@@ -486,23 +485,15 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         Returns:
             g, (t,) for a scalar v, else (N, t).
         """
-        s2, noise = self.error_scales()
-        v_arr = np.asarray(v, dtype=np.float64)[..., None]
-        explained = np.clip(1.0 - self.nonparametric.rls.lam * v_arr, 0.0, 1.0)  # 1 − ν
-        signal = s2 * explained
-        total = signal + (noise / self.novelty_scale) * v_arr
-        return np.where(total > 0.0, signal / np.where(total > 0.0, total, 1.0), 1.0)
-
-    def _weight_one(self, v: float) -> np.ndarray:
-        """:meth:`residual_weight` at one scalar v, from the scales cached since the last learned sample."""
-        cache = self._weight_cache
+        cache = self._weight_cache  # the scales change only when a sample is learned
         if cache is None:
             s2, noise = self.error_scales()
             cache = self._weight_cache = (s2, noise / self.novelty_scale)
         s2, spread = cache
-        signal = s2 * min(1.0, max(0.0, 1.0 - self.nonparametric.rls.lam * v))
-        total = signal + spread * v
-        return np.divide(signal, total, out=np.ones_like(signal), where=total > 0.0)
+        v_arr = np.asarray(v, dtype=np.float64)[..., None]
+        signal = s2 * np.clip(1.0 - self.nonparametric.rls.lam * v_arr, 0.0, 1.0)  # s²(1 − ν)
+        total = signal + spread * v_arr
+        return np.divide(signal, total, out=np.ones_like(total), where=total > 0.0)
 
     def error_scales(self) -> tuple[np.ndarray, np.ndarray]:
         """``(s², σ²)`` (t,) each: the rigid-body part's systematic error and the residual's noise variances.
@@ -686,7 +677,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._raw = None
         self._fast_candidate = np.zeros(self.n_outputs)
         pred, model_total, phi, kappa = self.predict_checked(xv, Phi)
-        raw = None if phi is None or self._raw is None else self._raw[0]
+        raw = None if phi is None else self._raw
         return _Context(pred, self, xv, Phi, phi, model_total, kappa, raw, self._fast_candidate)
 
     def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
