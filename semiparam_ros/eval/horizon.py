@@ -134,8 +134,9 @@ def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int,
         X: Inputs (n, d).
         Y: Measured outputs (n, t).
         delay: ``d ≥ 1`` samples; 0 = frozen (nothing learned).
-        stamps_ns: The samples' stamps [ns], given as ``stamp_ns=`` to ``learn_one`` of a model that learns
-            with them (the node's estimator: ``needs_stamps``).
+        stamps_ns: The samples' stamps [ns], given as ``stamp_ns=`` to ``learn_one`` and ``predict_one`` of
+            a model that learns with them (the node's estimator: ``needs_stamps``; its fast correction fades
+            with the age of the model at the predicted sample).
 
     Returns:
         Predictions (n, t).
@@ -166,7 +167,11 @@ def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int,
             model.learn_one(X[i - delay], Y[i - delay], stamp_ns=int(stamps_ns[i - delay]))
         elif learns and i >= delay:
             model.learn_one(X[i - delay], Y[i - delay])
-        pred = predict(X[i])
+        if stamped:
+            assert stamps_ns is not None  # checked above
+            pred = predict(X[i], stamp_ns=int(stamps_ns[i]))  # the model's age at the sample
+        else:
+            pred = predict(X[i])
         out[i] = np.asarray(getattr(pred, "total", pred), dtype=np.float64).reshape(-1)
     return out
 

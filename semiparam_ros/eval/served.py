@@ -217,9 +217,19 @@ class NodeLearner:
         """Learn the sample as the node does (the a-priori prediction is made and dropped)."""
         self.estimator.step(self._sample(x, y, stamp_ns))
 
-    def predict_one(self, x: Any) -> Prediction:
-        """Return the learned model's prediction at x (rigid-body part, residual, corrections)."""
-        return self.estimator.model.predict_one(x)
+    def predict_one(self, x: Any, *, stamp_ns: int | None = None) -> Prediction:
+        """Return the learned model's prediction at x (rigid-body part, residual, corrections).
+
+        Args:
+            x: The state ``[q, q̇, q̈]``.
+            stamp_ns: The predicted sample's stamp [ns]: the model's fast correction fades with the age of
+                its newest learned sample at it (:meth:`OnlineEstimator.age_at`); None = the age of the
+                last step's prediction.
+        """
+        model = self.estimator.model
+        if stamp_ns is not None:
+            model.prediction_age_s = self.estimator.age_at(int(stamp_ns))
+        return model.predict_one(x)
 
     def copy(self) -> NodeLearner:
         """Return an independent copy (the estimator's learned and time-based state)."""

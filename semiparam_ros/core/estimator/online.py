@@ -117,6 +117,7 @@ class OnlineEstimator:
         #: The payload learner since the last :meth:`tare_payload` (None before one).
         self.payload: PayloadLearner | None = None
         self._rejected = 0
+        self._last_learned_ns: int | None = None  # stamp of the newest learned sample
         self.noise = NoiseScale(self.model.n_outputs, config["uncertainty.noise_time_constant"])
         self.gate = ContactGate(gate_config(config))
         self.gate_enabled = bool(config["gate.enabled"])
@@ -188,6 +189,7 @@ class OnlineEstimator:
         start = time.perf_counter()
         x, y = self._check_sample(sample)
         model = self.model
+        model.prediction_age_s = self.age_at(sample.stamp_ns)
         if skip_learning and self.learning_enabled:
             prediction = model.predict_held(x)
             assert prediction.variance is not None  # a held prediction carries it
@@ -217,6 +219,8 @@ class OnlineEstimator:
                 self.n_samples_learned += 1
             std = self.noise.std(variance)
             error = y - prediction.total
+        if learned:
+            self._last_learned_ns = sample.stamp_ns
         if learned and self.payload is not None:
             self.payload.update(sample.q, sample.dq, sample.ddq, y)
         if learned or verdict is None:
@@ -227,6 +231,25 @@ class OnlineEstimator:
         else:
             self.noise.skip(sample.stamp_ns)
         return StepResult(sample, prediction, time.perf_counter() - start, learned, std, verdict)
+
+    def age_at(self, stamp_ns: int) -> float:
+        """Age [s] of the learned state at a stamp: T × (samples since the newest learned one − 1).
+
+        What the model's fast correction fades with (``prediction_age_s``). The samples are counted as
+        Δt/T rounded, so the age is 0 when the previous sample was learned, whatever the jitter below T/2;
+        it is 0 before the period T is known and at the first sample of a recording.
+
+        Args:
+            stamp_ns: The predicted sample's stamp [ns].
+
+        Returns:
+            The age [s], ≥ 0.
+        """
+        last, period = self._last_learned_ns, self.sample_period_s
+        if last is None or period is None:
+            return 0.0
+        missed = round((stamp_ns - last) * 1e-9 / period) - 1
+        return missed * period if missed > 0 else 0.0
 
     def _check_sample(self, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
         """``(x, y)`` of a sample, sizes and values checked once for every stage after it.
@@ -395,6 +418,7 @@ class OnlineEstimator:
         self.pipeline.reset(keep_counts=True)
         self.noise.restart_stream()
         self.gate.restart_stream()
+        self._last_learned_ns = None
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -405,6 +429,7 @@ class OnlineEstimator:
         self.n_learning_skipped = 0
         self.payload = None
         self._rejected = 0
+        self._last_learned_ns = None
         self.noise.reset()
         self.gate.reset()
 

@@ -54,7 +54,13 @@ from the samples the model learns (the contact gate's refusals are held out of t
   ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``: one step later κ ≈ 1, at a state far
   from the last learned one (a model h seconds old, a desired state, a new motion) κ → 0.
 
-Prediction: ``model(x) + w Φ(x)δ_f + κ b̂``; a frozen model is ``model(x)`` (:meth:`predict_model`).
+Both parts also fade with the **age** of the learned state, by ``α = exp(−a/τ_f)`` (:meth:`age_fade`;
+a = :attr:`prediction_age_s`, the sample period times the samples between the newest learned sample and
+the predicted one, set by the estimator from the stamps): one sample after a learned one α = 1; through
+a contact the gate holds out, or for a model queried h seconds after its last update, the correction of
+errors that old fades out with the memory it was learned with.
+
+Prediction: ``model(x) + α(w Φ(x)δ_f + κ b̂)``; a frozen model is ``model(x)`` (:meth:`predict_model`).
 
 Parts (:class:`~semiparam_ros.core.learners.semiparametric.Prediction`): ``parametric = ŷ_P``,
 ``residual = g·r + correction``, ``correction = wΦδ_f + κb̂`` (so ``total − correction`` is model(x)),
@@ -527,8 +533,11 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         model_total = yp + r
         if not self.use_tracker:
             return Prediction(yp, r, model_total, var, np.zeros(self.n_outputs)), model_total, phi, 0.0
-        kappa = self.tracker.weight(xv)
-        kappa_fast = kappa ** (1.0 / self.FAST_FADE ** 2)  # the same fade over FAST_FADE × the distances
+        kappa_state = self.tracker.weight(xv)
+        fade = self.age_fade()
+        kappa = kappa_state * fade
+        # the same fade over FAST_FADE × the distances
+        kappa_fast = kappa_state ** (1.0 / self.FAST_FADE ** 2) * fade
         P, v = self.fast.predict_checked(Phi, True)
         assert v is not None  # asked for
         c = P[:, 0]
@@ -540,6 +549,26 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         fast = model_total + np.where(useful, self.fast_weight(c, v), 0.0) * applied
         total = fast + kappa * self.tracker.estimate
         return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
+
+    def age_fade(self) -> float:
+        """Weight of both fast corrections for the age of the learned state: ``exp(−a/τ_f)``.
+
+        a = :attr:`prediction_age_s` [s] (the sample period times the samples between the newest learned
+        sample and the predicted one), τ_f = ``tracker_time_constant`` [s], the fast correction's memory:
+        an error learned a few τ_f ago says little about the error now (a contact the gate holds out, a
+        model queried 1 s after its last update). 1 when the previous sample was learned.
+
+        Example:
+            >>> m = ConsistentSemiparametricModel(lambda x: x[None, :1], 1, 3, 1, n_features=8,
+            ...                                   tracker_time_constant=0.3)
+            >>> m.age_fade()
+            1.0
+            >>> m.prediction_age_s = 0.3  # one memory τ_f after the newest learned sample
+            >>> round(m.age_fade(), 4)
+            0.3679
+        """
+        age = self.prediction_age_s
+        return math.exp(-age / self.tracker_time_constant) if age > 0.0 else 1.0
 
     def _expand(self, values: np.ndarray) -> np.ndarray:
         """Return the (t, p) matrix of the residual's Φ part from its learned entries (zeros elsewhere)."""
@@ -560,7 +589,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         return np.where(c2 > noise, 1.0 - noise / np.where(c2 > 0.0, c2, 1.0), 0.0)
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
-        """Predict ``model(x) + wΦ(x)δ_f + κ b̂`` with its parts (``correction`` = the last two terms).
+        """Predict ``model(x) + α(wΦ(x)δ_f + κ b̂)`` with its parts (``correction`` = the last terms).
 
         Args:
             x: The input ``[q, q̇, q̈]``.

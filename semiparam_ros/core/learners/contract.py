@@ -114,12 +114,15 @@ class Learner(Protocol):
         n_samples_seen: Samples learned so far (a prediction context is valid only while it is unchanged).
         period_settings: What :meth:`on_period` converts.
         sample_period_s: The period [s] last announced by :meth:`on_period` (None before).
+        prediction_age_s: Age [s] of the learned state at the predictions that follow, beyond one sample
+            period (0 = the previous sample was learned; set by the estimator from the stamps).
     """
 
     n_outputs: int
     n_samples_seen: int
     period_settings: PeriodSettings
     sample_period_s: float | None
+    prediction_age_s: float
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
         """Predict y at x; with ``return_variance`` the relative predictive variance per output."""

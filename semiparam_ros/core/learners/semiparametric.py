@@ -74,6 +74,11 @@ class _Model:
     period_settings = PeriodSettings()
     #: The period [s] last announced by :meth:`on_period` (None before).
     sample_period_s: float | None = None
+    #: Age [s] of the learned state at the predictions that follow: the sample period times the samples
+    #: between the newest learned sample and the predicted one (0 = the previous sample was learned). Set
+    #: by whoever knows the stamps (the estimator); a fast correction of recent errors fades with it (the
+    #: consistent SP's), the other learners ignore it.
+    prediction_age_s: float = 0.0
 
     def learn_one(self, x: Any, y: Any) -> None:
         """Learn one sample (x, y).

@@ -405,16 +405,30 @@ def test_failed_save_keeps_previous_checkpoint_and_no_temp_file(config, regresso
 # ----------------------------------------------------------------------------- 4. learning disabled
 def test_learning_disabled_predicts_without_changing_state(config, regressor):
     msgs = rich_stream().messages
-    est, _ = clean_stream_results(config, regressor, 700)
+    est, learned = clean_stream_results(config, regressor, 700)
     before = snapshot(est)  # (reading the state applies a deferred update: copy after it, bit for bit)
     frozen = est.model.copy()
     est.learning_enabled = False
     results = feed(est, msgs[700:900])
     assert len(results) > 90
+    # the fast correction fades with the age of the newest learned sample: exp(−a/τ_f), a = T × the
+    # samples since it less one (recomputed here from the stamps)
+    period, tau = est.sample_period_s, config["semiparametric.tracker_time_constant"]
+    last_ns = learned[-1].sample.stamp_ns
+    corrections = []
     for r in results:
         assert not r.learned
-        assert_same_prediction(r.prediction, frozen.predict_one(r.sample.x))
+        ref = frozen.predict_one(r.sample.x)
+        age = period * max(0, round((r.sample.stamp_ns - last_ns) * 1e-9 / period) - 1)
+        fade = np.exp(-age / tau)
+        assert ref.correction is not None and r.prediction.correction is not None
+        np.testing.assert_allclose(r.prediction.correction, fade * ref.correction, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(r.prediction.total, ref.total - (1.0 - fade) * ref.correction,
+                                   rtol=1e-12, atol=1e-12)
+        assert np.array_equal(r.prediction.parametric, ref.parametric)
         assert np.abs(r.prediction.residual).max() > 0  # both stages still predict
+        corrections.append(np.abs(ref.correction).max())
+    assert max(corrections[:5]) > 0  # there was a correction to fade
     assert_same_state(snapshot(est), before)
 
     # learning resumes where it stopped
@@ -429,6 +443,21 @@ def test_learning_disabled_predicts_without_changing_state(config, regressor):
     assert res and not any(r.learned for r in res)
     assert off.n_samples_learned == 0 and np.all(off.parameters == 0)
     assert all(np.all(r.prediction.total == 0) for r in res)
+
+
+def test_age_counts_the_samples_since_the_newest_learned_one(config, regressor):
+    """The age the fast correction fades with: T × (samples since the newest learned one − 1)."""
+    est, learned = clean_stream_results(config, regressor, 300)
+    period = est.sample_period_s
+    assert period is not None
+    last = learned[-1].sample.stamp_ns
+    step = period * 1e9
+    assert est.age_at(last + round(step)) == 0.0            # the next sample
+    assert est.age_at(last + round(1.4 * step)) == 0.0      # jitter below half a period
+    assert est.age_at(last + round(3.0 * step)) == pytest.approx(2.0 * period, rel=1e-12)
+    assert est.age_at(last - round(step)) == 0.0            # a stamp before it
+    est.start_recording()                                   # another recording: no age carried over
+    assert est.age_at(last + round(100 * step)) == 0.0
 
 
 def test_skipped_learning_predicts_with_the_residual_held_and_leaves_the_learned_state(config, regressor):
