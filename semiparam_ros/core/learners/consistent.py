@@ -49,7 +49,10 @@ from the samples the model learns (the contact gate's refusals are held out of t
 * a *local error tracker* for the rest, ``e − wΦδ_f`` (:class:`ErrorTracker`): a bank of exponential
   smoothers of the error with gains K ∈ {0, 0.1, 0.3, 1} (none, averages, the last error carried over),
   the one with the smallest recent one-step error used per output — K = 1 where the error drifts faster
-  than its noise (persistence of the model's error), K = 0 where noise dominates. The estimate ``b̂`` was
+  than its noise (persistence of the model's error), K = 0 where noise dominates; the chosen estimate is
+  shrunk by the noise it carries, ``b̂·max(0, 1 − 4r̂K/(2 − K)/b̂²)`` (r̂ the error's white-noise
+  variance), so that a smoother chosen for a lucky streak of noise adds (almost) nothing
+  (:attr:`ErrorTracker.used_estimate`). The estimate ``b̂`` was
   made at the state ``x_b`` of the last learned sample and is used at x with the weight
   ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``: one step later κ ≈ 1, at a state far
   from the last learned one (a model h seconds old, a desired state, a new motion) κ → 0.
@@ -103,7 +106,8 @@ class ErrorTracker:
     is averaged over about ``stats_samples`` learned samples, and per output the smoother with the
     smallest one is used: where the error drifts faster than its noise, K → 1; where noise dominates (a
     model at the noise floor), K = 0 and the tracker adds nothing. The choice needs no model of the noise
-    and follows a change of regime within ``stats_samples`` samples.
+    and follows a change of regime within ``stats_samples`` samples. The correction uses the chosen
+    estimate shrunk by the noise it carries (:attr:`used_estimate`).
 
     An estimate made at the state ``x_b`` of the last learned sample is used at x with the weight
     ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``. The increments of the error
@@ -180,9 +184,27 @@ class ErrorTracker:
         """b̂ (t,): the chosen smoother's estimate per output, units of y."""
         return self.estimates[self.chosen, np.arange(self.n_outputs)]
 
+    @property
+    def used_estimate(self) -> np.ndarray:
+        """The chosen estimate shrunk by its own noise: ``b̂ · max(0, 1 − z²·r̂K/(2 − K)/b̂²)`` per output.
+
+        ``r̂K/(2 − K)`` is the variance a smoother of gain K keeps of white noise of variance r̂
+        (:meth:`noise_variance`): an estimate that does not stand out from it by z = 2 standard deviations
+        is noise carried over and is not used.
+        """
+        chosen = self.chosen
+        b = self.estimates[chosen, np.arange(self.n_outputs)]
+        k = self.GAINS[chosen]
+        noise = self.SHRINK_Z ** 2 * self.noise_variance() * k / (2.0 - k)
+        b2 = b * b
+        return np.where(b2 > noise, b * (1.0 - noise / np.where(b2 > 0.0, b2, 1.0)), 0.0)
+
+    #: Standard deviations by which an estimate must stand out from its noise to be used.
+    SHRINK_Z = 2.0
+
     def correction(self, x: np.ndarray) -> np.ndarray:
-        """``κ(x) b̂`` (t,), units of y."""
-        return self.weight(x) * self.estimate
+        """``κ(x) b̂`` (t,), units of y, with b̂ the :attr:`used_estimate`."""
+        return self.weight(x) * self.used_estimate
 
     def noise_variance(self) -> np.ndarray:
         """r̂ (t,): the white-noise variance of the error, ``max(0, −E[d_m d_{m−1}])`` [units of y²]."""
@@ -547,7 +569,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         if useful is None:
             useful = self._fast_mask = self._fast_useful()
         fast = model_total + np.where(useful, self.fast_weight(c, v), 0.0) * applied
-        total = fast + kappa * self.tracker.estimate
+        total = fast + kappa * self.tracker.used_estimate
         return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
 
     def age_fade(self) -> float:

@@ -207,6 +207,35 @@ def test_tracker_carries_a_drifting_error_over_and_adds_nothing_to_white_noise()
     assert tr.noise_variance()[1] == pytest.approx(r, abs=4 * 2 * r / math.sqrt(2000))
 
 
+def test_tracker_uses_an_estimate_only_where_it_stands_out_from_its_noise():
+    """At the noise floor the chosen smoother sometimes carries noise over (a lucky streak makes K > 0 win
+    the running comparison): applied raw, that is worse than no correction. Shrunk by its own noise
+    (``b̂·max(0, 1 − 4 r̂K/(2 − K)/b̂²)``) it costs less than half as much, and a drifting error, which
+    stands far out of its noise, is carried over as before."""
+    rng = np.random.default_rng(2)
+    tr = ErrorTracker(2, 1, position_scale=1.0, velocity_scale=1.0, stats_samples=50)
+    x = np.zeros(3)
+    walk = 0.0
+    raw, used, none = [], [], []
+    for m in range(20000):
+        walk += 0.05 * rng.normal()
+        e = np.array([walk + 0.02 * rng.normal(), 0.2 * rng.normal()])
+        if m > 100:
+            raw.append((e - tr.estimate) ** 2)
+            used.append((e - tr.used_estimate) ** 2)
+            none.append(e ** 2)
+            k = ErrorTracker.GAINS[tr.chosen]
+            b = tr.estimate
+            noise = 4.0 * tr.noise_variance() * k / (2.0 - k)
+            expected = np.where(b * b > noise, b * (1.0 - noise / np.where(b != 0.0, b * b, 1.0)), 0.0)
+            np.testing.assert_allclose(tr.used_estimate, expected, rtol=1e-12, atol=0.0)
+        tr.update(x, e, np.zeros(2))
+    rms = {name: np.sqrt(np.mean(v, axis=0)) for name, v in (("raw", raw), ("used", used), ("none", none))}
+    assert rms["raw"][1] > rms["none"][1]                                  # the harm at the noise floor
+    assert rms["used"][1] - rms["none"][1] < 0.5 * (rms["raw"][1] - rms["none"][1])
+    assert rms["used"][0] < 1.01 * rms["raw"][0] < 0.05 * rms["none"][0]   # the drift is still followed
+
+
 def test_tracker_fades_with_the_state_distance():
     tr = ErrorTracker(1, 2, position_scale=0.1, velocity_scale=1.0)
     tr.update(np.zeros(6), np.array([1.0]), np.zeros(1))
