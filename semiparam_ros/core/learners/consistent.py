@@ -80,6 +80,15 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.learners._consistent_kernels import (
+    fast_total,
+    saving_update,
+    scale_update,
+    shrunk_choice,
+    significant_saving,
+    tracker_update,
+    weighted_residual,
+)
 from semiparam_ros.core.learners.adaptation import forgetting_factor
 from semiparam_ros.core.learners.contract import Prediction, PredictionContext
 from semiparam_ros.core.learners.features import Standardizer
@@ -161,6 +170,8 @@ class ErrorTracker:
         self.last_increment = np.zeros(t)     # its increment e − e_prev
         self.cov_increment = np.zeros(t)      # running E[d_m d_{m−1}]
         self.n_errors = 0                     # learned samples seen
+        self._used: np.ndarray | None = None   # used_estimate, until the next update
+        self._noise: np.ndarray | None = None  # noise_variance(), until the next update
 
     def _scaled(self, x: np.ndarray) -> np.ndarray:
         return x[:2 * self.n_joints] * self._inv_scale
@@ -192,12 +203,12 @@ class ErrorTracker:
         (:meth:`noise_variance`): an estimate that does not stand out from it by z = 2 standard deviations
         is noise carried over and is not used.
         """
-        chosen = self.chosen
-        b = self.estimates[chosen, np.arange(self.n_outputs)]
-        k = self.GAINS[chosen]
-        noise = self.SHRINK_Z ** 2 * self.noise_variance() * k / (2.0 - k)
-        b2 = b * b
-        return np.where(b2 > noise, b * (1.0 - noise / np.where(b2 > 0.0, b2, 1.0)), 0.0)
+        used = self._used
+        if used is None:  # (compiled: the smallest running error's smoother, shrunk)
+            used = self._used = np.empty(self.n_outputs)
+            shrunk_choice(self.estimates, self.errors, self.GAINS, self.noise_variance(), self.SHRINK_Z ** 2,
+                          self.n_errors >= 2, used)
+        return used
 
     #: Standard deviations by which an estimate must stand out from its noise to be used.
     SHRINK_Z = 2.0
@@ -208,7 +219,10 @@ class ErrorTracker:
 
     def noise_variance(self) -> np.ndarray:
         """r̂ (t,): the white-noise variance of the error, ``max(0, −E[d_m d_{m−1}])`` [units of y²]."""
-        return np.maximum(-self.cov_increment, 0.0)
+        noise = self._noise
+        if noise is None:
+            noise = self._noise = np.maximum(-self.cov_increment, 0.0)
+        return noise
 
     def update(self, x: np.ndarray, y: np.ndarray, model: np.ndarray, weight: float | None = None) -> None:
         """Absorb a learned sample: its state x, measurement y and the model's a-priori prediction.
@@ -227,12 +241,11 @@ class ErrorTracker:
                 b = max(1.0 / (self.n_errors - 1), 1.0 / self.stats_samples)
                 self.cov_increment += b * (d * self.last_increment - self.cov_increment)
             self.last_increment = d
-        prior = (self.weight(x) if weight is None else weight) * self.estimates
-        miss = e - prior
-        self.errors += a * (miss * miss - self.errors)
-        self.estimates = prior + self.GAINS[:, None] * miss
+        tracker_update(self.estimates, self.errors, self.GAINS, e,
+                       self.weight(x) if weight is None else weight, a)
         self.state = self._scaled(x)
         self.last_error = e
+        self._used = self._noise = None
         self.n_errors += 1
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
@@ -269,7 +282,9 @@ class ErrorTracker:
                or (st.size and (st.shape != (2 * n,) or not np.isfinite(st).all())))
         if bad:
             raise CheckpointError("tracker state has the wrong sizes or non-finite values")
-        self.estimates, self.errors = banks["estimates"], banks["errors"]
+        self.estimates = np.ascontiguousarray(banks["estimates"]).copy()
+        self.errors = np.ascontiguousarray(banks["errors"]).copy()
+        self._used = self._noise = None
         self.last_error, self.last_increment = vals["last_error"], vals["last_increment"]
         self.cov_increment = vals["cov_increment"]
         self.state = st if st.size else None
@@ -389,6 +404,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         # joint-torque regressor's: a joint's torque does not depend on the bodies before it, friction
         # columns are diagonal); the others would only be learned as zeros at the cost of their columns
         self._phi_entries = structural_entries(regressor, int(n_inputs), t, p)
+        self._entry_rows = self._phi_entries // p  # output row and parameter column of each entry
+        self._entry_cols = self._phi_entries % p
         self.nonparametric = NonparametricModel(int(n_inputs), t + self._phi_entries.size,
                                                 n_features=n_features,
                                                 sigma=sigma, lam=lam_nonparametric,
@@ -485,11 +502,12 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         phi = npm.features_of(xv)
         P, v = npm.rls.predict_checked(phi, True)
         assert v is not None  # asked for
-        pk = P[0]
         delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
-        r = pk[:t] - self._expand(pk[t:]) @ delta
-        self._raw = r.copy()
-        r *= self.residual_weight(float(v[0]))
+        s2, spread = self._weight_scales()
+        raw, r = np.empty(t), np.empty(t)
+        weighted_residual(P[0], t, self._entry_rows, self._entry_cols, np.ascontiguousarray(delta), s2,
+                          spread, npm.rls.lam, float(v[0]), raw, r)
+        self._raw = raw
         if rigid is None:
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
         return yp, r, var + float(v[0]), phi
@@ -513,15 +531,19 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         Returns:
             g, (t,) for a scalar v, else (N, t).
         """
-        cache = self._weight_cache  # the scales change only when a sample is learned
-        if cache is None:
-            s2, noise = self.error_scales()
-            cache = self._weight_cache = (s2, noise / self.novelty_scale)
-        s2, spread = cache
+        s2, spread = self._weight_scales()
         v_arr = np.asarray(v, dtype=np.float64)[..., None]
         signal = s2 * np.clip(1.0 - self.nonparametric.rls.lam * v_arr, 0.0, 1.0)  # s²(1 − ν)
         total = signal + spread * v_arr
         return np.divide(signal, total, out=np.ones_like(total), where=total > 0.0)
+
+    def _weight_scales(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(s², σ²/ν₀)`` of the residual's weight, cached until the next learned sample."""
+        cache = self._weight_cache  # the scales change only when a sample is learned
+        if cache is None:
+            s2, noise = self.error_scales()
+            cache = self._weight_cache = (s2, noise / self.novelty_scale)
+        return cache
 
     def error_scales(self) -> tuple[np.ndarray, np.ndarray]:
         """``(s², σ²)`` (t,) each: the rigid-body part's systematic error and the residual's noise variances.
@@ -541,12 +563,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         (n the samples averaged, at most about twice ``tracker_samples`` for the running mean): choosing by
         the smaller of two noisy errors alone would add the correction's noise where it saves nothing.
         """
-        mean, square = self._fast_errors
-        n = min(self._fast_n, 2 * self.tracker.stats_samples - 1)
-        if n < 2:
-            return np.zeros(self.n_outputs, dtype=bool)
-        spread = np.maximum(square - mean * mean, 0.0)
-        return mean > 2.0 * np.sqrt(spread / n)
+        out = np.empty(self.n_outputs, dtype=np.bool_)
+        significant_saving(self._fast_errors, min(self._fast_n, 2 * self.tracker.stats_samples - 1), out)
+        return out
 
     def predict_checked(self, xv: np.ndarray, Phi: np.ndarray, *, held: bool = False
                        ) -> tuple[Prediction, np.ndarray, np.ndarray | None, float]:
@@ -562,14 +581,15 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         kappa_fast = kappa_state ** (1.0 / self.FAST_FADE ** 2) * fade
         P, v = self.fast.predict_checked(Phi, True)
         assert v is not None  # asked for
-        c = P[:, 0]
-        applied = kappa_fast * c
-        self._fast_candidate = applied
         useful = self._fast_mask
         if useful is None:
             useful = self._fast_mask = self._fast_useful()
-        fast = model_total + np.where(useful, self.fast_weight(c, v), 0.0) * applied
-        total = fast + kappa * self.tracker.used_estimate
+        t = self.n_outputs
+        applied, fast, total = np.empty(t), np.empty(t), np.empty(t)
+        # fast = model + [useful]·fast_weight(c, v)·κ_f c, total = fast + κ b̂ (one compiled call)
+        fast_total(model_total, np.ascontiguousarray(P[:, 0]), v, self.tracker.noise_variance(), kappa_fast,
+                   useful, kappa, self.tracker.used_estimate, applied, fast, total)
+        self._fast_candidate = applied
         return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
 
     def age_fade(self) -> float:
@@ -756,23 +776,21 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             par_model.rls.defer_step(par_step)
             npm.rls.defer_step(np_step)
             assert ctx.raw_residual is not None  # computed with φ
-            e_rigid = yv - ctx.prediction.parametric
-            e_model = e_rigid - ctx.raw_residual
             beta = npm.rls.forgetting
             self._scale_weight = beta * self._scale_weight + 1.0
-            self._scale_model = beta * self._scale_model + e_model * e_model
             self._recent_n += 1
             a = max(1.0 / self._recent_n, 1.0 - self._recent_beta)
-            self._recent_rigid += a * (e_rigid * e_rigid - self._recent_rigid)
+            # σ²'s sum of (y − ŷ_P − r)² and s²'s recent mean of (y − ŷ_P)²
+            scale_update(self._scale_model, self._recent_rigid, yv, ctx.prediction.parametric,
+                         ctx.raw_residual, beta, a)
             self._weight_cache = None
         if fast_step is not None:
             self.fast.defer_step(fast_step)
             self.tracker.update(xv, yv, ctx.model_total, ctx.kappa)
-            e0 = yv - model_only
-            gain = e0 * e0 - (e0 - ctx.fast_candidate) ** 2  # what the full correction saved, per output
             self._fast_n += 1
             a = max(1.0 / self._fast_n, 1.0 / self.tracker.stats_samples)
-            self._fast_errors += a * (np.stack([gain, gain * gain]) - self._fast_errors)
+            # what the full correction saved, e² − (e − κ_f Φδ_f)² with e = y − model(x): mean and square
+            saving_update(self._fast_errors, yv, model_only, ctx.fast_candidate, a)
             self._fast_mask = None
         par_model.n_samples_seen += 1
         npm.n_samples_seen += 1

@@ -405,16 +405,20 @@ def test_failed_save_keeps_previous_checkpoint_and_no_temp_file(config, regresso
 # ----------------------------------------------------------------------------- 4. learning disabled
 def test_learning_disabled_predicts_without_changing_state(config, regressor):
     msgs = rich_stream().messages
-    est, learned = clean_stream_results(config, regressor, 700)
+    est, _ = clean_stream_results(config, regressor, 700)
+    # a step of the measured output the model has not learned yet: its fast correction follows it
+    offset = np.linspace(0.5, 1.5, est.model.n_outputs)
+    later = pipeline_samples(config, msgs)[-400:]
+    for sample in later[:100]:
+        est.step(Sample(sample.stamp_ns, sample.q, sample.dq, sample.ddq, sample.y + offset))
+    last_ns = later[99].stamp_ns
     before = snapshot(est)  # (reading the state applies a deferred update: copy after it, bit for bit)
     frozen = est.model.copy()
     est.learning_enabled = False
-    results = feed(est, msgs[700:900])
-    assert len(results) > 90
+    results = [est.step(Sample(s.stamp_ns, s.q, s.dq, s.ddq, s.y + offset)) for s in later[100:300]]
     # the fast correction fades with the age of the newest learned sample: exp(−a/τ_f), a = T × the
     # samples since it less one (recomputed here from the stamps)
     period, tau = est.sample_period_s, config["semiparametric.tracker_time_constant"]
-    last_ns = learned[-1].sample.stamp_ns
     corrections = []
     for r in results:
         assert not r.learned
@@ -428,7 +432,7 @@ def test_learning_disabled_predicts_without_changing_state(config, regressor):
         assert np.array_equal(r.prediction.parametric, ref.parametric)
         assert np.abs(r.prediction.residual).max() > 0  # both stages still predict
         corrections.append(np.abs(ref.correction).max())
-    assert max(corrections[:5]) > 0  # there was a correction to fade
+    assert min(corrections[:5]) > 0.1  # there was a correction to fade
     assert_same_state(snapshot(est), before)
 
     # learning resumes where it stopped

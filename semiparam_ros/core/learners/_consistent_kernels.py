@@ -1,0 +1,221 @@
+"""Compiled small-vector kernels of the consistent SP's per-sample step.
+
+Besides its two factor sweeps, a step of
+:class:`~semiparam_ros.core.learners.consistent.ConsistentSemiparametricModel` is a few dozen operations
+on t-vectors (t ≈ 6 outputs): the residual of the current parameters and its weight, the fast
+correction's weight, the tracker's smoothers. In numpy each is a ufunc call of about a microsecond; these
+kernels do the same arithmetic in one call each. Element-wise operations are done in the same order as
+the numpy expressions of the formulas (no ``fastmath``); the one sum, ``Σ_e P_e δ_{c(e)}`` of the
+residual, is accumulated in the order of the regressor's entries rather than by a BLAS product, so it
+agrees with numpy to rounding (``|Σ| ≤ n·ε·Σ|P_e δ_{c(e)}|``), not bit for bit. The tests compare every
+kernel with a numpy implementation of its formula.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "fast_total", "saving_update", "scale_update", "shrunk_choice", "significant_saving", "tracker_update",
+    "weighted_residual",
+]
+
+
+@njit(cache=True, nogil=True)
+def weighted_residual(pk: np.ndarray, t: int, rows: np.ndarray, cols: np.ndarray, delta: np.ndarray,
+                      s2: np.ndarray, spread: np.ndarray, lam: float, v: float, raw: np.ndarray,
+                      out: np.ndarray) -> None:
+    """Write the consistent residual of parameters δ and its weight into ``raw`` and ``out`` (t,).
+
+    ``raw_k = p_k − Σ_{e: rows_e = k} p_{t+e} δ_{cols_e}`` (p the residual learner's prediction: the t
+    outputs, then the regressor's learned entries e at (rows_e, cols_e)), and ``out_k = g_k raw_k`` with
+    ``g_k = S_k / (S_k + spread_k v)``, ``S_k = s2_k · clip(1 − λv, 0, 1)`` (1 where the denominator is 0).
+
+    Args:
+        pk: (t + E,) the residual learner's prediction at x.
+        t: Number of outputs.
+        rows: (E,) output row of each learned regressor entry.
+        cols: (E,) parameter column of each learned entry.
+        delta: (p,) the rigid-body parameters' deviation from the prior.
+        s2: (t,) the rigid-body part's recent systematic error variance.
+        spread: (t,) the residual's noise variance over the novelty scale.
+        lam: λ of the residual learner.
+        v: The residual's relative predictive variance at x (≥ 0).
+        raw: (t,) output, the residual before its weight.
+        out: (t,) output, the weighted residual.
+    """
+    for k in range(t):
+        raw[k] = pk[k]
+    for e in range(rows.shape[0]):
+        raw[rows[e]] -= pk[t + e] * delta[cols[e]]
+    keep = 1.0 - lam * v
+    if keep < 0.0:
+        keep = 0.0
+    elif keep > 1.0:
+        keep = 1.0
+    for k in range(t):
+        signal = s2[k] * keep
+        total = signal + spread[k] * v
+        g = signal / total if total > 0.0 else 1.0
+        out[k] = raw[k] * g
+
+
+@njit(cache=True, nogil=True)
+def fast_total(model_total: np.ndarray, c: np.ndarray, v: np.ndarray, noise: np.ndarray, kappa_fast: float,
+               useful: np.ndarray, kappa: float, used: np.ndarray, applied: np.ndarray, fast: np.ndarray,
+               total: np.ndarray) -> None:
+    """Write the model plus its fast corrections into ``applied``, ``fast`` and ``total`` (t,).
+
+    ``applied = κ_f c``; ``fast = model + [useful] w·applied`` with ``w = max(0, 1 − 9 r̂ v / c²)`` (0 where
+    ``c² ≤ 9 r̂ v``); ``total = fast + κ b̂``.
+
+    Args:
+        model_total: (t,) model(x).
+        c: (t,) the fast rigid-body correction Φδ_f at x.
+        v: (t,) its relative predictive variance.
+        noise: (t,) r̂, the white-noise variance of the model's error.
+        kappa_fast: κ_f, the fast correction's fade at x.
+        useful: (t,) bool, where the fast correction is used.
+        kappa: κ, the local tracker's fade at x.
+        used: (t,) b̂, the local tracker's estimate.
+        applied: (t,) output.
+        fast: (t,) output.
+        total: (t,) output.
+    """
+    for k in range(model_total.shape[0]):
+        a = kappa_fast * c[k]
+        applied[k] = a
+        w = 0.0
+        if useful[k]:
+            nk = 9.0 * noise[k] * v[k]
+            c2 = c[k] * c[k]
+            if c2 > nk:
+                w = 1.0 - nk / c2
+        fast[k] = model_total[k] + w * a
+        total[k] = fast[k] + kappa * used[k]
+
+
+@njit(cache=True, nogil=True)
+def tracker_update(estimates: np.ndarray, errors: np.ndarray, gains: np.ndarray, e: np.ndarray, weight: float,
+                   a: float) -> None:
+    """Absorb one learned error e into the bank of smoothers, in place.
+
+    ``miss = e − weight·b_K``; ``errors ← errors + a(miss² − errors)``; ``b_K ← weight·b_K + K·miss``.
+
+    Args:
+        estimates: (k, t) the smoothers' estimates b_K.
+        errors: (k, t) their running a-priori squared errors.
+        gains: (k,) the gains K.
+        e: (t,) the error.
+        weight: κ at the sample's state.
+        a: The running mean's weight.
+    """
+    for i in range(estimates.shape[0]):
+        gain = gains[i]
+        for k in range(estimates.shape[1]):
+            prior = weight * estimates[i, k]
+            miss = e[k] - prior
+            errors[i, k] += a * (miss * miss - errors[i, k])
+            estimates[i, k] = prior + gain * miss
+
+
+@njit(cache=True, nogil=True)
+def scale_update(scale_model: np.ndarray, recent_rigid: np.ndarray, y: np.ndarray, rigid: np.ndarray,
+                 raw: np.ndarray, beta: float, a: float) -> None:
+    """Update the residual weight's error statistics after a learned sample, in place.
+
+    ``e_P = y − ŷ_P``, ``e = e_P − r``: ``scale_model ← β·scale_model + e²``,
+    ``recent_rigid ← recent_rigid + a(e_P² − recent_rigid)``.
+
+    Args:
+        scale_model: (t,) Σ β^{n−m} e_m², the residual's noise variance times its weight.
+        recent_rigid: (t,) the recent mean of e_P².
+        y: (t,) the measurement.
+        rigid: (t,) ŷ_P, the rigid-body part's a-priori prediction.
+        raw: (t,) r, the residual's a-priori value before its weight.
+        beta: The residual learner's forgetting factor β.
+        a: The recent mean's weight.
+    """
+    for k in range(y.shape[0]):
+        e_rigid = y[k] - rigid[k]
+        e_model = e_rigid - raw[k]
+        scale_model[k] = beta * scale_model[k] + e_model * e_model
+        recent_rigid[k] += a * (e_rigid * e_rigid - recent_rigid[k])
+
+
+@njit(cache=True, nogil=True)
+def saving_update(fast_errors: np.ndarray, y: np.ndarray, model: np.ndarray, candidate: np.ndarray,
+                  a: float) -> None:
+    """Update the running mean and mean square of what the fast correction saved, in place.
+
+    ``e = y − model``, ``s = e² − (e − candidate)²``: ``fast_errors[0] += a(s − fast_errors[0])``,
+    ``fast_errors[1] += a(s² − fast_errors[1])``.
+
+    Args:
+        fast_errors: (2, t) the running mean of s and of s².
+        y: (t,) the measurement.
+        model: (t,) model(x), the a-priori prediction without corrections.
+        candidate: (t,) the full fast correction κ_f Φδ_f at the sample.
+        a: The running mean's weight.
+    """
+    for k in range(y.shape[0]):
+        e0 = y[k] - model[k]
+        miss = e0 - candidate[k]
+        gain = e0 * e0 - miss * miss
+        fast_errors[0, k] += a * (gain - fast_errors[0, k])
+        fast_errors[1, k] += a * (gain * gain - fast_errors[1, k])
+
+
+@njit(cache=True, nogil=True)
+def shrunk_choice(estimates: np.ndarray, errors: np.ndarray, gains: np.ndarray, noise: np.ndarray,
+                  z2: float, ready: bool, out: np.ndarray) -> None:
+    """Write the chosen smoother's estimate, shrunk by the noise it carries, into ``out`` (t,).
+
+    Per output k: the smoother ``i`` with the smallest running error (the first of equals; ``i = 0`` when
+    not ``ready``), ``b = estimates[i, k]``, ``n = z2·noise_k·K_i/(2 − K_i)``, ``out_k = b(1 − n/b²)`` where
+    ``b² > n``, else 0.
+
+    Args:
+        estimates: (k, t) the smoothers' estimates.
+        errors: (k, t) their running a-priori squared errors.
+        gains: (k,) the gains K (< 2).
+        noise: (t,) r̂, the white-noise variance of the error.
+        z2: z², the squared number of standard deviations.
+        ready: Whether enough errors were seen to choose.
+        out: (t,) output.
+    """
+    for k in range(estimates.shape[1]):
+        best = 0
+        if ready:
+            for i in range(1, estimates.shape[0]):
+                if errors[i, k] < errors[best, k]:
+                    best = i
+        b = estimates[best, k]
+        gain = gains[best]
+        nk = z2 * noise[k] * gain / (2.0 - gain)
+        b2 = b * b
+        out[k] = b * (1.0 - nk / b2) if b2 > nk else 0.0
+
+
+@njit(cache=True, nogil=True)
+def significant_saving(fast_errors: np.ndarray, n: int, out: np.ndarray) -> None:
+    """Write whether each output's mean saving exceeds two standard errors into ``out`` (t,) bool.
+
+    ``out_k = m_k > 2·sqrt(max(s_k − m_k², 0)/n)``, m and s the running mean of the saving and of its
+    square (``fast_errors[0]``, ``fast_errors[1]``), over n samples (all false for n < 2).
+
+    Args:
+        fast_errors: (2, t) the running mean and mean square.
+        n: The samples they average over.
+        out: (t,) bool output.
+    """
+    for k in range(fast_errors.shape[1]):
+        if n < 2:
+            out[k] = False
+            continue
+        mean = fast_errors[0, k]
+        spread = fast_errors[1, k] - mean * mean
+        if spread < 0.0:
+            spread = 0.0
+        out[k] = mean > 2.0 * np.sqrt(spread / n)

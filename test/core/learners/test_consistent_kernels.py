@@ -1,0 +1,146 @@
+"""The consistent SP's compiled step kernels against numpy implementations of their formulas.
+
+Element-wise kernels must agree bit for bit (same IEEE operations in the same order); the residual's sum
+over the regressor entries is accumulated in another order than numpy's matrix product, so it agrees to
+the rounding bound ``n·ε·Σ|P_e δ_c(e)|`` of a sum of n terms.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from semiparam_ros.core.learners._consistent_kernels import (
+    fast_total,
+    saving_update,
+    scale_update,
+    shrunk_choice,
+    significant_saving,
+    tracker_update,
+    weighted_residual,
+)
+
+EPS = np.finfo(float).eps
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_weighted_residual_is_the_residual_of_delta_with_its_wiener_weight(seed):
+    rng = np.random.default_rng(seed)
+    t, p = 6, 17
+    entries = np.sort(rng.choice(t * p, size=40, replace=False)).astype(np.int64)
+    pk = rng.normal(size=t + entries.size)
+    delta = rng.normal(size=p)
+    s2 = rng.uniform(0.0, 2.0, size=t)
+    s2[0] = 0.0  # an output whose rigid body is exact: weight 0
+    spread = rng.uniform(0.0, 1.0, size=t)
+    spread[1] = 0.0
+    s2[1] = 0.0  # 0/0: weight 1
+    lam, v = 1e-3, float(rng.uniform(0.0, 2000.0))
+    raw, out = np.empty(t), np.empty(t)
+    weighted_residual(pk, t, entries // p, entries % p, delta, s2, spread, lam, v, raw, out)
+    # numpy: the learned entries scattered into the (t, p) matrix, times δ
+    full = np.zeros(t * p)
+    full[entries] = pk[t:]
+    ref_raw = pk[:t] - full.reshape(t, p) @ delta
+    bound = (entries.size + 1) * EPS * (np.abs(full.reshape(t, p)) @ np.abs(delta) + np.abs(pk[:t]))
+    assert np.all(np.abs(raw - ref_raw) <= bound)
+    signal = s2 * np.clip(1.0 - lam * v, 0.0, 1.0)
+    total = signal + spread * v
+    g = np.divide(signal, total, out=np.ones_like(total), where=total > 0.0)
+    assert g[0] == 0.0 and g[1] == 1.0
+    assert np.array_equal(out, raw * g)  # the weight element-wise: bit for bit from the same raw
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_fast_total_is_the_model_plus_the_weighted_corrections(seed):
+    rng = np.random.default_rng(seed)
+    t = 7
+    model, c = rng.normal(size=t), rng.normal(size=t)
+    v, noise = rng.uniform(0.0, 0.1, size=t), rng.uniform(0.0, 1.0, size=t)
+    c[0] = 0.0
+    useful = rng.uniform(size=t) < 0.7
+    used = rng.normal(size=t)
+    kappa_fast, kappa = float(rng.uniform()), float(rng.uniform())
+    applied, fast, total = np.empty(t), np.empty(t), np.empty(t)
+    fast_total(model, c, v, noise, kappa_fast, useful, kappa, used, applied, fast, total)
+    ref_applied = kappa_fast * c
+    nk = 9.0 * noise * v
+    c2 = c * c
+    w = np.where(c2 > nk, 1.0 - nk / np.where(c2 > 0.0, c2, 1.0), 0.0)
+    ref_fast = model + np.where(useful, w, 0.0) * ref_applied
+    assert np.array_equal(applied, ref_applied)
+    assert np.array_equal(fast, ref_fast)
+    assert np.array_equal(total, ref_fast + kappa * used)
+
+
+def test_tracker_update_is_the_smoothers_recursion():
+    rng = np.random.default_rng(3)
+    gains = np.array([0.0, 0.1, 0.3, 1.0])
+    est, err = rng.normal(size=(4, 5)), rng.uniform(size=(4, 5))
+    ref_est, ref_err = est.copy(), err.copy()
+    for _ in range(20):
+        e, w, a = rng.normal(size=5), float(rng.uniform()), float(rng.uniform(0.01, 0.5))
+        tracker_update(est, err, gains, e, w, a)
+        prior = w * ref_est
+        miss = e - prior
+        ref_err += a * (miss * miss - ref_err)
+        ref_est = prior + gains[:, None] * miss
+    assert np.array_equal(est, ref_est) and np.array_equal(err, ref_err)
+
+
+def test_scale_and_saving_updates_are_their_running_means():
+    rng = np.random.default_rng(4)
+    t = 6
+    scale_model, recent = rng.uniform(size=t), rng.uniform(size=t)
+    fast_errors = rng.normal(size=(2, t))
+    ref_sm, ref_rr, ref_fe = scale_model.copy(), recent.copy(), fast_errors.copy()
+    for _ in range(20):
+        y, rigid, raw = rng.normal(size=t), rng.normal(size=t), rng.normal(size=t)
+        beta, a = float(rng.uniform(0.9, 1.0)), float(rng.uniform(0.01, 0.5))
+        scale_update(scale_model, recent, y, rigid, raw, beta, a)
+        e_rigid = y - rigid
+        e_model = e_rigid - raw
+        ref_sm = beta * ref_sm + e_model * e_model
+        ref_rr += a * (e_rigid * e_rigid - ref_rr)
+        model, cand = rng.normal(size=t), rng.normal(size=t)
+        saving_update(fast_errors, y, model, cand, a)
+        e0 = y - model
+        gain = e0 * e0 - (e0 - cand) ** 2
+        ref_fe += a * (np.stack([gain, gain * gain]) - ref_fe)
+    assert np.array_equal(scale_model, ref_sm) and np.array_equal(recent, ref_rr)
+    assert np.array_equal(fast_errors, ref_fe)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_shrunk_choice_is_the_smallest_errors_estimate_shrunk_by_its_noise(seed):
+    rng = np.random.default_rng(seed)
+    gains = np.array([0.0, 0.1, 0.3, 1.0])
+    est = rng.normal(scale=0.3, size=(4, 8))
+    err = rng.uniform(size=(4, 8))
+    err[:, 0] = 0.5  # a tie: the first smoother
+    noise = rng.uniform(0.0, 0.1, size=8)
+    for ready in (False, True):
+        out = np.empty(8)
+        shrunk_choice(est, err, gains, noise, 4.0, ready, out)
+        chosen = np.argmin(err, axis=0) if ready else np.zeros(8, dtype=np.int64)
+        b = est[chosen, np.arange(8)]
+        k = gains[chosen]
+        nk = 4.0 * noise * k / (2.0 - k)
+        b2 = b * b
+        ref = np.where(b2 > nk, b * (1.0 - nk / np.where(b2 > 0.0, b2, 1.0)), 0.0)
+        assert np.array_equal(out, ref)
+
+
+def test_significant_saving_is_two_standard_errors():
+    rng = np.random.default_rng(5)
+    mean = rng.normal(size=9)
+    square = mean ** 2 + rng.uniform(-0.1, 1.0, size=9)  # a negative spread (rounding) counts as 0
+    fe = np.stack([mean, square])
+    for n in (0, 1, 2, 30):
+        out = np.empty(9, dtype=np.bool_)
+        significant_saving(fe, n, out)
+        if n < 2:
+            assert not out.any()
+            continue
+        ref = mean > 2.0 * np.sqrt(np.maximum(square - mean * mean, 0.0) / n)
+        assert np.array_equal(out, ref)
