@@ -156,18 +156,19 @@ class ModelService:
         """Return the payload when learning or the projection changed it since the last call, else None.
 
         Since a tare: the payload learner's estimate (once a pickup was detected). Without one: beyond
-        the URDF, from the worker's latest consistent solution (never solved here).
+        the URDF (a linear solve on the rigid-body learner's state, about a millisecond), once something
+        was learned, for a model with a rigid-body part.
         """
-        worker = self.projection
         key = (self.loop.version, self.solved)
         if key == self._payload_key:
             return None
         with self.loop.lock:
-            learner = self.loop.estimator.payload
+            est = self.loop.estimator
+            learner = est.payload
             if learner is not None:
                 estimate = learner.estimate() if learner.detected else None
-            elif worker is not None and worker.latest is not None:
-                estimate = self.serving.payload(worker.latest)
+            elif est.n_samples_learned > 0 and est.parameters is not None:
+                estimate = self.serving.payload()
             else:
                 estimate = None
         self._payload_key = key

@@ -158,23 +158,20 @@ class LearnedModel:
             self._consistent = (key, estimate)
         return self._consistent[1]
 
-    def payload(self, consistent: ConsistentEstimate | None = None) -> PayloadEstimate:
+    def payload(self) -> PayloadEstimate:
         """Return the payload the distal body carries: mass [kg], centre of mass [m], inertia [kg·m²].
 
         Since the last tare (:meth:`OnlineEstimator.tare_payload`, the node's ``~/payload/tare``) when one
-        was made: the change of the distal body's parameters learned from the samples after it. Otherwise
-        beyond the URDF: the consistent estimate of the distal body minus its CAD values. Each with its
-        standard deviation; the centre of mass in the frame of the distal body (the child link of the last
-        configured joint), the inertia about the centre of mass (see
-        :mod:`semiparam_ros.core.rigid_body.payload`).
-
-        Args:
-            consistent: The consistent estimate beyond which the URDF's is counted (default
-                :meth:`consistent`, solved here if none is attached).
+        was made: the change of the distal body's parameters learned from the samples after it
+        (``reference="tare"``). Otherwise beyond the URDF (``reference="urdf"``): the links before the
+        distal body held at their CAD values, its ten parameters regressed on what the rigid-body part's
+        data leave, σ including the CAD links' assumed accuracy
+        (:func:`~semiparam_ros.core.rigid_body.payload.payload_beyond_urdf`; a linear solve, no cone
+        program). Each with its standard deviation; the centre of mass in the frame of the distal body
+        (the child link of the last configured joint), the inertia about the centre of mass.
 
         Raises:
             ValueError: For a model without a rigid-body part (``NP``).
-            ConfigurationError: If the consistent projection's solver fails.
         """
         from semiparam_ros.core.rigid_body.identification import full_column_rms
         from semiparam_ros.core.rigid_body.payload import payload_beyond_urdf
@@ -182,14 +179,13 @@ class LearnedModel:
         est = self.estimator
         if est.payload is not None:
             return est.payload.estimate()
-        rls = self._rigid_learner().rls
-        if consistent is None:
-            consistent = self.consistent()
+        par = self._rigid_learner()
+        rls = par.rls
         s2 = self._noise_s2()
         noise = float(np.mean(s2)) if s2 is not None and np.all(np.isfinite(s2)) else float("nan")
         if self._weights is None:
             self._weights = full_column_rms(est.regressor)
-        return payload_beyond_urdf(est.regressor, consistent.full, rls.R, est.column_scale, rls.lam,
+        return payload_beyond_urdf(est.regressor, par.parameters, rls.R, est.column_scale, rls.lam,
                                    self._weights, noise, est.n_samples_learned)
 
     def excitation(self) -> ExcitationReport:

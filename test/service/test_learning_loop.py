@@ -213,7 +213,7 @@ def test_model_service_serves_the_model_and_a_new_payload_once():
     q = np.full(len(loop.estimator.config["robot.joints"]), 0.3)
     assert np.allclose(service.gravity(q), service.serving.gravity(q))
     assert service.refresh() is None  # no projection: no link inertias to publish
-    assert service.payload() is None and service.payload() is None  # no tare, no worker: nothing
+    assert service.payload() is None and service.payload() is None  # no tare, nothing learned: nothing
     stats = service.statistics()
     assert stats["feedforward.ready"] is False and "feedforward.age_p50_ms" not in stats
     service.record_age(2.0)

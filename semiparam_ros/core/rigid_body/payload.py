@@ -5,10 +5,12 @@ chain (the child link of the last configured joint, with every link fixed to it)
 parameters ``δ = [m, mc_x, mc_y, mc_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz]`` (kg, kg·m, kg·m², about
 the body frame) are estimated in one of two ways:
 
-* **beyond the URDF**: the physically consistent estimate of the distal body minus the URDF's CAD values
-  (:func:`payload_beyond_urdf`), its covariance the posterior of the consistent projection's quadratic
-  (``s² H⁻¹``, H the cost's Hessian, the active constraints ignored). Right when the URDF models the
-  bare robot exactly; on a real robot its CAD errors of the distal body show as payload.
+* **beyond the URDF** (:func:`payload_beyond_urdf`): the links before the distal body held at their CAD
+  values, the distal body's ten parameters regressed (friction and offsets free) on what the rigid-body
+  learner's data leave; its covariance the data's plus the CAD links' uncertainty propagated to it, so
+  that a URDF whose other links are wrong gives a wide σ rather than a confident wrong mass. (Projecting
+  every link toward CAD with one weight instead spread the payload over the links before it: 0.48 kg
+  of 1.2 on the simulated Panda.)
 * **since a tare** (:class:`PayloadLearner`): after ``tare``, a ten-parameter recursive least squares on
   ``r = y − Φ_b(x) π̂_b,ref``, the measured output minus the rigid-body model at the tare (friction and
   offsets included), regressed on the distal body's ten columns of the full regressor ``Φ(x)``. It sees
@@ -48,7 +50,10 @@ from semiparam_ros.core.learners.rrls import RecursiveRLS
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.errors import CheckpointError, ConfigurationError
 
-__all__ = ["PayloadEstimate", "PayloadLearner", "payload_beyond_urdf", "payload_from_parameters"]
+__all__ = [
+    "CAD_COM_STD_M", "CAD_INERTIA_RELATIVE_STD", "CAD_MASS_RELATIVE_STD", "PayloadEstimate", "PayloadLearner",
+    "cad_parameter_std", "payload_beyond_urdf", "payload_from_parameters",
+]
 
 _I = ((0, 1, 3), (1, 2, 4), (3, 4, 5))  # [Ixx, Ixy, Iyy, Ixz, Iyz, Izz] → 3×3
 
@@ -131,33 +136,108 @@ def payload_from_parameters(delta: np.ndarray, covariance: np.ndarray, *, body: 
                            inertia_std, body, int(n_samples), reference, bool(detected))
 
 
-def payload_beyond_urdf(regressor: RigidBodyRegressor, full: np.ndarray, R: np.ndarray, scale: np.ndarray,
-                        lam: float, weights: np.ndarray, noise_s2: float, n_samples: int) -> PayloadEstimate:
-    """Return the distal body's consistent parameters minus the URDF's, with the projection's posterior.
+#: Assumed accuracy of a URDF's CAD inertial parameters for the links before the payload (one standard
+#: deviation): relative mass, centre-of-mass position [m], relative inertia about the centre of mass.
+CAD_MASS_RELATIVE_STD = 0.1
+CAD_COM_STD_M = 0.01
+CAD_INERTIA_RELATIVE_STD = 0.1
+
+
+def cad_parameter_std(params: np.ndarray, *, mass_relative: float = CAD_MASS_RELATIVE_STD,
+                      com_m: float = CAD_COM_STD_M,
+                      inertia_relative: float = CAD_INERTIA_RELATIVE_STD) -> np.ndarray:
+    """Return standard deviations of per-body CAD parameters from a mass, COM and inertia accuracy.
+
+    Per body ``[m, h = mc, I_o]`` (10 values, about the body frame): σ_m = ρ_m m;
+    ``σ_h,k = √((m σ_c)² + (h_k ρ_m)²)``; every entry of I_o gets ``ρ_I tr(I_o)/3 + 2‖h‖σ_c`` (the inertia
+    about the centre of mass, and the shift of the origin term when c moves). A diagonal approximation:
+    what matters is the scale with which other links can absorb a payload.
+
+    Args:
+        params: (10·b,) per-body parameters [kg, kg·m, kg·m²] (e.g. the URDF's).
+        mass_relative: ρ_m, relative standard deviation of a mass.
+        com_m: σ_c [m], standard deviation of a centre of mass per axis.
+        inertia_relative: ρ_I, relative standard deviation of an inertia.
+
+    Returns:
+        (10·b,) positive standard deviations.
+
+    Example:
+        >>> from semiparam_ros.core.rigid_body.dynamics import point_mass_parameters
+        >>> cad_parameter_std(point_mass_parameters(2.0, [0.0, 0.0, 0.1]))[:4].round(4).tolist()
+        [0.2, 0.02, 0.02, 0.0283]
+    """
+    p = np.asarray(params, dtype=np.float64).reshape(-1, 10)
+    m, h, i_o = np.abs(p[:, :1]), p[:, 1:4], p[:, 4:]
+    trace = np.abs(i_o[:, 0] + i_o[:, 2] + i_o[:, 5])[:, None]
+    std = np.empty_like(p)
+    std[:, :1] = mass_relative * m
+    std[:, 1:4] = np.hypot(m * com_m, h * mass_relative)
+    std[:, 4:] = inertia_relative * trace / 3.0 + 2.0 * np.linalg.norm(h, axis=1)[:, None] * com_m
+    return np.maximum(std, 1e-9).reshape(-1)
+
+
+def payload_beyond_urdf(regressor: RigidBodyRegressor, theta: np.ndarray, R: np.ndarray, scale: np.ndarray,
+                        lam: float, weights: np.ndarray, noise_s2: float, n_samples: int, *,
+                        cad_std: np.ndarray | None = None) -> PayloadEstimate:
+    """Estimate the distal body's change beyond the URDF, the links before it held at their CAD values.
+
+    The rigid-body learner's data define the quadratic ``‖M π − Rθ‖²`` over full parameters π
+    (``M = R·diag(c)·K``, K the base map: the same data term as the consistent projection). With the
+    bodies before the distal one at their CAD values π₀, the distal body's ten parameters δ and the
+    extra columns ξ (friction, offsets, …) are its least-squares solution,
+
+        [δ̂; ξ̂] = argmin ‖M_d δ + M_x ξ − (Rθ − M π₀)‖² + λ‖w ⊙ [δ; ξ]‖²,
+
+    a ten-plus-extras linear solve (no cone program: the payload itself is not constrained). Its
+    covariance adds to the data's ``s² H⁻¹`` the CAD links' uncertainty, propagated linearly:
+    ``J Σ_o Jᵀ`` with ``J = −H⁻¹ [M_d M_x]ᵀ M_o`` the estimate's sensitivity to the other bodies'
+    parameters and ``Σ_o = diag(cad_std²)``. Where the data tell the payload apart from the other links
+    (a well-excited arm), J is small and the estimate is as accurate as the URDF; where they cannot, σ
+    says so (a large mass σ is a payload that is not determined).
 
     Args:
         regressor: The rigid-body regressor (base map K, body layout, CAD values).
-        full: (n_params,) the consistent per-body parameters (:class:`ConsistentEstimate.full`).
-        R: (n_base, n_base) the rigid-body learner's factor (``RᵀR = A``, scaled units).
+        theta: (n_base,) the rigid-body learner's coefficients (scaled units, θ = c ⊙ π_b).
+        R: (n_base, n_base) its factor (``RᵀR = A``, scaled units).
         scale: (n_base,) its column scales c.
-        lam: The projection's λ.
-        weights: (n_params,) the projection's prior weights w.
+        lam: The learner's λ (a weak pull of δ and ξ toward zero, as in the projection).
+        weights: (n_params,) per-parameter weights w of that pull (:func:`full_column_rms`).
         noise_s2: Noise variance of y [(N·m)²], averaged over the outputs.
         n_samples: Samples learned.
+        cad_std: (10·n_bodies,) standard deviations of the CAD parameters (default
+            :func:`cad_parameter_std` of the URDF's).
 
     Returns:
         The payload beyond the URDF (``reference="urdf"``).
+
+    Raises:
+        ConfigurationError: Wrong sizes.
     """
     K = regressor.base.projection
-    M = R @ (np.asarray(scale)[:, None] * K)
-    H = M.T @ M + lam * np.diag(np.asarray(weights) ** 2)
+    n_base, n_params = K.shape
+    theta, R, scale = (np.asarray(a, dtype=np.float64) for a in (theta, R, scale))
+    if theta.shape != (n_base,) or R.shape != (n_base, n_base) or scale.shape != (n_base,):
+        raise ConfigurationError(f"theta, R and scale must be ({n_base},), ({n_base}, {n_base}), ({n_base},)")
+    prior = regressor.urdf_parameters()
+    n_rigid = 10 * regressor.n_bodies
+    std = cad_parameter_std(prior[:n_rigid]) if cad_std is None else np.asarray(cad_std, dtype=np.float64)
+    if std.shape != (n_rigid,):
+        raise ConfigurationError(f"cad_std must be ({n_rigid},), got {std.shape}")
     body = regressor.body_index(regressor.distal_body_name)
-    cols = np.arange(10 * body, 10 * body + 10)
-    unit = np.zeros((H.shape[0], 10))
-    unit[cols, np.arange(10)] = 1.0
-    cov = float(noise_s2) * cho_solve(cho_factor(H), unit)[cols]
-    delta = np.asarray(full)[cols] - regressor.urdf_parameters()[cols]
-    return payload_from_parameters(delta, 0.5 * (cov + cov.T), body=regressor.distal_body_name,
+    distal = np.arange(10 * body, 10 * body + 10)
+    free = np.concatenate([distal, np.arange(n_rigid, n_params)])       # δ, then the extras ξ
+    held = np.setdiff1d(np.arange(n_rigid), distal)                      # the links before: at CAD
+    M = R @ (scale[:, None] * K)
+    Mf = M[:, free]
+    H = Mf.T @ Mf + lam * np.diag(np.asarray(weights, dtype=np.float64)[free] ** 2)
+    factor = cho_factor(H)
+    solution = cho_solve(factor, Mf.T @ (R @ theta - M @ prior))
+    sensitivity = -cho_solve(factor, Mf.T @ M[:, held])[:10]             # ∂δ̂/∂π_o
+    cad_cov = (sensitivity * std[held] ** 2) @ sensitivity.T
+    data_cov = float(noise_s2) * cho_solve(factor, np.eye(free.size)[:, :10])[:10]
+    cov = data_cov + cad_cov
+    return payload_from_parameters(solution[:10], 0.5 * (cov + cov.T), body=regressor.distal_body_name,
                                    n_samples=n_samples, reference="urdf")
 
 

@@ -104,13 +104,92 @@ def test_payload_learner_state_is_validated_on_load():
         PayloadLearner.from_state_dict(reg, bad, "payload.")
 
 
-def test_payload_beyond_urdf_is_the_distal_change_of_the_consistent_estimate():
+def _learner_state(reg, full: np.ndarray, n: int = 400, seed: int = 0, lam: float = 1e-6):
+    """(θ, R) of a ridge fit of noise-free outputs ``Φ π`` at random states (closed form, base)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = reg.position_limits()
+    lo, hi = np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi)
+    joints = len(reg.joint_names)
+    q = rng.uniform(lo, hi, (n, joints))
+    dq, ddq = rng.uniform(-1.5, 1.5, (n, joints)), rng.uniform(-8.0, 8.0, (n, joints))
+    Phi_b = reg.base_regressor(q, dq, ddq).reshape(-1, reg.n_base)
+    y = (reg.regressor(q, dq, ddq) @ full).reshape(-1)
+    A = Phi_b.T @ Phi_b + lam * np.eye(reg.n_base)
+    theta = np.linalg.solve(A, Phi_b.T @ y)
+    return theta, np.linalg.cholesky(A).T
+
+
+def test_payload_beyond_urdf_recovers_the_distal_change_the_data_determine():
+    """Data of the URDF plus a point mass on the distal body (the links before exactly CAD): the payload,
+    its centre of mass exactly, and a σ that counts the CAD links' assumed accuracy (0 → the data's)."""
     reg = arm_regressor("panda")
     body = reg.body_index(reg.distal_body_name)
     full = reg.urdf_parameters().copy()
     full[10 * body: 10 * body + 10] += point_mass_parameters(0.8, [0.0, 0.02, 0.15])
-    R = np.eye(reg.n_base) * 100.0
-    got = payload_beyond_urdf(reg, full, R, np.ones(reg.n_base), 1e-3, np.ones(reg.n_params), 1e-4, 123)
-    assert got.reference == "urdf" and got.n_samples == 123
-    assert got.mass == pytest.approx(0.8) and got.com == pytest.approx([0.0, 0.02, 0.15])
-    assert got.mass_std > 0
+    theta, R = _learner_state(reg, full)
+    weights = np.ones(reg.n_params)
+    got = payload_beyond_urdf(reg, theta, R, np.ones(reg.n_base), 1e-6, weights, 1e-4, 123)
+    assert got.reference == "urdf" and got.n_samples == 123 and got.body == reg.distal_body_name
+    assert got.mass == pytest.approx(0.8, abs=1e-5) and got.com == pytest.approx([0.0, 0.02, 0.15], abs=1e-5)
+    exact = payload_beyond_urdf(reg, theta, R, np.ones(reg.n_base), 1e-6, weights, 1e-4, 123,
+                                cad_std=np.full(10 * reg.n_bodies, 1e-12))
+    assert exact.mass == pytest.approx(got.mass, abs=1e-12)
+    assert 0 < exact.mass_std < 0.01 * got.mass_std  # the CAD links' accuracy dominates σ here
+
+
+def test_payload_beyond_urdf_with_wrong_cad_links_is_within_its_sigma():
+    """The links before the payload off their CAD values by about the assumed accuracy: the error of the
+    estimate stays within 3σ (σ says how far the payload is determined), and it is larger than with
+    exact links (the CAD error does show)."""
+    from semiparam_ros.core.rigid_body.payload import cad_parameter_std
+
+    reg = arm_regressor("panda")
+    body = reg.body_index(reg.distal_body_name)
+    urdf = reg.urdf_parameters()
+    payload = point_mass_parameters(1.2, [0.0, 0.0, 0.2])
+    rng = np.random.default_rng(4)
+    std = cad_parameter_std(urdf[: 10 * reg.n_bodies])
+    errors = []
+    for draw in range(5):
+        true = urdf.copy()
+        true[10 * body: 10 * body + 10] += payload
+        wrong = np.setdiff1d(np.arange(10 * reg.n_bodies), np.arange(10 * body, 10 * body + 10))
+        true[wrong] += rng.normal(0.0, 1.0, wrong.size) * std[wrong]
+        theta, R = _learner_state(reg, true, seed=draw)
+        got = payload_beyond_urdf(reg, theta, R, np.ones(reg.n_base), 1e-6, np.ones(reg.n_params), 1e-4, 1)
+        assert abs(got.mass - 1.2) <= 3.0 * got.mass_std
+        assert np.all(np.abs(got.com - [0.0, 0.0, 0.2]) <= 3.0 * got.com_std)
+        errors.append(abs(got.mass - 1.2))
+    assert max(errors) > 1e-3
+
+
+@pytest.fixture(scope="module")
+def panda_carrying():
+    """The simulated Panda (1 kHz, friction, noise; its URDF exact) carrying its preset payload from the
+    start, 20 s, learned by the estimator with the default configuration."""
+    spec = ARM_ROBOTS["panda"]
+    rec = simulate_arm(ArmScenarioConfig(name="carry_test", robot="panda", duration=20.0, seed=2,
+                                         payload_mass=spec.payload_mass, payload_time=0.0, perturbation=None))
+    reg = arm_regressor("panda")
+    body = reg.body_index(reg.distal_body_name)
+    cols = slice(10 * body, 10 * body + 10)
+    truth = payload_from_parameters(rec.parameters_after[cols] - reg.urdf_parameters()[cols],
+                                    np.zeros((10, 10)), body=reg.distal_body_name, n_samples=0, reference="t")
+    est = OnlineEstimator(load_config(REPO / "config" / "panda.yaml"))
+    for k in range(rec.stamps.shape[0]):
+        est.process_joint_state(JointStateData(int(rec.stamps[k]), rec.joint_names, rec.q_measured[k],
+                                               rec.dq_measured[k], rec.measured_torques[k]))
+    return est, truth
+
+
+def test_payload_without_a_tare_meets_the_target_on_the_simulated_panda(panda_carrying, tmp_path):
+    """No tare, the payload mounted before recording, the URDF exact: mass within 3 %, centre of mass
+    within 10 mm, from the checkpoint; the truth within 3σ."""
+    est, truth = panda_carrying
+    path = tmp_path / "carry.npz"
+    est.save(path)
+    got = load_model(path).payload()
+    assert got.reference == "urdf" and got.body == truth.body
+    assert abs(got.mass - truth.mass) <= 0.03 * truth.mass
+    assert np.linalg.norm(got.com - truth.com) <= 0.010
+    assert abs(got.mass - truth.mass) <= 3.0 * got.mass_std
