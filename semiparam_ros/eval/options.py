@@ -21,7 +21,18 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-__all__ = ["DEFAULT_FIRST_S", "DEFAULT_SPLITS", "DEFAULT_WINDOW_S", "ProtocolOptions", "Variant"]
+__all__ = [
+    "CASCADE_SP", "DEFAULT_FIRST_S", "DEFAULT_SPLITS", "DEFAULT_WINDOW_S", "JOINT_SP", "ProtocolOptions",
+    "Variant",
+]
+
+#: The joint semiparametric learner
+#: (:class:`~semiparam_ros.core.learners.joint.JointSemiparametricModel`): the SP model built with
+#: ``semiparametric.combination = joint`` whatever the configuration says.
+JOINT_SP = "SPJ"
+#: The paper's cascade (:class:`~semiparam_ros.core.learners.semiparametric.SemiparametricModel`): the SP
+#: model built with ``semiparametric.combination = cascade`` whatever the configuration says.
+CASCADE_SP = "SPC"
 
 #: Sliding RMSE window [s].
 DEFAULT_WINDOW_S = 3.0

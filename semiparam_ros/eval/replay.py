@@ -26,7 +26,7 @@ from semiparam_ros.core.stream.rate import measured_period_s
 from semiparam_ros.eval.diagnostics import FrozenParametricSP
 from semiparam_ros.eval.horizon import HorizonReport, evaluate_horizons
 from semiparam_ros.eval.metrics import OutputSpec
-from semiparam_ros.eval.options import DEFAULT_WINDOW_S, ProtocolOptions, Variant
+from semiparam_ros.eval.options import CASCADE_SP, DEFAULT_WINDOW_S, JOINT_SP, ProtocolOptions, Variant
 from semiparam_ros.eval.parallel import run_jobs
 from semiparam_ros.eval.protocol import (
     AdaptationResult,
@@ -61,14 +61,6 @@ GROUND_TRUTH_WRENCH_TOPIC = "/ground_truth/wrench"
 _TRUTH_MARGIN_NS = 1_000_000_000
 #: The paper's three learners.
 KINDS: tuple[str, ...] = ("P", "NP", "SP")
-#: The joint semiparametric learner
-#: (:class:`~semiparam_ros.core.learners.joint.JointSemiparametricModel`): the SP model built with
-#: ``semiparametric.combination = joint`` whatever the configuration says.
-JOINT_SP = "SPJ"
-#: The paper's cascade (:class:`~semiparam_ros.core.learners.semiparametric.SemiparametricModel`): the SP
-# model
-#: built with ``semiparametric.combination = cascade`` whatever the configuration says.
-CASCADE_SP = "SPC"
 #: Diagnostic variant (:class:`~semiparam_ros.eval.diagnostics.FrozenParametricSP`): SP whose rigid-body
 #: stage stops learning after the training stream.
 FROZEN_P = "SPfrozenP"

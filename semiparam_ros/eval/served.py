@@ -27,8 +27,8 @@ from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.errors import RejectedSampleError
+from semiparam_ros.eval.options import CASCADE_SP, JOINT_SP
 from semiparam_ros.eval.protocol import SampleArrays
-from semiparam_ros.eval.replay import CASCADE_SP, JOINT_SP
 from semiparam_ros.service.serving import LearnedModel, load_model
 
 __all__ = ["SERVED_COMBINATIONS", "NodeLearner", "ServedModel", "learn_served", "node_learner", "serve",
