@@ -40,7 +40,7 @@ import numpy as np
 
 from semiparam_ros.atomic import atomic_savefig
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.protocol import SampleArrays, needs_stamps
+from semiparam_ros.eval.protocol import SampleArrays, stamps_for
 
 __all__ = [
     "DEFAULT_HORIZONS",
@@ -156,22 +156,18 @@ def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int,
     n = X.shape[0]
     out = np.empty((n, Y.shape[1]))
     learns = delay > 0 and callable(getattr(model, "learn_one", None))
-    stamped = learns and needs_stamps(model)
-    if stamped and (stamps_ns is None or len(stamps_ns) != n):
-        raise ConfigurationError("this model learns with the samples' stamps: pass stamps_ns, one per sample")
+    stamps = stamps_for(model, stamps_ns, n) if learns else None
     # frozen, a learner is used as its model: without the fast correction of its recent errors, if it has one
     predict = (getattr(model, "predict_model", None) if delay == 0 else None) or model.predict_one
     for i in range(n):
-        if stamped and i >= delay:
-            assert stamps_ns is not None  # checked above
-            model.learn_one(X[i - delay], Y[i - delay], stamp_ns=int(stamps_ns[i - delay]))
-        elif learns and i >= delay:
-            model.learn_one(X[i - delay], Y[i - delay])
-        if stamped:
-            assert stamps_ns is not None  # checked above
-            pred = predict(X[i], stamp_ns=int(stamps_ns[i]))  # the model's age at the sample
-        else:
+        if stamps is None:
+            if learns and i >= delay:
+                model.learn_one(X[i - delay], Y[i - delay])
             pred = predict(X[i])
+        else:  # the node's estimator: learned with its stamps, predicting at the model's age at the sample
+            if i >= delay:
+                model.learn_one(X[i - delay], Y[i - delay], stamp_ns=int(stamps[i - delay]))
+            pred = predict(X[i], stamp_ns=int(stamps[i]))
         out[i] = np.asarray(getattr(pred, "total", pred), dtype=np.float64).reshape(-1)
     return out
 

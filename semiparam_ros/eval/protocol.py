@@ -32,6 +32,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from semiparam_ros.core.stream.rate import stream_period_s
+from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse, group_rmse, window_samples, windowed_rmse
 from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 
@@ -41,12 +42,14 @@ __all__ = [
     "ProtocolResult",
     "Recovery",
     "SampleArrays",
+    "needs_stamps",
     "predict_only",
     "progress_enabled",
     "recovery",
     "run_adaptation",
     "run_protocol",
     "split_bounds",
+    "stamps_for",
     "test_then_train",
     "train",
 ]
@@ -222,6 +225,22 @@ def needs_stamps(model: Any) -> bool:
     return bool(getattr(model, "needs_stamps", False))
 
 
+def stamps_for(model: Any, stamps_ns: np.ndarray | None, n: int) -> np.ndarray | None:
+    """Return the stamps to give a model with each of n samples: ``stamps_ns`` if it :func:`needs_stamps`.
+
+    Returns:
+        ``stamps_ns``, or None for a model that learns without stamps.
+
+    Raises:
+        ConfigurationError: A model that needs stamps without one per sample.
+    """
+    if not needs_stamps(model):
+        return None
+    if stamps_ns is None or len(stamps_ns) != n:
+        raise ConfigurationError("this model learns with the samples' stamps: pass stamps_ns, one per sample")
+    return stamps_ns
+
+
 def test_then_train(model: OnlineModel, X: np.ndarray, Y: np.ndarray,
                     progress: Progress | None = None,
                     stamps_ns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -238,21 +257,21 @@ def test_then_train(model: OnlineModel, X: np.ndarray, Y: np.ndarray,
     Returns:
         ``(predictions (n, t), update_ns (n,))``: the a-priori predictions and the wall time of each
         ``predict_learn_one`` call [ns].
+
+    Raises:
+        ConfigurationError: A model that needs stamps without one per sample.
     """
     n = X.shape[0]
     predictions = np.empty_like(Y, dtype=np.float64)
     update_ns = np.empty(n, dtype=np.int64)
     clock = time.perf_counter_ns
-    stamped = needs_stamps(model)
-    if stamped and (stamps_ns is None or len(stamps_ns) != n):
-        raise ValueError("this model learns with the samples' stamps: pass stamps_ns, one per sample")
+    stamps = stamps_for(model, stamps_ns, n)
     for i in range(n):
         t0 = clock()
-        if stamped:
-            assert stamps_ns is not None  # checked above
-            prediction = model.predict_learn_one(X[i], Y[i], stamp_ns=int(stamps_ns[i]))
-        else:
+        if stamps is None:
             prediction = model.predict_learn_one(X[i], Y[i])
+        else:
+            prediction = model.predict_learn_one(X[i], Y[i], stamp_ns=int(stamps[i]))
         update_ns[i] = clock() - t0
         predictions[i] = _total(prediction)
         if progress is not None and (i + 1) % 100 == 0:

@@ -75,7 +75,7 @@ class ModelService:
         self._projection_version = -1
         self._ff_key = (-1, -1)
         self._links_published = 0
-        self._payload_key: tuple[int, int] | None = None
+        self._payload_key: int | None = None
         self._excitation: tuple[float, int, dict[str, object]] | None = None
 
     @property
@@ -153,13 +153,13 @@ class ModelService:
             self._payload_key = None
 
     def payload(self) -> PayloadEstimate | None:
-        """Return the payload when learning or the projection changed it since the last call, else None.
+        """Return the payload when learning changed it since the last call, else None.
 
         Since a tare: the payload learner's estimate (once a pickup was detected). Without one: beyond
         the URDF (a linear solve on the rigid-body learner's state, about a millisecond), once something
         was learned, for a model with a rigid-body part.
         """
-        key = (self.loop.version, self.solved)
+        key = self.loop.version  # neither estimate depends on the consistent projection
         if key == self._payload_key:
             return None
         with self.loop.lock:

@@ -43,9 +43,11 @@ from the samples the model learns (the contact gate's refusals are held out of t
   known): a payload or a drift of the inertial parameters is a change ``Φ(x)Δπ``, which it follows
   within about τ_f and carries to nearby states through Φ (it fades like the local tracker below, over
   :attr:`FAST_FADE` times its distances). It is used with the weight ``w = max(0, 1 − 9r̂v/c²)`` of its
-  value c against its own standard deviation (:meth:`fast_weight`), and only on the outputs where it
-  recently saved a significant part of the one-step squared error: where it only fits noise (a model
-  already at the noise floor) it adds nothing;
+  value c against its own standard deviation ``√(r̂v)`` (v the fast learner's relative predictive
+  variance, r̂ the noise variance of the model's error estimated by the tracker: the correction counts
+  only as far as it stands out from its noise by three standard deviations, at once for a payload), and
+  only on the outputs where it recently saved a significant part of the one-step squared error: where it
+  only fits noise (a model already at the noise floor) it adds nothing;
 * a *local error tracker* for the rest, ``e − wΦδ_f`` (:class:`ErrorTracker`): a bank of exponential
   smoothers of the error with gains K ∈ {0, 0.1, 0.3, 1} (none, averages, the last error carried over),
   the one with the smallest recent one-step error used per output — K = 1 where the error drifts faster
@@ -586,7 +588,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             useful = self._fast_mask = self._fast_useful()
         t = self.n_outputs
         applied, fast, total = np.empty(t), np.empty(t), np.empty(t)
-        # fast = model + [useful]·fast_weight(c, v)·κ_f c, total = fast + κ b̂ (one compiled call)
+        # fast = model + [useful]·max(0, 1 − 9r̂v/c²)·κ_f c, total = fast + κ b̂ (one compiled call)
         fast_total(model_total, np.ascontiguousarray(P[:, 0]), v, self.tracker.noise_variance(), kappa_fast,
                    useful, kappa, self.tracker.used_estimate, applied, fast, total)
         self._fast_candidate = applied
@@ -611,24 +613,6 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """
         age = self.prediction_age_s
         return math.exp(-age / self.tracker_time_constant) if age > 0.0 else 1.0
-
-    def _expand(self, values: np.ndarray) -> np.ndarray:
-        """Return the (t, p) matrix of the residual's Φ part from its learned entries (zeros elsewhere)."""
-        full = np.zeros(self.n_outputs * self.n_params)
-        full[self._phi_entries] = values
-        return full.reshape(self.n_outputs, self.n_params)
-
-    def fast_weight(self, c: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Weight of the fast rigid-body correction per output, in [0, 1]: ``max(0, 1 − 9 r̂ v / c²)``.
-
-        ``c = Φδ_f`` is the correction, ``r̂ v`` its variance (v the relative predictive variance of the
-        fast learner, r̂ the noise variance of the model's error estimated by the tracker): the correction
-        counts only as far as it stands out from its own noise by three standard deviations — at once for a
-        payload (large, well determined), not at all where it only fits noise (a model at the noise floor).
-        """
-        noise = 9.0 * self.tracker.noise_variance() * v
-        c2 = c * c
-        return np.where(c2 > noise, 1.0 - noise / np.where(c2 > 0.0, c2, 1.0), 0.0)
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
         """Predict ``model(x) + α(wΦ(x)δ_f + κ b̂)`` with its parts (``correction`` = the last terms).
