@@ -7,8 +7,9 @@ Every joint trajectory the simulator produces is a truncated Fourier series
 so that q (rad), q̇ (rad/s) and q̈ (rad/s²) are evaluated in closed form and are consistent to machine
 precision: a rigid-body model fed the true q̈ reproduces the true wrench exactly, which the tests rely on.
 
-* :class:`FourierTrajectory` — the series itself, fitted to one sampled period (the converged closed-loop
-  inverse-kinematics orbit of :mod:`semiparam_ros.sim.ik`) or drawn at random (:func:`multisine`).
+* :class:`~semiparam_ros.core.fourier.FourierTrajectory` (re-exported here) — the series itself, fitted
+  to one sampled period (the converged closed-loop inverse-kinematics orbit of :mod:`semiparam_ros.sim.ik`)
+  or drawn at random (:func:`multisine`).
 * :class:`PointToPoint` — moves between random targets at the velocity limits, with rests (not periodic;
   piecewise-constant q̈).
 * :class:`CartesianCircle` — the hand's reference path: a circle of radius r (m) travelled at constant speed
@@ -21,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from semiparam_ros.core.fourier import FourierTrajectory, as_times
+
 __all__ = [
     "CartesianCircle",
     "FourierTrajectory",
@@ -29,121 +32,6 @@ __all__ = [
     "SlowSignal",
     "multisine",
 ]
-
-
-def _times(t: np.ndarray | float) -> np.ndarray:
-    """Return times (s) as a finite 1-D float array, or raise ValueError."""
-    times = np.atleast_1d(np.asarray(t, dtype=np.float64))
-    if times.ndim != 1 or not np.all(np.isfinite(times)):
-        raise ValueError("t must be a finite scalar or 1-D array of times (s)")
-    return times
-
-
-@dataclass(frozen=True)
-class FourierTrajectory:
-    """A periodic joint trajectory as a truncated Fourier series with analytic derivatives.
-
-    Attributes:
-        omega: Fundamental angular frequency ω = 2π/T (rad/s).
-        offset: Mean joint positions a₀, shape ``(n,)`` (rad).
-        cos_coef: Cosine coefficients aₖ, shape ``(K, n)`` (rad), k = 1 … K.
-        sin_coef: Sine coefficients bₖ, shape ``(K, n)`` (rad).
-    """
-
-    omega: float
-    offset: np.ndarray
-    cos_coef: np.ndarray
-    sin_coef: np.ndarray
-
-    def __post_init__(self) -> None:
-        offset = np.atleast_1d(np.asarray(self.offset, dtype=np.float64))
-        cos_coef = np.asarray(self.cos_coef, dtype=np.float64).reshape(-1, offset.size)
-        sin_coef = np.asarray(self.sin_coef, dtype=np.float64).reshape(-1, offset.size)
-        if cos_coef.shape != sin_coef.shape:
-            raise ValueError("cos_coef and sin_coef must have the same shape (K, n)")
-        if not (np.isfinite(self.omega) and self.omega > 0):
-            raise ValueError(f"omega must be a positive finite angular frequency, got {self.omega!r}")
-        if not (
-            np.all(np.isfinite(offset)) and np.all(np.isfinite(cos_coef)) and np.all(np.isfinite(sin_coef))
-        ):
-            raise ValueError("Fourier coefficients must be finite")
-        object.__setattr__(self, "omega", float(self.omega))
-        object.__setattr__(self, "offset", offset)
-        object.__setattr__(self, "cos_coef", cos_coef)
-        object.__setattr__(self, "sin_coef", sin_coef)
-
-    @property
-    def period(self) -> float:
-        """The period T = 2π/ω (s)."""
-        return 2.0 * np.pi / self.omega
-
-    @property
-    def n_joints(self) -> int:
-        """Number of joints n."""
-        return int(self.offset.size)
-
-    @property
-    def n_harmonics(self) -> int:
-        """Number of harmonics K."""
-        return int(self.cos_coef.shape[0])
-
-    def evaluate(self, t: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Positions, velocities and accelerations at the times ``t``.
-
-        Args:
-            t: Times (s), scalar or 1-D array of length m.
-
-        Returns:
-            ``(q, dq, ddq)``, each of shape ``(m, n)`` (rad, rad/s, rad/s²).
-
-        Raises:
-            ValueError: If a time is not finite.
-        """
-        t = _times(t)
-        k = np.arange(1, self.n_harmonics + 1, dtype=np.float64)
-        kw = k * self.omega
-        # Reduce the phase modulo 2π per harmonic in exact integer-period steps: for long bags
-        # (t ~ 1000 s) this keeps the argument of cos/sin small without changing the value.
-        t_red = np.mod(t, self.period)
-        phase = np.outer(t_red, kw)
-        c, s = np.cos(phase), np.sin(phase)
-        q = self.offset + c @ self.cos_coef + s @ self.sin_coef
-        dq = s @ (-kw[:, None] * self.cos_coef) + c @ (kw[:, None] * self.sin_coef)
-        kw2 = (kw * kw)[:, None]
-        ddq = -(c @ (kw2 * self.cos_coef) + s @ (kw2 * self.sin_coef))
-        return q, dq, ddq
-
-    @classmethod
-    def fit_periodic(cls, samples: np.ndarray, period: float, n_harmonics: int) -> FourierTrajectory:
-        """Fit the series to one period sampled on a uniform grid (least squares = truncated DFT).
-
-        Args:
-            samples: ``(N, n)`` joint positions at ``t = i·T/N``, i = 0 … N−1 (rad); the sample at
-                ``t = T`` equals the first and is not included.
-            period: The period T (s).
-            n_harmonics: Number of harmonics K to keep; must satisfy ``K < N/2``.
-
-        Returns:
-            The fitted trajectory.
-
-        Raises:
-            ValueError: On bad shapes, non-finite samples or too many harmonics.
-        """
-        samples = np.asarray(samples, dtype=np.float64)
-        if samples.ndim != 2 or samples.shape[0] < 4:
-            raise ValueError("samples must have shape (N, n) with N >= 4")
-        n_grid = samples.shape[0]
-        if not (0 < n_harmonics < n_grid / 2):
-            raise ValueError(f"n_harmonics must be in (0, N/2) = (0, {n_grid / 2}), got {n_harmonics}")
-        if not np.all(np.isfinite(samples)):
-            raise ValueError("samples must be finite")
-        if not (np.isfinite(period) and period > 0):
-            raise ValueError(f"period must be positive, got {period!r}")
-        spectrum = np.fft.rfft(samples, axis=0) / n_grid
-        offset = spectrum[0].real
-        cos_coef = 2.0 * spectrum[1 : n_harmonics + 1].real
-        sin_coef = -2.0 * spectrum[1 : n_harmonics + 1].imag
-        return cls(2.0 * np.pi / period, offset, cos_coef, sin_coef)
 
 
 def multisine(
@@ -427,7 +315,7 @@ class ModulatedOrbit:
         Raises:
             ValueError: If a time is not finite.
         """
-        t = _times(t)
+        t = as_times(t)
         phi, dphi, ddphi = self.phase(t)
         dphi_, ddphi_ = dphi[:, None], ddphi[:, None]
         Q0, Q0p, Q0pp = self._in_phase(self.base, phi)
@@ -535,7 +423,7 @@ class PointToPoint:
 
     def __call__(self, t: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return q [rad], q̇ [rad/s], q̈ [rad/s²] at times t [s], each of shape ``(len(t), n)``."""
-        times = _times(t)
+        times = as_times(t)
         rho = self.ramp
         begins = self.start + np.concatenate(([0.0], np.cumsum(self.durations + self.rests)[:-1]))
         i = np.clip(np.searchsorted(begins, times, side="right") - 1, 0, self.durations.size - 1)
