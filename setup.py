@@ -34,6 +34,7 @@ setup(
             "learn = semiparam_ros.cli.learn:main",
             "learn-fleet = semiparam_ros.cli.learn_fleet:main",
             "export_urdf = semiparam_ros.cli.export_urdf:main",
+            "excite = semiparam_ros.cli.excite:main",
             "tune = semiparam_ros.cli.tune:main",
             "real_robots = semiparam_ros.cli.real_robots:main",
         ],

@@ -133,6 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="true vs URDF parameters: relative mass, inertia change, COM shift (m); default 0.15 0.15 0.01",
     )
     a.add_argument("--no-perturbation", action="store_true", help="true parameters = the URDF's")
+    a.add_argument("--trajectory", help="drive the arm on this excitation (excite's traj.yaml, traj.mcap or "
+                   "traj.excitation.yaml; repeated for the duration) instead of a random multi-sine")
     p.add_argument("--no-noise", action="store_true", help="no noise on joints and wrench")
     p.add_argument("--overwrite", action="store_true", help="replace existing bag folders")
     p.add_argument("--no-compress", action="store_true", help="do not zstd-compress the MCAP chunks")

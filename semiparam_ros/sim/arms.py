@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.fourier import FourierTrajectory
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, is_physically_consistent
 from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 from semiparam_ros.sim.contacts import (
@@ -371,6 +372,9 @@ class ArmScenarioConfig(RecordingConfig):
         friction_scale: Factor on the robot's friction, offsets and armature (0 removes them).
         armature: If given, the armature of every joint (kg·m²), replacing the robot's (before scaling).
         noise_scale: Factor on every noise σ (0 removes noise).
+        trajectory: The joints' trajectory (one period, repeated; e.g. a designed excitation,
+            :func:`~semiparam_ros.io.trajectory_files.read_excitation`), in the robot's joint order; None:
+            the seeded random multi-sine.
     """
 
     duration: float = DEFAULT_DURATION_S
@@ -380,11 +384,15 @@ class ArmScenarioConfig(RecordingConfig):
     friction_scale: float = 1.0
     armature: float | None = None
     noise_scale: float = 1.0
+    trajectory: FourierTrajectory | None = None
 
     def __post_init__(self) -> None:
         self.check_common()
         if self.robot not in ARM_ROBOTS:
             raise ValueError(f"robot must be one of {sorted(ARM_ROBOTS)}, got {self.robot!r}")
+        n = len(ARM_ROBOTS[self.robot].joints)
+        if self.trajectory is not None and self.trajectory.n_joints != n:
+            raise ValueError(f"the trajectory moves {self.trajectory.n_joints} joints, {self.robot} has {n}")
         if isinstance(self.rate, bool) or not (np.isfinite(self.rate) and self.rate > 0):
             raise ValueError(f"rate must be a positive number, got {self.rate!r}")
         if self.rate > 10_000:
@@ -559,7 +567,7 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
         base_period=spec.base_period,
         max_velocity=spec.max_velocity,
         max_acceleration=spec.max_acceleration,
-    )
+    ) if config.trajectory is None else config.trajectory
     count = round(config.duration * config.rate)
     stamps = sample_stamps(config.start_ns, count, config.rate)
     t = (stamps - config.start_ns) * 1e-9
@@ -598,7 +606,7 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
         "joint_states": {"rate_hz": float(config.rate), "count": int(count)},
         "joints": list(spec.joints),
         "trajectory": {
-            "type": "multisine",
+            "type": "multisine" if config.trajectory is None else "given (Fourier series)",
             "base_period_s": traj.period,
             "harmonics": [int(k) for k in np.flatnonzero(np.any(traj.cos_coef != 0, axis=1)) + 1],
             "position_window_rad": [list(w) for w in spec.position_window],

@@ -25,6 +25,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from semiparam_ros.io.trajectory_files import read_excitation
 from semiparam_ros.sim.arms import (
     ARM_ROBOTS,
     ARM_SCENARIOS,
@@ -338,11 +339,12 @@ class SimulationOptions:
     perturbation: tuple[float, float, float] | None = None
     no_perturbation: bool = False
     no_noise: bool = False
+    trajectory: str | None = None
 
 
 _ICUB_ONLY = ("joint_rate", "wrench_rate", "delay", "radius", "speed", "speed_variation", "centre_wander",
               "radius_wander", "no_variability")
-_ARM_ONLY = ("friction_scale", "armature", "perturbation", "no_perturbation")
+_ARM_ONLY = ("friction_scale", "armature", "perturbation", "no_perturbation", "trajectory")
 
 
 def options_configs(options: SimulationOptions) -> list[RecordingConfig]:
@@ -390,11 +392,19 @@ def options_configs(options: SimulationOptions) -> list[RecordingConfig]:
         perturbation = ParameterPerturbation(*o.perturbation) if o.perturbation is not None else \
             ParameterPerturbation()
     friction_scale = 1.0 if o.friction_scale is None else o.friction_scale
+    trajectory = None
+    if o.trajectory is not None:
+        described = read_excitation(o.trajectory)
+        joints = ARM_ROBOTS[o.robot].joints
+        if described.joint_names != joints:
+            raise ValueError(f"--trajectory {o.trajectory}: its joints {list(described.joint_names)} are not "
+                             f"{o.robot}'s {list(joints)}")
+        trajectory = described.trajectory
     return preset_configs(
         o.robot, o.scenario, preset=o.preset, rate=rate, duration=duration, payload_mass=o.payload_mass,
         payload_time=o.payload_time, contacts=contacts, seed=o.seed, perturbation=perturbation,
         friction_scale=0.0 if o.no_effects else friction_scale, armature=o.armature,
-        noise_scale=0.0 if o.no_noise else o.noise_scale)
+        noise_scale=0.0 if o.no_noise else o.noise_scale, trajectory=trajectory)
 
 
 def simulate_bags(options: SimulationOptions, out: str | Path, *, overwrite: bool = False,

@@ -750,6 +750,10 @@ class RigidBodyRegressor:
         """Return the velocity limits (n,) in rad/s (m/s) from the URDF."""
         return self._vlim.copy()
 
+    def effort_limits(self) -> np.ndarray:
+        """Return the effort limits (n,) in N·m (N) from the URDF (0 where the URDF gives none)."""
+        return np.asarray(self._model.effortLimit, dtype=np.float64)[self._idx_v].copy()
+
     @property
     def distal_body_name(self) -> str:
         """The most distal body (deepest in the tree): the one carrying the end effector.
