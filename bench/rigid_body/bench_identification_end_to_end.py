@@ -67,12 +67,14 @@ def identify(robot: str, folder: pathlib.Path, trajectory: pathlib.Path | None, 
     reg = model.estimator.regressor
     estimate = model.consistent()
     true_full = np.asarray(truth["true_parameters"]["after_payload"])
+    cad = reg.urdf_parameters()
     links = []
     for i, body in enumerate(reg.body_names):
         mass, com, _ = estimate.link(i)
         p = true_full[10 * i: 10 * i + 10]
         links.append({"body": body, "true_mass_kg": float(p[0]), "mass_kg": mass,
                       "mass_error_percent": 100 * (mass - p[0]) / p[0],
+                      "cad_mass_error_percent": 100 * (cad[10 * i] - p[0]) / p[0],
                       "com_error_mm": 1000 * float(np.linalg.norm(com - p[1:4] / p[0]))})
     names = reg.parameter_names
     fr = truth["friction"]
@@ -89,6 +91,8 @@ def identify(robot: str, folder: pathlib.Path, trajectory: pathlib.Path | None, 
         "robot": robot, "excitation": "designed" if trajectory else "random multi-sine", "seed": seed,
         "links": links, "joints": joints,
         "max_mass_error_percent": max(abs(r["mass_error_percent"]) for r in links),
+        "max_cad_mass_error_percent": max(abs(r["cad_mass_error_percent"]) for r in links),
+        "median_mass_error_percent": float(np.median([abs(r["mass_error_percent"]) for r in links])),
         "max_com_error_mm": max(r["com_error_mm"] for r in links),
         "max_viscous_error": max(abs(r["viscous"] - r["true_viscous"]) for r in joints),
         "max_coulomb_error": max(abs(r["coulomb"] - r["true_coulomb"]) for r in joints),
@@ -132,7 +136,9 @@ def main() -> int:
                     r = identify(robot, folder, trajectory, seed)
                     rows.append(r)
                     p = r["payload"]
-                    print(f"| {robot} | {r['excitation']} | {seed} | {r['max_mass_error_percent']:.1f} % | "
+                    print(f"| {robot} | {r['excitation']} | {seed} | {r['median_mass_error_percent']:.1f} / "
+                          f"{r['max_mass_error_percent']:.1f} % "
+                          f"(CAD {r['max_cad_mass_error_percent']:.1f}) | "
                           f"{r['max_com_error_mm']:.0f} | {r['max_viscous_error']:.3f} | "
                           f"{r['max_coulomb_error']:.3f} | {p['mass_kg']:.3f} ± {p['mass_std_kg']:.3f} "
                           f"({p['mass_error_sigmas']:.1f}σ) | {p['com_error_mm']:.0f} mm "

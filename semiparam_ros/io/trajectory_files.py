@@ -8,10 +8,11 @@
   empty), its first point ``lead_in`` seconds after the start so that the controller has time to bring the
   arm from wherever it stands to the trajectory's first point (where it is at rest):
 
-  - ``traj.yaml``: the message's fields as YAML, e.g. for
-    ``ros2 topic pub --once /joint_trajectory_controller/joint_trajectory trajectory_msgs/msg/JointTrajectory
-    "$(cat traj.yaml)"``;
-  - ``traj.mcap``: a rosbag2 folder ``traj/`` holding the one message on ``topic`` (``ros2 bag play traj``);
+  - ``traj.mcap``: a rosbag2 folder ``traj/`` holding the one message on ``topic``; ``ros2 bag play traj``
+    sends it to the controller (a 20 s trajectory at 100 points/s is ~1 MB: too long for a command-line
+    argument of ``ros2 topic pub``);
+  - ``traj.yaml``: the message's fields as YAML (for a script: ``yaml.safe_load`` then
+    ``rosidl_runtime_py.set_message_fields``);
 
 * the **description** ``traj.excitation.yaml``: the Fourier coefficients (what the simulator reads to
   drive a simulated arm exactly, :func:`read_excitation`), the limits, the condition number and each base

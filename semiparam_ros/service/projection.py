@@ -13,7 +13,7 @@ from semiparam_ros.core.estimator.build import build_regressor
 from semiparam_ros.core.rigid_body.identification import (
     ConsistentEstimate,
     consistent_parameters,
-    full_column_rms,
+    prior_weights,
 )
 
 __all__ = ["ProjectionWorker"]
@@ -123,7 +123,7 @@ class ProjectionWorker:
 def _worker_main(conn: object, config_flat: dict, urdf_xml: str) -> None:  # pragma: no cover - subprocess
     """Run the worker process: build the regressor once, then solve what arrives until ``None``."""
     regressor = build_regressor(EstimatorConfig.from_flat(config_flat), urdf_xml, source="the node's URDF")
-    weights = full_column_rms(regressor)
+    weights = prior_weights(regressor)
     while True:
         try:
             job = conn.recv()  # type: ignore[attr-defined]

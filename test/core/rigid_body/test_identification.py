@@ -10,7 +10,12 @@ from helpers import REPO
 
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, is_physically_consistent
-from semiparam_ros.core.rigid_body.identification import consistent_parameters, excitation_report, export_urdf
+from semiparam_ros.core.rigid_body.identification import (
+    consistent_parameters,
+    excitation_report,
+    export_urdf,
+    full_column_rms,
+)
 from semiparam_ros.core.rigid_body.urdf import RegressorSpec
 from semiparam_ros.service.learn import learn_bags
 from semiparam_ros.service.serving import LearnedModel
@@ -137,3 +142,26 @@ def test_export_urdf_command(learned, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "condition number" in out and "panda_link1" in out and (tmp_path / "id.urdf").is_file()
     assert cli.main(["--checkpoint", str(tmp_path / "nope.npz"), "--out", str(tmp_path / "x.urdf")]) == 2
+
+
+def test_a_payload_stays_on_the_distal_body(tmp_path):
+    # URDF exact, 1.2 kg on the hand from the start: the base parameters cannot tell the payload's mass on
+    # link 7 from mass on the links before it; the weaker CAD prior of the distal body keeps it there.
+    rec = simulate_arm(ArmScenarioConfig(name="panda_carry", robot="panda", duration=20.0, rate=200.0, seed=3,
+                                         payload_mass=1.2, payload_time=0.0, perturbation=None))
+    bag = write_recording(rec, tmp_path / "panda_carry")
+    config = load_config(REPO / "config" / "panda.yaml").with_overrides({"nonparametric.n_features": 100})
+    est, _ = learn_bags([bag], config)
+    reg = est.regressor
+    par = est.model.parametric
+    default = LearnedModel(est).consistent()
+    uniform = consistent_parameters(reg, par.parameters, par.rls.R, est.column_scale, par.rls.lam,
+                                    weights=full_column_rms(reg))
+    d = reg.body_index(reg.distal_body_name)
+    true_mass = rec.parameters_after[10 * d]
+    assert true_mass == pytest.approx(reg.urdf_parameters()[10 * d] + 1.2)
+    err_default = abs(default.link(d)[0] - true_mass) / true_mass
+    err_uniform = abs(uniform.link(d)[0] - true_mass) / true_mass
+    assert err_default < 0.10 < err_uniform
+    for i in range(d):  # the links before it stay near their (exact) CAD masses
+        assert default.link(i)[0] == pytest.approx(rec.parameters_after[10 * i], rel=0.10), reg.body_names[i]
