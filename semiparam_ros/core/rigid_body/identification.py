@@ -46,6 +46,11 @@ __all__ = ["DISTAL_PRIOR_FACTOR", "OUTSIDE_EXCITED", "ConsistentEstimate", "Exci
 #: The distal body's CAD prior is this many times weaker than the other bodies' (module docstring).
 DISTAL_PRIOR_FACTOR = 10.0
 
+#: Clarabel's tolerances, tighter than its defaults (1e-8): the weak prior of the distal body leaves its
+#: parameters loosely held, and with nothing learned the projection must return CAD (1e-8 N·m, not 1e-6),
+#: at the same solve time.
+_SOLVER_TOLERANCES = {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10, "tol_ktratio": 1e-8}
+
 #: Mass given to a link the reduced model merged into a body, in the exported URDF (kg): URDF parsers want a
 #: positive mass; 1e-9 kg changes no torque beyond 1e-8 N·m.
 _NEGLIGIBLE_MASS = 1e-9
@@ -181,7 +186,7 @@ def consistent_parameters(regressor: RigidBodyRegressor, theta: np.ndarray, R: n
     problem = cp.Problem(cp.Minimize(cost), constraints)
     start = time.perf_counter()
     try:
-        problem.solve(solver=cp.CLARABEL)
+        problem.solve(solver=cp.CLARABEL, **_SOLVER_TOLERANCES)
     except cp.SolverError as err:
         raise ConfigurationError(f"the consistent projection failed: {err}") from err
     elapsed = time.perf_counter() - start
