@@ -76,6 +76,7 @@ class ModelService:
         self._ff_key = (-1, -1)
         self._links_published = 0
         self._payload_key: int | None = None
+        self._payload_missing: str | None = None  # of the last payload published (None: none yet)
         self._excitation: tuple[float, int, dict[str, object]] | None = None
 
     @property
@@ -172,6 +173,8 @@ class ModelService:
             else:
                 estimate = None
         self._payload_key = key
+        if estimate is not None:
+            self._payload_missing = estimate.missing
         return estimate
 
     def excitation_statistics(self) -> dict[str, object]:
@@ -190,7 +193,7 @@ class ModelService:
         return last[2]
 
     def statistics(self) -> dict[str, object]:
-        """Return the ``feedforward.*`` and ``consistent.*`` diagnostics; starts a new latency period."""
+        """Return the feedforward, consistent and payload diagnostics; start a new latency period."""
         ff = self.feedforward
         if ff is None:
             return {}
@@ -204,6 +207,9 @@ class ModelService:
             if worker.latest is not None:
                 stats["consistent.solve_ms"] = 1e3 * worker.latest.solve_s
             stats["consistent.error"] = worker.error or ""
+        if self._payload_missing is not None:
+            stats["payload.determined"] = not self._payload_missing
+            stats["payload.missing"] = self._payload_missing
         stats["feedforward.last_error"] = ff.last_error or ""
         latency, self.latency_ms = self.latency_ms, []
         if latency:

@@ -41,17 +41,19 @@ Example:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, solve_triangular
 
 from semiparam_ros.core.learners.rrls import RecursiveRLS
-from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
+from semiparam_ros.core.rigid_body.dynamics import INERTIAL_PARAMETER_NAMES, RigidBodyRegressor
 from semiparam_ros.errors import CheckpointError, ConfigurationError
 
 __all__ = [
-    "CAD_COM_STD_M", "CAD_INERTIA_RELATIVE_STD", "CAD_MASS_RELATIVE_STD", "PayloadEstimate", "PayloadLearner",
+    "CAD_COM_STD_M", "CAD_INERTIA_RELATIVE_STD", "CAD_MASS_RELATIVE_STD", "DETERMINED_MASS_FRACTION",
+    "PayloadEstimate", "PayloadLearner",
     "cad_parameter_std", "payload_beyond_urdf", "payload_from_parameters",
 ]
 
@@ -73,6 +75,10 @@ class PayloadEstimate:
         reference: ``"tare"`` or ``"urdf"`` (what the payload is counted beyond).
         detected: Whether a pickup was detected since the tare (False: nothing carried yet, the estimate
             is zero with the prior's standard deviations); always True beyond the URDF.
+        missing: Empty when the payload is determined; else why not and which excitation is missing
+            (beyond the URDF: the data's part of the mass σ, without the CAD links' uncertainty, above
+            :data:`DETERMINED_MASS_FRACTION` of the distal body's CAD mass plus the estimate). The numbers
+            are still given, with their σ.
     """
 
     mass: float
@@ -85,6 +91,12 @@ class PayloadEstimate:
     n_samples: int
     reference: str
     detected: bool = True
+    missing: str = ""
+
+    @property
+    def determined(self) -> bool:
+        """Whether the data determine the payload (:attr:`missing` is empty)."""
+        return not self.missing
 
 
 def _payload_values(delta: np.ndarray) -> np.ndarray:
@@ -99,7 +111,7 @@ def _payload_values(delta: np.ndarray) -> np.ndarray:
 
 
 def payload_from_parameters(delta: np.ndarray, covariance: np.ndarray, *, body: str, n_samples: int,
-                            reference: str, detected: bool = True) -> PayloadEstimate:
+                            reference: str, detected: bool = True, missing: str = "") -> PayloadEstimate:
     """Turn the change δ of a body's ten parameters and its covariance into a payload estimate.
 
     Args:
@@ -109,6 +121,7 @@ def payload_from_parameters(delta: np.ndarray, covariance: np.ndarray, *, body: 
         n_samples: Samples behind the estimate.
         reference: What the payload is counted beyond (``"tare"`` or ``"urdf"``).
         detected: Whether a pickup was detected (see :class:`PayloadEstimate`).
+        missing: Why the payload is not determined ("" when it is).
 
     Returns:
         The estimate; its standard deviations by first-order propagation (central differences).
@@ -133,7 +146,7 @@ def payload_from_parameters(delta: np.ndarray, covariance: np.ndarray, *, body: 
     inertia = np.array([[values[4 + k] for k in row] for row in _I])
     inertia_std = np.array([[std[4 + k] for k in row] for row in _I])
     return PayloadEstimate(float(values[0]), float(std[0]), values[1:4].copy(), std[1:4].copy(), inertia,
-                           inertia_std, body, int(n_samples), reference, bool(detected))
+                           inertia_std, body, int(n_samples), reference, bool(detected), missing)
 
 
 #: Assumed accuracy of a URDF's CAD inertial parameters for the links before the payload (one standard
@@ -141,6 +154,10 @@ def payload_from_parameters(delta: np.ndarray, covariance: np.ndarray, *, body: 
 CAD_MASS_RELATIVE_STD = 0.1
 CAD_COM_STD_M = 0.01
 CAD_INERTIA_RELATIVE_STD = 0.1
+#: A payload beyond the URDF is determined when the data's part of its mass σ (excitation and noise; the
+#: CAD links' uncertainty is in σ but is not what more data would fix) is at most this fraction of the
+#: distal body's CAD mass plus the estimated payload mass.
+DETERMINED_MASS_FRACTION = 0.1
 
 
 def cad_parameter_std(params: np.ndarray, *, mass_relative: float = CAD_MASS_RELATIVE_STD,
@@ -237,8 +254,26 @@ def payload_beyond_urdf(regressor: RigidBodyRegressor, theta: np.ndarray, R: np.
     cad_cov = (sensitivity * std[held] ** 2) @ sensitivity.T
     data_cov = float(noise_s2) * cho_solve(factor, np.eye(free.size)[:, :10])[:10]
     cov = data_cov + cad_cov
-    return payload_from_parameters(solution[:10], 0.5 * (cov + cov.T), body=regressor.distal_body_name,
-                                   n_samples=n_samples, reference="urdf")
+    estimate = payload_from_parameters(solution[:10], 0.5 * (cov + cov.T), body=regressor.distal_body_name,
+                                       n_samples=n_samples, reference="urdf")
+    limit = DETERMINED_MASS_FRACTION * (float(prior[10 * body]) + abs(estimate.mass))
+    data_mass_std = math.sqrt(max(float(data_cov[0, 0]), 0.0))
+    if data_mass_std <= limit:
+        return estimate
+    return replace(estimate, missing=_what_is_missing(data_cov, std[distal], data_mass_std, limit))
+
+
+def _what_is_missing(data_cov: np.ndarray, unit: np.ndarray, mass_std: float, limit: float) -> str:
+    """Say which of the distal body's parameters the data leave least determined (in CAD-accuracy units)."""
+    scale = 1.0 / np.maximum(unit, 1e-12)
+    data_n = scale[:, None] * data_cov * scale[None, :]
+    _, vectors = np.linalg.eigh(0.5 * (data_n + data_n.T))
+    direction = vectors[:, -1]
+    top = np.argsort(-np.abs(direction))[:3]
+    names = ", ".join(f"{INERTIAL_PARAMETER_NAMES[i]} ({direction[i]:+.2f})" for i in top)
+    return (f"not determined: the data alone give the mass a σ of {mass_std:.3g} kg (> {limit:.3g} kg); they "
+            f"leave the distal body's {names} unexcited: move the arm through more poses and the last joints "
+            "faster")
 
 
 class PayloadLearner:
@@ -352,8 +387,11 @@ class PayloadLearner:
         Rinv = solve_triangular(self.rls.R, np.eye(10), lower=False)  # 10×10, off the sample path
         s2 = self.noise_s2()
         cov = (0.0 if np.isnan(s2) else s2) * (Rinv @ Rinv.T)
+        missing = ("" if self.detected and not np.isnan(s2) else
+                   "not determined: no pickup detected since the tare" if not self.detected else
+                   "not determined: too few samples since the pickup for a σ")
         return payload_from_parameters(delta, cov, body=self.body, n_samples=self.n_samples, reference="tare",
-                                       detected=self.detected)
+                                       detected=self.detected, missing=missing)
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the learner's state as arrays (for checkpoints)."""

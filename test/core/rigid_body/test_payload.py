@@ -189,7 +189,41 @@ def test_payload_without_a_tare_meets_the_target_on_the_simulated_panda(panda_ca
     path = tmp_path / "carry.npz"
     est.save(path)
     got = load_model(path).payload()
-    assert got.reference == "urdf" and got.body == truth.body
+    assert got.reference == "urdf" and got.body == truth.body and got.determined
     assert abs(got.mass - truth.mass) <= 0.03 * truth.mass
     assert np.linalg.norm(got.com - truth.com) <= 0.010
     assert abs(got.mass - truth.mass) <= 3.0 * got.mass_std
+
+
+def test_payload_beyond_urdf_says_when_it_is_not_determined():
+    """Well excited with exact CAD links: determined. The distal joints held still: the data cannot see the
+    distal body, and the estimate says so and names the directions; a numbers-only answer never comes
+    without its σ."""
+    reg = arm_regressor("panda")
+    body = reg.body_index(reg.distal_body_name)
+    full = reg.urdf_parameters().copy()
+    full[10 * body: 10 * body + 10] += point_mass_parameters(0.8, [0.0, 0.02, 0.15])
+    exact_cad = np.full(10 * reg.n_bodies, 1e-12)
+    theta, R = _learner_state(reg, full)
+    good = payload_beyond_urdf(reg, theta, R, np.ones(reg.n_base), 1e-6, np.ones(reg.n_params), 1e-4, 400,
+                               cad_std=exact_cad)
+    assert good.determined and good.missing == ""
+    # the arm resting near one pose (a recording of a standstill): the joint offsets (the parameter file's
+    # model has them, free here) explain the gravity torques as well as a payload would
+    from semiparam_ros.core.estimator.build import build_regressor
+
+    reg = build_regressor(load_config(REPO / "config" / "panda.yaml"))
+    full = np.concatenate([full, np.zeros(reg.n_params - full.size)])
+    exact_cad = np.full(10 * reg.n_bodies, 1e-12)
+    rng = np.random.default_rng(1)
+    n, joints = 400, len(reg.joint_names)
+    q = np.array([0.0, -0.3, 0.0, -2.0, 0.0, 1.6, 0.8]) + rng.uniform(-1e-3, 1e-3, (n, joints))
+    dq, ddq = rng.uniform(-1e-3, 1e-3, (n, joints)), rng.uniform(-1e-3, 1e-3, (n, joints))
+    Phi_b = reg.base_regressor(q, dq, ddq).reshape(-1, reg.n_base)
+    A = Phi_b.T @ Phi_b + 1e-6 * np.eye(reg.n_base)
+    theta = np.linalg.solve(A, Phi_b.T @ (reg.regressor(q, dq, ddq) @ full).reshape(-1))
+    still = payload_beyond_urdf(reg, theta, np.linalg.cholesky(A).T, np.ones(reg.n_base), 1e-6,
+                                np.ones(reg.n_params), 0.05, n, cad_std=exact_cad)
+    assert not still.determined
+    assert still.missing.startswith("not determined") and "unexcited" in still.missing
+    assert np.isfinite(still.mass) and still.mass_std > 0.1
