@@ -237,6 +237,8 @@ class Excitation:
                  f"({len(self.parameter_names)} base parameters, {self.trajectory.n_harmonics} harmonics, "
                  f"period {self.trajectory.period:.4g} s × {self.periods})"]
         for kind, used in self.usage.items():
+            if kind == "acceleration" and not np.any(np.isfinite(self.limits.acceleration)):
+                continue  # no acceleration limit was given
             lines.append(f"  largest use of the {kind} limits: {100 * float(np.max(used)):.0f} %")
         rel = self.parameter_std / np.maximum(np.abs(self.cad_values), 1e-12)
         lines.append(f"least determined base parameters (σ per N·m of noise at {self.rate:g} Hz over "
