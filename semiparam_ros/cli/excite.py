@@ -65,6 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``excite``; returns the exit status (0 done, 2 invalid or infeasible input, 1 an I/O failure)."""
     args = build_parser().parse_args(argv)
+    from threadpoolctl import threadpool_limits
+
     from semiparam_ros.core.config import load_config
     from semiparam_ros.core.estimator.build import build_regressor
     from semiparam_ros.core.rigid_body.excitation import ExcitationLimits, design_excitation
@@ -83,8 +85,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         regressor = build_regressor(config)
         limits = ExcitationLimits.from_regressor(regressor, margin=args.margin,
                                                  max_acceleration=args.max_acceleration, overrides=overrides)
-        excitation = design_excitation(regressor, limits, duration=args.duration, period=args.period,
-                                       n_harmonics=args.harmonics, iterations=args.iterations, seed=args.seed)
+        # One BLAS thread: the SVDs are small (hundreds of rows × the base parameters), a second thread
+        # gains nothing alone and two excite runs sharing two cores each with two threads ran 15× slower.
+        with threadpool_limits(1):
+            excitation = design_excitation(regressor, limits, duration=args.duration, period=args.period,
+                                           n_harmonics=args.harmonics, iterations=args.iterations,
+                                           seed=args.seed)
         print(excitation.summary())
         written = write_excitation(args.out, excitation, point_rate=args.point_rate, lead_in=args.lead_in,
                                    topic=args.topic or DEFAULT_TOPIC, overwrite=args.overwrite)
