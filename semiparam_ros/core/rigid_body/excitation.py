@@ -101,6 +101,8 @@ class ExcitationLimits:
         effort: Largest |τ| of the CAD rigid-body model (n,) (N·m).
         margin: The fraction kept free: each position range shrunk by ``margin × range`` at both ends,
             velocities, accelerations and efforts multiplied by ``1 − margin``.
+        sources: Where each limit came from: per kind ``"URDF"``, ``"given"`` or ``"none (efforts)"``, and
+            ``"JOINT.KIND": "given"`` for each override.
     """
 
     joint_names: tuple[str, ...]
