@@ -35,11 +35,12 @@ from semiparam_ros.cli.errors import error_exit
 __all__ = ["add_config_arguments", "build_parser", "main", "parse_overrides"]
 
 
-def parse_overrides(items: Sequence[str]) -> dict[str, object]:
+def parse_overrides(items: Sequence[str], option: str = "--set") -> dict[str, object]:
     """Parse ``name=value`` overrides (values in YAML syntax: ``0.1``, ``true``, ``[a, b]``).
 
     Args:
         items: Strings ``dotted.name=value``.
+        option: The command-line option they came from (named in the error).
 
     Returns:
         Dotted names to parsed values.
@@ -51,7 +52,7 @@ def parse_overrides(items: Sequence[str]) -> dict[str, object]:
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name:
-            raise ValueError(f"--set expects name=value, got {item!r}")
+            raise ValueError(f"{option} expects name=value, got {item!r}")
         out[name.strip()] = yaml.safe_load(value)
     return out
 

@@ -74,10 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         overrides: dict[str, float] = {}
-        for item in args.limit:
-            if "=" not in item:
-                raise ValueError(f"--limit expects JOINT.KIND=VALUE, got {item!r}")
-        for key, value in parse_overrides(args.limit).items():
+        for key, value in parse_overrides(args.limit, "--limit").items():
             if not isinstance(value, int | float) or isinstance(value, bool):
                 raise ValueError(f"--limit {key}: expected a number, got {value!r}")
             overrides[key] = float(value)

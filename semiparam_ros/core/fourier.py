@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FourierTrajectory", "as_times"]
+__all__ = ["MULTISINE_HARMONICS", "FourierTrajectory", "as_times", "random_multisine_terms"]
 
 
 def as_times(t: np.ndarray | float) -> np.ndarray:
@@ -138,3 +138,30 @@ class FourierTrajectory:
         cos_coef = 2.0 * spectrum[1 : n_harmonics + 1].real
         sin_coef = -2.0 * spectrum[1 : n_harmonics + 1].imag
         return cls(2.0 * np.pi / period, offset, cos_coef, sin_coef)
+
+
+#: The harmonics of a random multi-sine: the first three, then odd ones.
+MULTISINE_HARMONICS: tuple[int, ...] = (1, 2, 3, 5, 7, 9, 11, 13)
+
+
+def random_multisine_terms(rng: np.random.Generator, harmonics: np.ndarray,
+                           n_joints: int) -> tuple[np.ndarray, np.ndarray]:
+    """Draw a random multi-sine's terms: per joint, amplitudes ∝ U(0.5, 1)/k and phases U(0, 2π).
+
+    Joint by joint, its amplitudes then its phases, so a seed gives the same terms to every caller. A term
+    of amplitude A and phase φ is ``A sin(kωt + φ)``: cosine coefficient ``A sin φ``, sine ``A cos φ``.
+
+    Args:
+        rng: The generator drawn from.
+        harmonics: (K,) the harmonic numbers k used (positive integers).
+        n_joints: Number of joints n.
+
+    Returns:
+        ``(amplitudes, phases)``, each (n, K) (rad before any scaling; rad).
+    """
+    amplitudes = np.empty((n_joints, harmonics.size))
+    phases = np.empty((n_joints, harmonics.size))
+    for j in range(n_joints):
+        amplitudes[j] = rng.uniform(0.5, 1.0, harmonics.size) / harmonics
+        phases[j] = rng.uniform(0.0, 2.0 * np.pi, harmonics.size)
+    return amplitudes, phases

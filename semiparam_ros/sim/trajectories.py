@@ -22,7 +22,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from semiparam_ros.core.fourier import FourierTrajectory, as_times
+from semiparam_ros.core.fourier import (
+    MULTISINE_HARMONICS,
+    FourierTrajectory,
+    as_times,
+    random_multisine_terms,
+)
 
 __all__ = [
     "CartesianCircle",
@@ -40,7 +45,7 @@ def multisine(
     *,
     seed: int,
     base_period: float = 20.0,
-    harmonics: tuple[int, ...] = (1, 2, 3, 5, 7, 9, 11, 13),
+    harmonics: tuple[int, ...] = MULTISINE_HARMONICS,
     margin: float = 0.1,
     max_velocity: float = 1.5,
     max_acceleration: float = 8.0,
@@ -87,9 +92,9 @@ def multisine(
     n_harm = int(ks[-1])
     cos_coef = np.zeros((n_harm, n))
     sin_coef = np.zeros((n_harm, n))
+    amplitudes, phases = random_multisine_terms(rng, ks, n)
     for j in range(n):
-        amp = rng.uniform(0.5, 1.0, ks.size) / ks
-        phase = rng.uniform(0.0, 2.0 * np.pi, ks.size)
+        amp, phase = amplitudes[j], phases[j]
         kw = ks * omega
         scale = min(
             half[j] / amp.sum(),

@@ -55,7 +55,7 @@ import numpy as np
 from scipy.linalg import qr, solve_triangular
 from scipy.optimize import minimize
 
-from semiparam_ros.core.fourier import FourierTrajectory
+from semiparam_ros.core.fourier import MULTISINE_HARMONICS, FourierTrajectory, random_multisine_terms
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.errors import ConfigurationError
 
@@ -73,8 +73,6 @@ __all__ = [
 
 #: The limits an excitation respects, as named in overrides (``JOINT.KIND=VALUE``).
 LIMIT_KINDS: tuple[str, ...] = ("lower", "upper", "velocity", "acceleration", "effort")
-#: The harmonics of the random multi-sine baseline (those of the simulator's excitation).
-MULTISINE_HARMONICS: tuple[int, ...] = (1, 2, 3, 5, 7, 9, 11, 13)
 #: Weight of the squared relative effort excess in the objective (log κ is O(1)–O(10)).
 _EFFORT_PENALTY = 100.0
 #: Power of the smooth condition number the optimiser minimises (:func:`_soft_log_condition`).
@@ -139,6 +137,9 @@ class ExcitationLimits:
         if not (isinstance(margin, int | float) and 0.0 <= margin < 0.5):
             raise InfeasibleExcitationError(
                 f"margin must be in [0, 0.5) (a fraction of each range), got {margin!r}")
+        if max_acceleration is not None and not (math.isfinite(max_acceleration) and max_acceleration > 0):
+            raise ConfigurationError(
+                f"max_acceleration must be a positive number of rad/s², got {max_acceleration!r}")
         joints = regressor.joint_names
         lower, upper = regressor.position_limits()
         values = {
@@ -147,9 +148,6 @@ class ExcitationLimits:
             "acceleration": np.full(len(joints),
                                     np.inf if max_acceleration is None else float(max_acceleration)),
         }
-        if max_acceleration is not None and not (math.isfinite(max_acceleration) and max_acceleration > 0):
-            raise ConfigurationError(
-                f"max_acceleration must be a positive number of rad/s², got {max_acceleration!r}")
         sources = {kind: "URDF" for kind in LIMIT_KINDS}
         sources["acceleration"] = "none (efforts)" if max_acceleration is None else "given"
         for key, value in (overrides or {}).items():
@@ -295,8 +293,7 @@ def parameter_std(regressor: RigidBodyRegressor, trajectory: FourierTrajectory, 
     R = qr(Y, mode="r")[0][: Y.shape[1]]
     d = np.abs(np.diag(R))
     if d.min() <= 1e-12 * d.max():
-        out = np.full(Y.shape[1], np.inf)
-        return out
+        return np.full(Y.shape[1], np.inf)
     Rinv = solve_triangular(R, np.eye(R.shape[0]))  # rows of R⁻¹: diag((RᵀR)⁻¹) = Σ_j (R⁻¹)_ij²
     return np.sqrt(np.sum(Rinv * Rinv, axis=1) * n_grid / (rate * duration))
 
@@ -526,16 +523,15 @@ def random_multisine(regressor: RigidBodyRegressor, limits: ExcitationLimits, *,
     n = limits.n_joints
     a = np.zeros((int(ks[-1]), n))
     b = np.zeros((int(ks[-1]), n))
+    amplitudes, phases = random_multisine_terms(rng, ks, n)
     for j in range(n):
-        amp = rng.uniform(0.5, 1.0, ks.size) / ks
-        phase = rng.uniform(0.0, 2.0 * np.pi, ks.size)
-        a[ks - 1, j] = amp * np.sin(phase)
-        b[ks - 1, j] = amp * np.cos(phase)
+        a[ks - 1, j] = amplitudes[j] * np.sin(phases[j])
+        b[ks - 1, j] = amplitudes[j] * np.cos(phases[j])
     omega = 2.0 * math.pi / period
     mid = 0.5 * (limits.lower + limits.upper)
     raw = FourierTrajectory(omega, mid, a, b)
-    _, dq, ddq = raw.evaluate(_grid(period, max(int(period * rate), 8)))
-    u = raw.evaluate(_grid(period, max(int(period * rate), 8)))[0] - mid
+    q, dq, ddq = raw.evaluate(_grid(period, max(int(period * rate), 8)))
+    u = q - mid
     half = 0.5 * (limits.upper - limits.lower)
     s = np.minimum.reduce([half / np.abs(u).max(0), limits.velocity / np.abs(dq).max(0),
                            limits.acceleration / np.abs(ddq).max(0)]) * (1.0 - 1e-9)

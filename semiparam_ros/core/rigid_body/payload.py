@@ -387,9 +387,12 @@ class PayloadLearner:
         Rinv = solve_triangular(self.rls.R, np.eye(10), lower=False)  # 10×10, off the sample path
         s2 = self.noise_s2()
         cov = (0.0 if np.isnan(s2) else s2) * (Rinv @ Rinv.T)
-        missing = ("" if self.detected and not np.isnan(s2) else
-                   "not determined: no pickup detected since the tare" if not self.detected else
-                   "not determined: too few samples since the pickup for a σ")
+        if not self.detected:
+            missing = "not determined: no pickup detected since the tare"
+        elif np.isnan(s2):
+            missing = "not determined: too few samples since the pickup for a σ"
+        else:
+            missing = ""
         return payload_from_parameters(delta, cov, body=self.body, n_samples=self.n_samples, reference="tare",
                                        detected=self.detected, missing=missing)
 
