@@ -157,6 +157,7 @@ def run_estimator(bag: str | Path, config: EstimatorConfig, *, start_stamp_ns: i
     """
     topics = topics or Topics.from_config(config)
     est = OnlineEstimator(config)
+    est.inline_projection = True  # the node's consistent rigid body, on its schedule in the bag's time
     wrench = topics.wrench if config["robot.output"] == "wrench" else None
     stamps: list[int] = []
     ys: list[np.ndarray] = []

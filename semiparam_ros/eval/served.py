@@ -176,8 +176,10 @@ class NodeLearner:
 
     ``predict_learn_one(x, y, stamp_ns=…)`` is :meth:`OnlineEstimator.step` on the sample: the a-priori
     prediction with the contact gate, the noise estimate and the rate meter exactly as in the node (a
-    sample the gate refuses is predicted, not learned). ``predict_one`` is the learned model at x (the
-    delay line of the horizon table); ``copy`` is an independent estimator (the regressor and the
+    sample the gate refuses is predicted, not learned), and the consistent projection of the rigid body
+    solved on the node's schedule in the samples' time (:attr:`OnlineEstimator.inline_projection`).
+    ``predict_one`` is the learned model at x (the delay line of the horizon table); ``copy`` is an
+    independent estimator (the regressor and the
     configuration, both read-only, are shared) for another stream: its first sample, like a stamp not after
     the previous one, begins another recording (:meth:`OnlineEstimator.start_recording`), as ``learn``
     does between bags.
@@ -192,6 +194,7 @@ class NodeLearner:
     def __init__(self, estimator: OnlineEstimator) -> None:
         self.estimator = estimator
         estimator.learning_enabled = True
+        estimator.inline_projection = True  # the node's consistent rigid body, on its schedule in stamp time
         self._last_ns: int | None = None
         self._restart = False  # the next sample begins another recording
         self._n = len(estimator.config["robot.joints"])

@@ -113,6 +113,7 @@ def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
                 else None)
     est = OnlineEstimator(config)
     est.learning_enabled = True
+    est.inline_projection = True  # the node's projection schedule, in the bags' time
     if init is not None:
         est.load(init)
     learned_before = est.n_samples_learned

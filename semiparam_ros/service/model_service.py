@@ -73,6 +73,8 @@ class ModelService:
         #: Ages of the answered desired states this diagnostics period [ms] (stamp → answer).
         self.latency_ms: list[float] = []
         self._projection_version = -1
+        self._applied = 0  # the worker's solutions the live estimator predicts with (its count)
+        self._submitted_learned = 0  # samples the estimator had learned at the last submission
         self._ff_key = (-1, -1)
         self._links_published = 0
         self._payload_key: int | None = None
@@ -84,11 +86,35 @@ class ModelService:
         """Consistent solutions the worker returned so far (0 without one)."""
         return self.projection.solved if self.projection is not None else 0
 
+    def apply_consistent(self) -> bool:
+        """Hand the worker's newest solution to the live estimator, whose predictions then use it.
+
+        The node's per-sample predictions use the same consistent rigid body as the feed-forward and
+        ``load_model`` (:meth:`OnlineEstimator.use_consistent`), from the first solution of a learned
+        state on (the projection of an estimator that learned nothing is its prior, which it predicts
+        with anyway), as ``learn`` and offline replay do in line (``OnlineEstimator.inline_projection``).
+
+        Returns:
+            Whether a new solution was applied.
+        """
+        worker = self.projection
+        if worker is None:
+            return False
+        solved = worker.solved  # before latest: a solution arriving in between is applied now or next time
+        estimate = worker.latest
+        if estimate is None or solved == self._applied or self._submitted_learned == 0:
+            return False
+        with self.loop.lock:
+            self.loop.estimator.use_consistent(estimate)
+        self._applied = solved
+        return True
+
     def submit_projection(self) -> None:
         """Send the rigid-body learner's state to the projection worker, if learning changed it."""
         worker = self.projection
         if worker is None:
             return
+        self.apply_consistent()
         if self.config["feedforward.refresh_period"] <= 0 and worker.latest is not None:
             self.serving.attach_consistent(worker.latest)  # the live model is served: attach it there
         loop = self.loop
@@ -97,8 +123,10 @@ class ModelService:
         with loop.lock:
             theta, R, lam = loop.estimator.rigid_body_state()
             version = loop.version
+            learned = loop.estimator.n_samples_learned
         if worker.submit(theta, R, loop.estimator.column_scale, lam):
             self._projection_version = version
+            self._submitted_learned = learned
 
     def refresh(self) -> ConsistentEstimate | None:
         """Serve a fresh copy of the model if learning or the projection changed it.
@@ -109,6 +137,7 @@ class ModelService:
         """
         ff = self.feedforward
         worker = self.projection
+        self.apply_consistent()
         key = (self.loop.version, self.solved)
         if ff is None or key == self._ff_key:
             return None

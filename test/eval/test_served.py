@@ -79,3 +79,44 @@ def test_node_learner_is_the_node_step_and_the_bare_learner_without_the_gate():
     spiky[500:520] += 40.0  # a contact of 40 N/N·m on every axis for 0.2 s, after the gate's 2 s warm-up
     test_then_train(gated, data.X, spiky, None, data.stamps_ns)
     assert gated.estimator.n_samples_learned < len(data)
+
+
+@needs_kuka
+def test_replay_predicts_with_the_consistent_projection_solved_on_the_nodes_schedule():
+    """Offline (``learn``, the evaluation's online rows) the consistent projection is solved in line on
+    the node's schedule in the log's time: first ``consistent_period`` after the first sample, then every
+    period while learning changes the model. Each solution is the projection of the rigid-body learner's
+    state at that sample (solved again here from a copy of that state), and from then on the model's
+    rigid-body part is Φ(x)·θ_consistent (θ = c ⊙ π in the learner's columns)."""
+    from semiparam_ros.core.rigid_body.identification import consistent_parameters
+    from semiparam_ros.eval.served import node_learner
+
+    period = 5.0
+    cfg = load_config(REPO / "config" / "kuka_lwr4.yaml").with_overrides(
+        {"robot.urdf": str(KUKA / "kuka_lwr4_cogimon.urdf"), "nonparametric.n_features": 50,
+         "parametric.consistent_period": period})
+    train, _ = load_samples(KUKA / "measurements_1", cfg)
+    node = node_learner(cfg, "SP")
+    assert node is not None
+    est = node.estimator
+    changes = []
+    for stamp, x, y in zip(train.stamps_ns, train.X, train.Y, strict=True):
+        before = est.model.rigid_override
+        state = est.rigid_body_state()
+        node.learn_one(x, y, stamp_ns=int(stamp))
+        after = est.model.rigid_override
+        if after is not None and (before is None or not np.array_equal(after, before)):
+            changes.append((int(stamp), state, after))
+    duration = (train.stamps_ns[-1] - train.stamps_ns[0]) * 1e-9
+    assert len(changes) == int(duration // period) >= 3
+    stamps = np.array([c[0] for c in changes] + [int(train.stamps_ns[0])])
+    gaps = np.diff(np.sort(stamps)) * 1e-9
+    dt = float(np.median(np.diff(train.stamps_ns))) * 1e-9
+    assert np.all(gaps >= period) and np.all(gaps <= period + 2 * dt)
+    _, (theta, R, lam), theta_c = changes[-1]
+    again = consistent_parameters(est.regressor, theta, R, est.column_scale, lam)
+    np.testing.assert_allclose(est.column_scale * again.base, theta_c, rtol=1e-9, atol=1e-12)
+    n = len(cfg["robot.joints"])
+    x = train.X[-1]
+    Phi = est.regressor.base_regressor(x[:n], x[n:2 * n], x[2 * n:]) / est.column_scale
+    np.testing.assert_allclose(est.model.predict_one(x).parametric, Phi @ theta_c, rtol=1e-10, atol=1e-10)

@@ -223,3 +223,43 @@ def test_model_service_serves_the_model_and_a_new_payload_once():
     assert "feedforward.age_p50_ms" not in service.statistics()  # a new period
     assert service.export_urdf(None)[0] is False
     service.close()
+
+
+def test_the_live_estimator_predicts_with_each_new_consistent_solution():
+    """The node's per-sample predictions use the worker's consistent rigid body (the one the feed-forward
+    and ``load_model`` serve) from the first solution of a learned state on: its parametric part is then
+    Φ(x)·(c ⊙ π_consistent), recomputed here from the worker's solution. A solution of the state before
+    anything was learned (the prior) is not applied."""
+    from semiparam_ros.core.stream.messages import JointStateData
+
+    loop = _loop(**{"robot.output": "joint_torques", "gate.enabled": False})
+    est = loop.estimator
+    service = ModelService(loop, est.config)
+    try:
+        worker = service.projection
+        assert worker is not None and est.projects
+        service.submit_projection()  # nothing learned yet
+        assert worker.wait(timeout=120.0) is not None
+        assert not service.apply_consistent() and est.model.rigid_override is None
+        joints = est.config["robot.joints"]
+        n = len(joints)
+        for i in range(300):  # 3 s at 100 Hz of a slow sine, torques 0.2 N·m above the CAD gravity
+            t = 0.01 * i
+            q = 0.4 * np.sin(0.7 * t + np.arange(n))
+            dq = 0.28 * np.cos(0.7 * t + np.arange(n))
+            effort = service.serving.cad(q, dq, np.zeros(n)) + 0.2
+            loop.step(JointStateData(10**9 + 10**7 * i, tuple(joints), q, dq, effort))
+        assert est.n_samples_learned > 0 and loop.version > 0
+        service.submit_projection()
+        latest = worker.wait(timeout=120.0)
+        assert latest is not None and worker.solved == 2
+        assert service.apply_consistent()
+        rigid = est.column_scale * latest.base
+        np.testing.assert_array_equal(est.model.rigid_override, rigid)
+        assert not service.apply_consistent()  # no new solution: nothing to do
+        q, dq, ddq = np.full(n, 0.1), np.full(n, 0.2), np.full(n, -0.3)
+        Phi = est.regressor.base_regressor(q, dq, ddq) / est.column_scale  # the learner's columns (θ = c ⊙ π)
+        pred = est.model.predict_one(np.concatenate([q, dq, ddq]))
+        np.testing.assert_allclose(pred.parametric, Phi @ rigid, rtol=1e-10, atol=1e-10)
+    finally:
+        service.close()

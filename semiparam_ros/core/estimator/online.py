@@ -29,10 +29,12 @@ from semiparam_ros.core.estimator.build import (
 )
 from semiparam_ros.core.estimator.state import check_magnitudes, meta_arrays, read_meta
 from semiparam_ros.core.learners._step_kernels import joined_within
+from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.core.learners.semiparametric import rigid_body_part
 from semiparam_ros.core.learners.uncertainty import NoiseScale
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
+from semiparam_ros.core.rigid_body.identification import ConsistentEstimate
 from semiparam_ros.core.rigid_body.payload import PayloadLearner
 from semiparam_ros.core.stream.gate import ContactGate, Verdict
 from semiparam_ros.core.stream.messages import JointStateData, Sample, WrenchData
@@ -125,6 +127,11 @@ class OnlineEstimator:
         #: Sample period [s] measured from the first :data:`RATE_SAMPLES` samples (None until then).
         self.sample_period_s: float | None = None
         self._rate = RateMeter()  # the rule of offline replay's measured_period_s(stamps)
+        #: Solve the consistent projection in line, on the node's schedule in the samples' time (``learn``
+        #: and offline replay; the node solves it in a worker process instead): see :meth:`projects`.
+        self.inline_projection = False
+        self._projected_at: int | None = None  # stamp [ns] the schedule counts from (None: next sample)
+        self._projected_learned = 0  # n_samples_learned at the last solution
 
     # ------------------------------------------------------------------ streaming
     def process_joint_state(self, msg: JointStateData, *, skip_learning: bool = False) -> list[StepResult]:
@@ -186,6 +193,8 @@ class OnlineEstimator:
         """
         if self.sample_period_s is None:
             self._measure_rate(sample.stamp_ns)
+        if self.inline_projection:
+            self._project_if_due(sample.stamp_ns)
         start = time.perf_counter()
         x, y = self._check_sample(sample)
         model = self.model
@@ -315,6 +324,69 @@ class OnlineEstimator:
             raise ConfigurationError("the model has no rigid-body part to project")
         return par.parameters.copy(), par.rls.R.copy(), par.rls.lam
 
+    @property
+    def projects(self) -> bool:
+        """Whether this estimator's model predicts with a consistent projection once one is solved.
+
+        The node's rule: ``parametric.consistent`` on, joint torques, the consistent SP (the default).
+        """
+        return (bool(self.config["parametric.consistent"]) and self.config["robot.output"] == "joint_torques"
+                and isinstance(self.model, ConsistentSemiparametricModel))
+
+    def _project_if_due(self, stamp_ns: int) -> None:
+        """Solve the consistent projection if the node's schedule, in the samples' time, says it is due.
+
+        As the node: a solution every ``parametric.consistent_period`` [s] when learning changed the
+        rigid-body learner, and one at once when a recording begins with something learned but no
+        solution (a warm start from a checkpoint); a solver failure keeps the last solution. Nothing is
+        solved before the first learned sample (the projection of the prior is the prior).
+        """
+        model = self.model
+        if not (self.projects and isinstance(model, ConsistentSemiparametricModel)):
+            return
+        last = self._projected_at
+        if last is not None and stamp_ns - last < self.config["parametric.consistent_period"] * 1e9:
+            return
+        self._projected_at = stamp_ns
+        learned = self.n_samples_learned
+        if learned == 0 or (learned == self._projected_learned and model.rigid_override is not None):
+            return
+        from semiparam_ros.core.rigid_body.identification import consistent_parameters
+
+        theta, R, lam = self.rigid_body_state()
+        try:
+            estimate = consistent_parameters(self.regressor, theta, R, self._scale, lam)
+        except ConfigurationError:
+            return  # the solver failed: keep the last solution, as the node's worker does
+        self._projected_learned = learned
+        self.use_consistent(estimate)
+
+    def use_consistent(self, estimate: ConsistentEstimate | None) -> bool:
+        """Predict with a consistent projection's rigid body from now on (the consistent SP; None: learned).
+
+        Where ``parametric.consistent`` is on, the node hands each new solution of its projection worker
+        to the model it predicts with, so that its per-sample predictions, the feed-forward and
+        ``load_model`` all use one rigid body (see
+        :meth:`~semiparam_ros.core.learners.consistent.ConsistentSemiparametricModel.use_rigid`).
+
+        Args:
+            estimate: A solution of
+                :func:`~semiparam_ros.core.rigid_body.identification.consistent_parameters` for this
+                estimator's rigid-body learner, or None to predict with the learned parameters.
+
+        Returns:
+            Whether the model took it (False for a model other than the consistent SP, which always
+            predicts with its learned parameters).
+
+        Raises:
+            RejectedSampleError: An estimate of another size or with non-finite values (model unchanged).
+        """
+        model = self.model
+        if not isinstance(model, ConsistentSemiparametricModel):
+            return False
+        model.use_rigid(None if estimate is None else self._scale * np.asarray(estimate.base))
+        return True
+
     def apply_runtime_parameters(self, config: EstimatorConfig) -> None:
         """Take the run-time gate and noise parameters (``gate.*``, ``uncertainty.*``) of a configuration.
 
@@ -419,6 +491,7 @@ class OnlineEstimator:
         self.noise.restart_stream()
         self.gate.restart_stream()
         self._last_learned_ns = None
+        self._projected_at = None
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -430,6 +503,8 @@ class OnlineEstimator:
         self.payload = None
         self._rejected = 0
         self._last_learned_ns = None
+        self._projected_at = None
+        self._projected_learned = 0
         self.noise.reset()
         self.gate.reset()
 

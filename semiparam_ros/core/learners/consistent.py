@@ -429,6 +429,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._held: tuple[np.ndarray, float] | None = None  # (g·r, its relative variance) last computed
         self._raw: np.ndarray | None = None  # r, before its weight, of the last full prediction
         self._fast_candidate = np.zeros(t)   # κ_f Φδ_f of the last full prediction
+        self._rigid: np.ndarray | None = None  # the rigid-body parameters predicted with (None: learned)
         self._recent_beta = self._scale_forgetting(sample_period_s)
         self._reset_scales()
 
@@ -492,6 +493,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         par_model, npm = self.parametric, self.nonparametric
         yp, var = par_model.predict_phi(Phi, True)
         assert var is not None  # asked for
+        own = rigid is None  # the model's own rigid part: the learned one, or the one set by use_rigid
+        if own:
+            rigid = self._rigid
         if rigid is not None:
             yp = Phi @ rigid
         if held and self._held is not None:
@@ -510,7 +514,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         weighted_residual(P[0], t, self._entry_rows, self._entry_cols, np.ascontiguousarray(delta), s2,
                           spread, npm.rls.lam, float(v[0]), raw, r)
         self._raw = raw
-        if rigid is None:
+        if own:
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
         return yp, r, var + float(v[0]), phi
 
@@ -678,6 +682,35 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         yp, r, var, _ = self._model_valid(xv, Phi, self._checked_rigid(rigid))
         return Prediction(yp, r, yp + r, var)
 
+    def use_rigid(self, rigid: np.ndarray | None) -> None:
+        """Predict with these rigid-body parameters instead of the learned ones, from now on (None: learned).
+
+        For the physically consistent projection of the learned parameters, re-solved off the sample
+        path: the model's rigid part ŷ_P = Φ(x)π, its residual ``r = p − P(π − π₀)`` consistent with π,
+        the residual's weight (s² is then the recent error of Φπ) and the fast correction (which learns
+        the error of this model) all use π. The learners keep learning π̂ unconstrained: that is what the
+        projection starts from. Not part of the saved state (the projection is solved again from it).
+
+        Args:
+            rigid: (p,) parameters in the learner's units (scaled columns), or None.
+
+        Raises:
+            RejectedSampleError: A wrong size or a non-finite value (the model is unchanged).
+
+        Example:
+            >>> m = ConsistentSemiparametricModel(lambda x: x[None, :1], 1, 3, 1, n_features=8, prior=[1.0])
+            >>> m.use_rigid(np.array([2.0]))
+            >>> float(m.predict_model([3.0, 0.0, 0.0]).parametric[0])  # Φ(x)π = 3 · 2
+            6.0
+        """
+        self._rigid = None if rigid is None else self._checked_rigid(rigid).copy()  # type: ignore[union-attr]
+        self._held = None
+
+    @property
+    def rigid_override(self) -> np.ndarray | None:
+        """The rigid-body parameters set by :meth:`use_rigid` (learner units), or None (the learned ones)."""
+        return None if self._rigid is None else self._rigid.copy()
+
     def _checked_rigid(self, rigid: np.ndarray | None) -> np.ndarray | None:
         if rigid is None:
             return None
@@ -709,6 +742,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         Phi = par_model.phi_rows(X2)
         yp, var = par_model.predict_phi_rows(Phi)
         rigid = self._checked_rigid(rigid)
+        if rigid is None:
+            rigid = self._rigid
         if rigid is not None:
             yp = Phi @ rigid
         r = np.zeros_like(yp)
@@ -796,6 +831,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.tracker.reset()
         self._held = None
         self._raw = None
+        self._rigid = None  # a projection of what was forgotten
         self._reset_scales()
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
@@ -842,6 +878,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.tracker, self.fast = tracker, fast
         self._held = None
         self._raw = None
+        self._rigid = None  # the projection of the loaded state is solved again
         self._scale_weight, self._recent_n, self._fast_n = float(scales[0]), int(scales[1]), int(scales[2])
         self._scale_model, self._recent_rigid = scales[3:3 + t].copy(), scales[3 + t:3 + 2 * t].copy()
         self._fast_errors = scales[3 + 2 * t:].reshape(2, t).copy()

@@ -31,6 +31,7 @@ loaded back (same joints, same locked positions) it gives the same rigid-body pr
 
 from __future__ import annotations
 
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
@@ -186,7 +187,9 @@ def consistent_parameters(regressor: RigidBodyRegressor, theta: np.ndarray, R: n
     problem = cp.Problem(cp.Minimize(cost), constraints)
     start = time.perf_counter()
     try:
-        problem.solve(solver=cp.CLARABEL, **_SOLVER_TOLERANCES)
+        with warnings.catch_warnings():  # the status says so ("optimal_inaccurate"), kept in the estimate
+            warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+            problem.solve(solver=cp.CLARABEL, **_SOLVER_TOLERANCES)
     except cp.SolverError as err:
         raise ConfigurationError(f"the consistent projection failed: {err}") from err
     elapsed = time.perf_counter() - start

@@ -297,3 +297,49 @@ def test_predicting_with_other_rigid_parameters_moves_the_residual_with_them():
         np.testing.assert_allclose(batch.total[i], m.predict_model(x, other).total, rtol=1e-9, atol=1e-12)
     with pytest.raises(RejectedSampleError):
         m.predict_model(Xt[0], np.array([np.nan, 0.0, 0.0]))
+
+
+def test_a_rigid_body_set_by_use_rigid_is_the_one_every_prediction_uses():
+    """After ``use_rigid(π')`` the model's own predictions (one state, many, held, learn-time a priori)
+    equal those with ``rigid=π'`` given explicitly: ŷ_P = Φ(x)π' (independent: the regressor times π'),
+    the residual consistent with π'. ``None`` returns to the learned parameters; bad values are refused
+    with the model unchanged; reset and a loaded state forget it (it is solved again from the state)."""
+    m = model(tracker=True)
+    X, Y = data(300, 11)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    other = m.parametric.parameters + np.array([0.3, -0.2, 0.1])
+    Xt, _ = data(6, 12)
+    explicit = [m.predict_model(x, other) for x in Xt]
+    learned = [m.predict_model(x) for x in Xt]
+    m.use_rigid(other)
+    np.testing.assert_array_equal(m.rigid_override, other)
+    for x, e in zip(Xt, explicit, strict=True):
+        own = m.predict_model(x)
+        np.testing.assert_allclose(own.parametric, regressor(x) @ other, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(own.total, e.total, rtol=1e-12, atol=1e-12)
+        one = m.predict_one(x)  # the online prediction: model(x) plus the fast correction
+        np.testing.assert_allclose(one.parametric, regressor(x) @ other, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(one.total - one.correction, e.total, rtol=1e-12, atol=1e-12)
+        held = m.predict_held(x)  # the residual held from the last full prediction, with π'
+        np.testing.assert_allclose(held.total - held.correction, e.total, rtol=1e-12, atol=1e-12)
+    many = m.predict_model_many(Xt)
+    np.testing.assert_allclose(many.total, np.array([e.total for e in explicit]), rtol=1e-9, atol=1e-12)
+    ctx = m.predict_ahead(Xt[0])
+    np.testing.assert_allclose(ctx.prediction.parametric, regressor(Xt[0]) @ other, rtol=1e-12)
+    with pytest.raises(RejectedSampleError):
+        m.use_rigid(np.array([1.0, np.inf, 0.0]))
+    with pytest.raises(RejectedSampleError):
+        m.use_rigid(np.ones(4))
+    np.testing.assert_array_equal(m.rigid_override, other)  # unchanged by the refusals
+    state = m.state_dict()
+    assert not any("rigid" in key for key in state)
+    m.use_rigid(None)
+    for x, ref in zip(Xt, learned, strict=True):
+        np.testing.assert_allclose(m.predict_model(x).total, ref.total, rtol=1e-12, atol=1e-12)
+    m.use_rigid(other)
+    m.load_state_dict(state)
+    assert m.rigid_override is None
+    m.use_rigid(other)
+    m.reset()
+    assert m.rigid_override is None
