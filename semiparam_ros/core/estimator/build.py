@@ -90,7 +90,8 @@ def regressor_function(regressor: RigidBodyRegressor,
             regressor of the scaled parameters ``θ = c ⊙ π_b`` (see :func:`column_scale`).
 
     Returns:
-        A function mapping x (3n,) to the base regressor (t × n_base), scaled if asked.
+        A function mapping x (3n,) to the base regressor (t × n_base), scaled if asked; its attribute
+        ``many`` maps (N, 3n) rows to (N, t, n_base) at once.
     """
     inv = None if scale is None else 1.0 / np.asarray(scale, dtype=np.float64)
 
@@ -98,6 +99,11 @@ def regressor_function(regressor: RigidBodyRegressor,
         # the learners pass a checked (3n,) float64 x; equal bit for bit to base_regressor(q, dq, ddq) / c
         return regressor.base_regressor_of_input(x, inv)
 
+    def many(X: np.ndarray) -> np.ndarray:
+        # (N, 3n) checked rows at once: the vectorised predictions (see ParametricModel.phi_rows)
+        return regressor.base_regressor_of_inputs(X, inv)
+
+    base_regressor.many = many  # type: ignore[attr-defined]
     return base_regressor
 
 

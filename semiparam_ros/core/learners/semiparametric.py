@@ -363,10 +363,24 @@ class ParametricModel(_Model):
         return Prediction(yp, np.zeros_like(yp), yp.copy(), var)
 
     def phi_rows(self, X2: np.ndarray) -> np.ndarray:
-        """Stacked regressors (N, t, p) of validated inputs (N, n_inputs)."""
-        Phi = np.empty((X2.shape[0], self.n_outputs, self.n_params))
-        for i in range(X2.shape[0]):
-            Phi[i] = self._phi_uncached(np.ascontiguousarray(X2[i]))
+        """Stacked regressors (N, t, p) of validated inputs (N, n_inputs).
+
+        A regressor with a ``many`` attribute (the rigid-body regressor's, see
+        :func:`~semiparam_ros.core.estimator.build.regressor_function`) maps all rows in one call; any
+        other is called row by row.
+        """
+        many = getattr(self.regressor, "many", None)
+        if many is None:
+            Phi = np.empty((X2.shape[0], self.n_outputs, self.n_params))
+            for i in range(X2.shape[0]):
+                Phi[i] = self._phi_uncached(np.ascontiguousarray(X2[i]))
+            return Phi
+        Phi = np.ascontiguousarray(many(np.ascontiguousarray(X2)), dtype=np.float64)
+        if Phi.shape != (X2.shape[0], self.n_outputs, self.n_params):
+            raise ConfigurationError(f"regressor returned shape {Phi.shape}, expected ({X2.shape[0]}, "
+                                     f"{self.n_outputs}, {self.n_params})")
+        if not within(Phi.reshape(X2.shape[0], -1), MAX_ABS_INPUT):
+            raise RejectedSampleError("regressor returned NaN, inf or absurdly large entries")
         return Phi
 
     def predict_phi_rows(self, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

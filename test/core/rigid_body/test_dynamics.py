@@ -18,7 +18,7 @@ from semiparam_ros.core.rigid_body.dynamics import (
     is_physically_consistent,
     point_mass_parameters,
 )
-from semiparam_ros.errors import ConfigurationError
+from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 from semiparam_ros.sim.frames import body_placement, frame_in_body, frame_placement
 
 ICUB_JOINTS = ["r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow"]
@@ -495,3 +495,32 @@ def test_one_spec_builds_the_same_regressor_as_the_keywords_and_pickles(icub, ic
         RigidBodyRegressor.from_urdf(icub_urdf_path(), spec, output="wrench")
     with pytest.raises(ConfigurationError, match="RegressorSpec"):
         RigidBodyRegressor(icub_text, ICUB_JOINTS)  # type: ignore[arg-type]  # the constructor takes a spec
+
+
+@pytest.mark.parametrize("config_name", ["icub_right_arm.yaml", "panda.yaml"])
+def test_base_regressors_of_many_inputs_are_the_rows_one_by_one(config_name):
+    """The vectorised base regressor (friction, offset and base columns applied to all rows at once) is
+    the per-row one, column factors included: exactly, but for the Coulomb columns' tanh, which numpy may
+    round otherwise on a whole array (|Δ| ≤ 2 ulp of values ≤ 1)."""
+    from helpers import REPO
+
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.core.estimator.build import build_regressor, column_scale, regressor_function
+
+    cfg = load_config(REPO / "config" / config_name)
+    reg = build_regressor(cfg)
+    rng = np.random.default_rng(4)
+    qs, dqs, ddqs = random_states(reg, rng, 40)
+    X = np.ascontiguousarray(np.hstack([qs, dqs, ddqs]))
+    factor = 1.0 / column_scale(cfg, reg)
+    for f in (None, factor):
+        many = reg.base_regressor_of_inputs(X, f)
+        rows = np.array([reg.base_regressor_of_input(x, f) for x in X])
+        assert many.shape == rows.shape == (40, reg.n_outputs, reg.n_base)
+        scale = 1.0 if f is None else np.abs(f).max()
+        np.testing.assert_allclose(many, rows, rtol=0.0, atol=4 * np.finfo(float).eps * scale)
+    fn = regressor_function(reg, column_scale(cfg, reg))
+    np.testing.assert_allclose(fn.many(X), np.array([fn(x) for x in X]), rtol=0.0,
+                               atol=4 * np.finfo(float).eps * np.abs(factor).max())
+    with pytest.raises(RejectedSampleError):
+        reg.base_regressor_of_inputs(X[:, :-1])
