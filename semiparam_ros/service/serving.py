@@ -318,10 +318,7 @@ class LearnedModel:
         if consistent:
             if not isinstance(model, ConsistentSemiparametricModel | ParametricModel):
                 raise ValueError("consistent=True needs the consistent SP (the default) or the P learner")
-            estimate = self.consistent()
-            rigid = self.estimator.column_scale * estimate.base
-            if estimate.source is not None:  # moved by what the model learned since (0 for its own solve)
-                rigid = rigid + (self._rigid_learner().parameters - estimate.source)
+            rigid = self.estimator.column_scale * self.consistent().base
         if isinstance(model, ConsistentSemiparametricModel):
             if X.shape[0] == 1:
                 pred = model.predict_model(X[0], rigid)

@@ -130,8 +130,6 @@ class OnlineEstimator:
         #: Solve the consistent projection in line, on the node's schedule in the samples' time (``learn``
         #: and offline replay; the node solves it in a worker process instead): see :meth:`projects`.
         self.inline_projection = False
-        #: The consistent solution the model predicts with (:meth:`use_consistent`), or None.
-        self.consistent_estimate: ConsistentEstimate | None = None
         self._projected_at: int | None = None  # stamp [ns] the schedule counts from (None: next sample)
         self._projected_learned = 0  # n_samples_learned at the last solution
 
@@ -369,9 +367,7 @@ class OnlineEstimator:
         Where ``parametric.consistent`` is on, the node hands each new solution of its projection worker
         to the model it predicts with, so that its per-sample predictions, the feed-forward and
         ``load_model`` all use one rigid body (see
-        :meth:`~semiparam_ros.core.learners.consistent.ConsistentSemiparametricModel.use_rigid`): the
-        solution, moved by what the learner learned since the state it was solved from
-        (``estimate.source``).
+        :meth:`~semiparam_ros.core.learners.consistent.ConsistentSemiparametricModel.use_rigid`).
 
         Args:
             estimate: A solution of
@@ -388,11 +384,7 @@ class OnlineEstimator:
         model = self.model
         if not isinstance(model, ConsistentSemiparametricModel):
             return False
-        if estimate is None:
-            model.use_rigid(None)
-        else:
-            model.use_rigid(self._scale * np.asarray(estimate.base), estimate.source)
-        self.consistent_estimate = estimate
+        model.use_rigid(None if estimate is None else self._scale * np.asarray(estimate.base))
         return True
 
     def apply_runtime_parameters(self, config: EstimatorConfig) -> None:
@@ -513,7 +505,6 @@ class OnlineEstimator:
         self._last_learned_ns = None
         self._projected_at = None
         self._projected_learned = 0
-        self.consistent_estimate = None
         self.noise.reset()
         self.gate.reset()
 

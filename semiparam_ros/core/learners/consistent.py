@@ -429,8 +429,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._held: tuple[np.ndarray, float] | None = None  # (g·r, its relative variance) last computed
         self._raw: np.ndarray | None = None  # r, before its weight, of the last full prediction
         self._fast_candidate = np.zeros(t)   # κ_f Φδ_f of the last full prediction
-        # the rigid-body parameters predicted with and the learned ones they were solved from (None: learned)
-        self._rigid: tuple[np.ndarray, np.ndarray | None] | None = None
+        self._rigid: np.ndarray | None = None  # the rigid-body parameters predicted with (None: learned)
         self._recent_beta = self._scale_forgetting(sample_period_s)
         self._reset_scales()
 
@@ -496,7 +495,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         assert var is not None  # asked for
         own = rigid is None  # the model's own rigid part: the learned one, or the one set by use_rigid
         if own:
-            rigid = self._own_rigid()
+            rigid = self._rigid
         if rigid is not None:
             yp = Phi @ rigid
         if held and self._held is not None:
@@ -683,22 +682,17 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         yp, r, var, _ = self._model_valid(xv, Phi, self._checked_rigid(rigid))
         return Prediction(yp, r, yp + r, var)
 
-    def use_rigid(self, rigid: np.ndarray | None, source: np.ndarray | None = None) -> None:
+    def use_rigid(self, rigid: np.ndarray | None) -> None:
         """Predict with these rigid-body parameters instead of the learned ones, from now on (None: learned).
 
-        For the physically consistent projection π_c of the learned parameters, re-solved off the
-        sample path: the model's rigid part ŷ_P = Φ(x)π, its residual ``r = p − P(π − π₀)`` consistent
-        with π, the residual's weight (s² is then the recent error of Φπ) and the fast correction (which
-        learns the error of this model) all use π. The learners keep learning π̂ unconstrained: that is
-        what the projection starts from. With ``source``, the learned parameters π_c was solved from,
-        π = π_c + (π̂ − source) moves with what the learner learns until the next solution (the
-        projection to first order: where the data determine the parameters it follows them one to one,
-        and where they do not π̂ does not move either); without it π = π_c. Not part of the saved state
-        (the projection is solved again from it).
+        For the physically consistent projection of the learned parameters, re-solved off the sample
+        path: the model's rigid part ŷ_P = Φ(x)π, its residual ``r = p − P(π − π₀)`` consistent with π,
+        the residual's weight (s² is then the recent error of Φπ) and the fast correction (which learns
+        the error of this model) all use π. The learners keep learning π̂ unconstrained: that is what the
+        projection starts from. Not part of the saved state (the projection is solved again from it).
 
         Args:
             rigid: (p,) parameters in the learner's units (scaled columns), or None.
-            source: (p,) the learner's parameters ``rigid`` was solved from, or None.
 
         Raises:
             RejectedSampleError: A wrong size or a non-finite value (the model is unchanged).
@@ -708,36 +702,14 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             >>> m.use_rigid(np.array([2.0]))
             >>> float(m.predict_model([3.0, 0.0, 0.0]).parametric[0])  # Φ(x)π = 3 · 2
             6.0
-            >>> m.use_rigid(np.array([2.0]), source=np.array([0.5]))  # π = 2 + (π̂ − 0.5), π̂ = 1 here
-            >>> float(m.predict_model([3.0, 0.0, 0.0]).parametric[0])
-            7.5
         """
-        if rigid is None:
-            self._rigid = None
-        else:
-            checked = self._checked_rigid(rigid)
-            assert checked is not None  # not None in, not None out
-            origin = self._checked_rigid(source)
-            self._rigid = (checked.copy(), None if origin is None else origin.copy())
+        self._rigid = None if rigid is None else self._checked_rigid(rigid).copy()  # type: ignore[union-attr]
         self._held = None
-
-    def _own_rigid(self) -> np.ndarray | None:
-        """Return the parameters set by :meth:`use_rigid`, moved since their source (None: the learned)."""
-        if self._rigid is None:
-            return None
-        rigid, source = self._rigid
-        if source is None:
-            return rigid
-        return rigid + (self.parametric.parameters - source)
 
     @property
     def rigid_override(self) -> np.ndarray | None:
-        """The rigid-body parameters the model predicts with, set by :meth:`use_rigid` (learner units).
-
-        None when it predicts with the learned ones.
-        """
-        own = self._own_rigid()
-        return None if own is None else own.copy()
+        """The rigid-body parameters set by :meth:`use_rigid` (learner units), or None (the learned ones)."""
+        return None if self._rigid is None else self._rigid.copy()
 
     def _checked_rigid(self, rigid: np.ndarray | None) -> np.ndarray | None:
         if rigid is None:
@@ -771,7 +743,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         yp, var = par_model.predict_phi_rows(Phi)
         rigid = self._checked_rigid(rigid)
         if rigid is None:
-            rigid = self._own_rigid()
+            rigid = self._rigid
         if rigid is not None:
             yp = Phi @ rigid
         r = np.zeros_like(yp)

@@ -105,8 +105,6 @@ class ConsistentEstimate:
         body_names: The bodies, in the order of ``full``.
         solve_s: Wall time of the solve [s].
         status: The solver's status (``"optimal"``).
-        source: (n_base,) the learner's estimate θ it was projected from (the learner's scaled units), or
-            None: what a model that keeps learning moves the solution by until the next solve.
     """
 
     full: np.ndarray
@@ -114,7 +112,6 @@ class ConsistentEstimate:
     body_names: tuple[str, ...]
     solve_s: float
     status: str
-    source: np.ndarray | None = None
 
     def link(self, i: int) -> tuple[float, np.ndarray, np.ndarray]:
         """Return body i: mass [kg], centre of mass [m] in the body frame, inertia about it (3, 3) [kg·m²]."""
@@ -199,8 +196,7 @@ def consistent_parameters(regressor: RigidBodyRegressor, theta: np.ndarray, R: n
     if pi.value is None or problem.status not in ("optimal", "optimal_inaccurate"):
         raise ConfigurationError(f"the consistent projection failed: solver status {problem.status}")
     full = np.asarray(pi.value, dtype=np.float64)
-    return ConsistentEstimate(full, K @ full, tuple(regressor.body_names), elapsed, str(problem.status),
-                              theta.copy())
+    return ConsistentEstimate(full, K @ full, tuple(regressor.body_names), elapsed, str(problem.status))
 
 
 @dataclass(frozen=True)
