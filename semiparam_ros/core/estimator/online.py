@@ -34,7 +34,7 @@ from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.core.learners.semiparametric import rigid_body_part
 from semiparam_ros.core.learners.uncertainty import NoiseScale
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
-from semiparam_ros.core.rigid_body.identification import ConsistentEstimate
+from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, consistent_parameters
 from semiparam_ros.core.rigid_body.payload import PayloadLearner
 from semiparam_ros.core.stream.gate import ContactGate, Verdict
 from semiparam_ros.core.stream.messages import JointStateData, Sample, WrenchData
@@ -351,8 +351,6 @@ class OnlineEstimator:
         learned = self.n_samples_learned
         if learned == 0 or (learned == self._projected_learned and model.rigid_override is not None):
             return
-        from semiparam_ros.core.rigid_body.identification import consistent_parameters
-
         theta, R, lam = self.rigid_body_state()
         try:
             estimate = consistent_parameters(self.regressor, theta, R, self._scale, lam)

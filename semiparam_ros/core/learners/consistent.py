@@ -703,7 +703,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             >>> float(m.predict_model([3.0, 0.0, 0.0]).parametric[0])  # Φ(x)π = 3 · 2
             6.0
         """
-        self._rigid = None if rigid is None else self._checked_rigid(rigid).copy()  # type: ignore[union-attr]
+        checked = self._checked_rigid(rigid)
+        self._rigid = None if checked is None else checked.copy()
         self._held = None
 
     @property
