@@ -31,6 +31,7 @@ from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, export_urdf
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate
+from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.service.feedforward import DesiredState, FeedForward, FeedForwardCommand, TrajectoryEffort
 from semiparam_ros.service.projection import ProjectionWorker
 from semiparam_ros.service.serving import LearnedModel
@@ -104,9 +105,12 @@ class ModelService:
         estimate = worker.latest
         if estimate is None or solved == self._applied or self._submitted_learned == 0:
             return False
-        with self.loop.lock:
-            self.loop.estimator.use_consistent(estimate)
         self._applied = solved
+        try:
+            with self.loop.lock:
+                self.loop.estimator.use_consistent(estimate)
+        except RejectedSampleError:  # non-finite values from the solver: keep predicting as before
+            return False
         return True
 
     def submit_projection(self) -> None:

@@ -353,11 +353,10 @@ class OnlineEstimator:
             return
         theta, R, lam = self.rigid_body_state()
         try:
-            estimate = consistent_parameters(self.regressor, theta, R, self._scale, lam)
-        except ConfigurationError:
-            return  # the solver failed: keep the last solution, as the node's worker does
+            self.use_consistent(consistent_parameters(self.regressor, theta, R, self._scale, lam))
+        except (ConfigurationError, RejectedSampleError):
+            return  # the solver failed or gave non-finite values: keep the last solution, as the node does
         self._projected_learned = learned
-        self.use_consistent(estimate)
 
     def use_consistent(self, estimate: ConsistentEstimate | None) -> bool:
         """Predict with a consistent projection's rigid body from now on (the consistent SP; None: learned).

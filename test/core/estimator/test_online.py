@@ -42,7 +42,7 @@ from semiparam_ros.core.config import EstimatorConfig, load_config
 from semiparam_ros.core.estimator.build import build_model, build_pipeline, build_regressor
 from semiparam_ros.core.estimator.online import OnlineEstimator, StepResult
 from semiparam_ros.core.stream.messages import JointStateData, Sample, WrenchData
-from semiparam_ros.errors import CheckpointError, RejectedSampleError
+from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 from semiparam_ros.io.bags import iter_samples
 
 
@@ -903,3 +903,44 @@ def test_a_checkpoint_of_the_former_default_cascade_is_refused_with_the_way_to_l
     again = OnlineEstimator(cascade_cfg)
     again.load(path)
     assert again.n_samples_learned == old.n_samples_learned
+
+
+def test_an_inline_projection_that_fails_keeps_the_last_solution_and_loses_no_sample(tmp_path, monkeypatch):
+    """Offline, the projection is solved in line; a solver failure or a non-finite solution keeps what the
+    model predicted with (here: the learned parameters), and the sample at which it was due is still
+    predicted and learned (nothing counted as rejected). A good solution after it is applied."""
+    from dataclasses import replace
+
+    from helpers.bags import ur5_config, write_ur5_torque_bag
+
+    import semiparam_ros.core.estimator.online as online
+    from semiparam_ros.eval.replay import load_samples
+
+    write_ur5_torque_bag(tmp_path / "log", 6.0, seed=3)
+    cfg = ur5_config().with_overrides({"parametric.consistent_period": 1.0})
+    data, _ = load_samples(tmp_path / "log", cfg)
+    real = online.consistent_parameters
+    calls: list[str] = []
+
+    def flaky(*args, **kwargs):
+        calls.append("call")
+        if len(calls) == 1:
+            raise ConfigurationError("the consistent projection failed: solver status infeasible")
+        good = real(*args, **kwargs)
+        return good if len(calls) > 2 else replace(good, base=np.full_like(good.base, np.nan))
+
+    monkeypatch.setattr(online, "consistent_parameters", flaky)
+    est = OnlineEstimator(cfg)
+    est.inline_projection = True
+    est.learning_enabled = True
+    n = len(cfg["robot.joints"])
+    learned_at_failures = []
+    for stamp, x, y in zip(data.stamps_ns, data.X, data.Y, strict=True):
+        before = len(calls)
+        result = est.step(Sample(int(stamp), x[:n], x[n:2 * n], x[2 * n:], y))
+        if len(calls) > before and len(calls) <= 2:
+            learned_at_failures.append(result.learned)
+            assert est.model.rigid_override is None  # still the learned parameters
+    assert len(calls) >= 3 and learned_at_failures == [True, True]
+    assert est.drops["rejected_sample"] == 0
+    assert est.model.rigid_override is not None and np.isfinite(est.model.rigid_override).all()
