@@ -15,6 +15,7 @@ import threading
 import time
 
 import pytest
+from geometry_msgs.msg import WrenchStamped
 from helpers.ros import CONFIG, TOPICS, NodeProcess, TestClient, make_ros_env, source_bag
 
 from semiparam_ros.core.config import load_config
@@ -54,11 +55,15 @@ def test_signals_under_load_exit_cleanly_with_a_final_checkpoint(signum, message
         client = TestClient(env)
         stop = threading.Event()
         try:
+            predictions = client.collect(WrenchStamped, "/estimator/predicted_wrench")
             player = BagPlayer(client.node, messages)
             assert player.wait_for_subscribers(timeout=60.0), node.output()
             thread = threading.Thread(target=player.play, kwargs={"hz": 1000.0, "should_stop": stop.is_set},
                                       daemon=True)
             thread.start()
+            # the signal lands at a random point of the learning stream, not before it reached the node (on a
+            # loaded machine discovery can take longer than the shortest delay: once, nothing was learned)
+            assert predictions.wait_for(lambda m: len(m) > 0, timeout=60.0), node.output()
             time.sleep(rng.uniform(0.5, 1.5))
             node.proc.send_signal(signum)
             code = node.proc.wait(timeout=60)
@@ -70,10 +75,12 @@ def test_signals_under_load_exit_cleanly_with_a_final_checkpoint(signum, message
             node.stop()
         out = node.output()
         ok = code == 0 and "FATAL" not in out and "Traceback" not in out and ckpt.is_file()
+        learned = None
         if ok:
             est = OnlineEstimator(load_config(CONFIG).with_overrides({"nonparametric.n_features": 100}))
             est.load(ckpt)
-            ok = est.n_samples_learned > 0
+            learned = est.n_samples_learned
+            ok = learned > 0
         if not ok:
-            failures.append((trial, code, out[-2000:]))
+            failures.append((trial, code, ckpt.is_file(), learned, out[-2000:]))
     assert not failures, failures
