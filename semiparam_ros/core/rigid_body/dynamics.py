@@ -529,23 +529,28 @@ class RigidBodyRegressor:
         return -self._block() if self._sign < 0 else self._block().copy()
 
     def _extra(self, out: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> None:
-        """Write the sensor-offset and per-joint extra columns of one state into ``out`` (t, n_params)."""
+        """Write the sensor-offset and per-joint extra columns into ``out``.
+
+        One state: ``out`` (t, n_params), ``dq``/``ddq`` (n,); N states: (N, t, n_params) and (N, n).
+        """
         c = self._n_rigid
+        lead = (slice(None),) * (out.ndim - 1)  # the rows (and states) before the columns
         if self.sensor_offset:
-            out[:, c : c + self.n_outputs] = self._eye
+            out[(*lead, slice(c, c + self.n_outputs))] = self._eye
             c += self.n_outputs
         n, d = self.n_joints, self._diag
+        diag: tuple[slice | np.ndarray, ...] = (*lead[:-1], d, d)  # each joint's own row and column
         for kind in self.extra_kinds:
-            block = out[:, c : c + n]
-            block[:] = 0.0
+            block = out[(*lead, slice(c, c + n))]
+            block.fill(0.0)
             if kind == "viscous":
-                block[d, d] = dq
+                block[diag] = dq
             elif kind == "coulomb":
-                block[d, d] = np.tanh(dq / self.coulomb_velocity)
+                block[diag] = np.tanh(dq / self.coulomb_velocity)
             elif kind == "offset":
-                block[d, d] = 1.0
+                block[diag] = 1.0
             else:  # armature
-                block[d, d] = ddq
+                block[diag] = ddq
             c += n
 
     def wrench(self, q: Any, dq: Any, ddq: Any, params: Any = None) -> np.ndarray:
@@ -761,27 +766,12 @@ class RigidBodyRegressor:
         if X.ndim != 2 or X.shape[1] != 3 * n:
             raise RejectedSampleError(f"X must have shape (N, {3 * n}) for joints {list(self.joint_names)}, "
                                       f"got {X.shape}")
-        N, c = X.shape[0], self._n_rigid
-        out = np.zeros((N, self.n_outputs, self.n_params))
-        for i in range(N):
+        out = np.empty((X.shape[0], self.n_outputs, self.n_params))
+        for i in range(X.shape[0]):
             self._fill(X[i, :n], X[i, n:2 * n], X[i, 2 * n:])
             self._rigid(out[i])
-        if self.sensor_offset:
-            out[:, :, c : c + self.n_outputs] = self._eye
-            c += self.n_outputs
-        d = self._diag
-        dq, ddq = X[:, n:2 * n], X[:, 2 * n:]
-        for kind in self.extra_kinds:
-            block = out[:, :, c : c + n]
-            if kind == "viscous":
-                block[:, d, d] = dq
-            elif kind == "coulomb":
-                block[:, d, d] = np.tanh(dq / self.coulomb_velocity)
-            elif kind == "offset":
-                block[:, d, d] = 1.0
-            else:  # armature
-                block[:, d, d] = ddq
-            c += n
+        if self.n_params > self._n_rigid:
+            self._extra(out, X[:, n:2 * n], X[:, 2 * n:])
         Phi = out[:, :, self._base.independent]
         if column_factor is not None:
             Phi *= column_factor
