@@ -179,10 +179,9 @@ class NodeLearner:
     sample the gate refuses is predicted, not learned), and the consistent projection of the rigid body
     solved on the node's schedule in the samples' time (:attr:`OnlineEstimator.inline_projection`).
     ``predict_one`` is the learned model at x (the delay line of the horizon table); ``copy`` is an
-    independent estimator (the regressor and the
-    configuration, both read-only, are shared) for another stream: its first sample, like a stamp not after
-    the previous one, begins another recording (:meth:`OnlineEstimator.start_recording`), as ``learn``
-    does between bags.
+    independent estimator (the regressor and the configuration, both read-only, are shared) for another
+    stream: its first sample, like a stamp not after the previous one, begins another recording
+    (:meth:`OnlineEstimator.start_recording`), as ``learn`` does between bags.
 
     Args:
         estimator: The estimator (learning is switched on).

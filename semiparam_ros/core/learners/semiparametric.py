@@ -375,13 +375,7 @@ class ParametricModel(_Model):
             for i in range(X2.shape[0]):
                 Phi[i] = self._phi_uncached(np.ascontiguousarray(X2[i]))
             return Phi
-        Phi = np.ascontiguousarray(many(np.ascontiguousarray(X2)), dtype=np.float64)
-        if Phi.shape != (X2.shape[0], self.n_outputs, self.n_params):
-            raise ConfigurationError(f"regressor returned shape {Phi.shape}, expected ({X2.shape[0]}, "
-                                     f"{self.n_outputs}, {self.n_params})")
-        if not within(Phi.reshape(X2.shape[0], -1), MAX_ABS_INPUT):
-            raise RejectedSampleError("regressor returned NaN, inf or absurdly large entries")
-        return Phi
+        return self._checked_phi(many(np.ascontiguousarray(X2)), (X2.shape[0], self.n_outputs, self.n_params))
 
     def predict_phi_rows(self, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(Φ(π₀ + δ̂), diag(Φ A⁻¹ Φᵀ))`` of stacked regressors (N, t, p), both (N, t)."""
@@ -421,12 +415,20 @@ class ParametricModel(_Model):
         return Phi
 
     def _phi_uncached(self, x: np.ndarray) -> np.ndarray:
-        Phi = np.asarray(self.regressor(x), dtype=np.float64)
-        if Phi.shape != (self.n_outputs, self.n_params):
-            raise ConfigurationError(f"regressor returned shape {Phi.shape}, expected ({self.n_outputs}, "
-                             f"{self.n_params})")
-        Phi = np.ascontiguousarray(Phi)
-        if not within(Phi, MAX_ABS_INPUT):
+        return self._checked_phi(self.regressor(x), (self.n_outputs, self.n_params))
+
+    @staticmethod
+    def _checked_phi(value: Any, shape: tuple[int, ...]) -> np.ndarray:
+        """Return the regressor's output as a C-contiguous float64 array of ``shape``, values checked.
+
+        Raises:
+            ConfigurationError: Another shape (a regressor that does not fit the model).
+            RejectedSampleError: NaN, inf or entries beyond ±MAX_ABS_INPUT.
+        """
+        Phi = np.ascontiguousarray(value, dtype=np.float64)
+        if Phi.shape != shape:
+            raise ConfigurationError(f"regressor returned shape {Phi.shape}, expected {shape}")
+        if not within(Phi.reshape(-1, shape[-1]), MAX_ABS_INPUT):
             raise RejectedSampleError("regressor returned NaN, inf or absurdly large entries")
         return Phi
 
