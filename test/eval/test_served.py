@@ -120,3 +120,21 @@ def test_replay_predicts_with_the_consistent_projection_solved_on_the_nodes_sche
     x = train.X[-1]
     Phi = est.regressor.base_regressor(x[:n], x[n:2 * n], x[2 * n:]) / est.column_scale
     np.testing.assert_allclose(est.model.predict_one(x).parametric, Phi @ theta_c, rtol=1e-10, atol=1e-10)
+
+
+@needs_kuka
+def test_the_served_sigma_covers_the_frozen_models_error_on_other_motion():
+    """Learned on log 1 with the defaults, loaded as a user would and used frozen on logs 2 (the same
+    range, another motion) and 3 (faster, mostly outside the training range): ±2σ holds 80–99 % of the
+    errors on both (σ too narrow where the residual's correlated errors were counted as independent
+    samples, too wide where the state is novel and the model abstains to its rigid body)."""
+    cfg = load_config(REPO / "config" / "kuka_lwr4.yaml").with_overrides(
+        {"robot.urdf": str(KUKA / "kuka_lwr4_cogimon.urdf")})
+    train, _ = load_samples(KUKA / "measurements_1", cfg)
+    served = learn_served(cfg, train)
+    n = len(cfg["robot.joints"])
+    for log in ("measurements_2", "measurements_3"):
+        test, _ = load_samples(KUKA / log, cfg)
+        total, std = served.predict(test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:])
+        coverage = float(np.mean(np.abs(test.Y - total) <= 2.0 * std))
+        assert 0.80 <= coverage <= 0.99, (log, coverage)

@@ -121,27 +121,32 @@ def tracker_update(estimates: np.ndarray, errors: np.ndarray, gains: np.ndarray,
 
 
 @njit(cache=True, nogil=True)
-def scale_update(scale_model: np.ndarray, recent_rigid: np.ndarray, y: np.ndarray, rigid: np.ndarray,
-                 raw: np.ndarray, beta: float, a: float) -> None:
-    """Update the residual weight's error statistics after a learned sample, in place.
+def scale_update(scale_model: np.ndarray, recent_rigid: np.ndarray, corr: np.ndarray, y: np.ndarray,
+                 rigid: np.ndarray, raw: np.ndarray, beta: float, a: float, a_corr: float) -> None:
+    """Update the error statistics of the residual's weight and of the model's variance, in place.
 
     ``e_P = y − ŷ_P``, ``e = e_P − r``: ``scale_model ← β·scale_model + e²``,
-    ``recent_rigid ← recent_rigid + a(e_P² − recent_rigid)``.
+    ``recent_rigid ← recent_rigid + a(e_P² − recent_rigid)``, and the correlation statistics
+    ``m ← m + a_c(e − m)`` (``corr[0]``, the smoothed error), ``corr[1] ← β·corr[1] + m²``.
 
     Args:
         scale_model: (t,) Σ β^{n−m} e_m², the residual's noise variance times its weight.
         recent_rigid: (t,) the recent mean of e_P².
+        corr: (2, t) the smoothed error m and Σ β^{n−m} m_m².
         y: (t,) the measurement.
         rigid: (t,) ŷ_P, the rigid-body part's a-priori prediction.
         raw: (t,) r, the residual's a-priori value before its weight.
         beta: The residual learner's forgetting factor β.
         a: The recent mean's weight.
+        a_corr: The smoothed error's weight a_c.
     """
     for k in range(y.shape[0]):
         e_rigid = y[k] - rigid[k]
         e_model = e_rigid - raw[k]
         scale_model[k] = beta * scale_model[k] + e_model * e_model
         recent_rigid[k] += a * (e_rigid * e_rigid - recent_rigid[k])
+        corr[0, k] += a_corr * (e_model - corr[0, k])
+        corr[1, k] = beta * corr[1, k] + corr[0, k] * corr[0, k]
 
 
 @njit(cache=True, nogil=True)

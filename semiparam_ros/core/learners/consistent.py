@@ -31,8 +31,13 @@ of the rigid-body part's *recent* systematic error, s²(1 − ν) the part of it
 the residual's noise variance, σ²v its predictive variance at x. Where the rigid body is poor, a residual
 of moderate confidence is used; where it is excellent, the model abstains unless the residual is
 confident, and far from the data it falls back to its rigid-body part instead of extrapolating cosines.
-The predictive variance reported is unchanged (the residual's own), so σ still says how novel the state
-is. **model(x) = ŷ_P + g·r** is what is used frozen, at desired states and for feed-forward.
+**model(x) = ŷ_P + g·r** is what is used frozen, at desired states and for feed-forward. Its variance
+(:meth:`model_variance`, what ``predict_model`` reports) is the error variance of ``ŷ_P + g·r`` as an
+estimate of the rigid body's systematic error — what the weight misses of the part the data explain, the
+residual's own error counted with the length c over which its errors stay correlated
+(:meth:`correlation_samples`: consecutive samples of one motion are not independent), and the part the
+data do not explain. The online prediction's variance stays the residual's own ``v``: its errors are the
+fast correction's, one step ahead.
 
 **4. Fast correction** (the tracker: one step ahead, payloads, contacts). Two parts, both learned only
 from the samples the model learns (the contact gate's refusals are held out of them too):
@@ -431,6 +436,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._fast_candidate = np.zeros(t)   # κ_f Φδ_f of the last full prediction
         self._rigid: np.ndarray | None = None  # the rigid-body parameters predicted with (None: learned)
         self._recent_beta = self._scale_forgetting(sample_period_s)
+        self._corr_beta = self._correlation_forgetting(sample_period_s)
         self._reset_scales()
 
     def _reset_scales(self) -> None:
@@ -439,6 +445,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._recent_rigid = np.zeros(self.n_outputs)  # recent mean of (y − ŷ_P)² (SCALE_TIME_CONSTANT)
         self._recent_n = 0                             # samples in it
         self._fast_errors = np.zeros((2, self.n_outputs))  # recent mean of d and d², d the fast saving
+        self._corr = np.zeros((2, self.n_outputs))     # smoothed residual error m, Σ β^{n−m} m² (its memory)
         self._fast_n = 0                               # samples in them
         self._weight_cache: tuple[np.ndarray, np.ndarray] | None = None  # (s², σ²/ν₀) until the next learn
         self._fast_mask: np.ndarray | None = None      # _fast_useful() until the next learn
@@ -462,6 +469,15 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         samples = max(self.SCALE_TIME_CONSTANT / float(sample_period_s), float(self.SCALE_MIN_SAMPLES))
         return forgetting_factor(samples, 1.0)
 
+    #: Window [s] of the smoothed error that measures how long the residual's errors stay correlated (at
+    #: least :attr:`SCALE_MIN_SAMPLES` samples): a correlation longer than it counts as this long.
+    CORRELATION_WINDOW = 1.0
+
+    def _correlation_forgetting(self, sample_period_s: float) -> float:
+        """β_c = exp(−1/L) of the smoothed error, L = max(CORRELATION_WINDOW/T, SCALE_MIN_SAMPLES) samples."""
+        samples = max(self.CORRELATION_WINDOW / float(sample_period_s), float(self.SCALE_MIN_SAMPLES))
+        return forgetting_factor(samples, 1.0)
+
     def _fast_forgetting(self, sample_period_s: float) -> float:
         """β_f = exp(−1/N), N = max(τ_f/T, 10·p/t) samples (τ_f in s, T the period in s)."""
         floor = self.FAST_ROWS_PER_PARAMETER * self.n_params / self.n_outputs
@@ -480,15 +496,19 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         beta = super().on_period(sample_period_s)
         self.fast.set_forgetting(self._fast_forgetting(sample_period_s))
         self._recent_beta = self._scale_forgetting(sample_period_s)
+        self._corr_beta = self._correlation_forgetting(sample_period_s)
         return beta
 
     # ------------------------------------------------------------------ prediction
     def _model_valid(self, xv: np.ndarray, Phi: np.ndarray, rigid: np.ndarray | None = None, *,
-                     held: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+                     held: bool = False, model_variance: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """``(ŷ_P, g·r, relative variance, φ or None)`` for a validated x and its regressor.
 
         ``rigid``: other rigid-body parameters to predict with (see :meth:`predict_model`). ``held``: take
         the residual ``g·r`` and its relative variance as last computed (see :meth:`predict_held`).
+        ``model_variance``: the relative variance of model(x) used alone (:meth:`model_variance`) instead
+        of the online prediction's.
         """
         par_model, npm = self.parametric, self.nonparametric
         yp, var = par_model.predict_phi(Phi, True)
@@ -516,6 +536,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._raw = raw
         if own:
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
+        if model_variance:
+            return yp, r, var + self.model_variance(float(v[0])), phi
         return yp, r, var + float(v[0]), phi
 
     def residual_weight(self, v: Any) -> np.ndarray:
@@ -542,6 +564,62 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         signal = s2 * np.clip(1.0 - self.nonparametric.rls.lam * v_arr, 0.0, 1.0)  # s²(1 − ν)
         total = signal + spread * v_arr
         return np.divide(signal, total, out=np.ones_like(total), where=total > 0.0)
+
+    def model_variance(self, v: Any) -> np.ndarray:
+        """Return the residual stage's share of the relative variance of model(x) = ŷ_P + g·r used alone.
+
+        Per output, in units of the residual's noise variance σ²:
+
+            ``[(1 − g)² s²(1 − ν) + g² c σ² v + s² ν] / σ²``
+
+        the error variance of ``ŷ_P + g r`` as an estimate of the rigid body's systematic error: the part
+        the data explain at x (``s²(1 − ν)``) is missed by ``1 − g``, the residual's own error ``c σ² v``
+        enters with ``g``, and the part the data do not explain (``s² ν``) is all missed. ``c`` is
+        :meth:`correlation_samples`: ``σ² v`` assumes independent errors, but the residual's errors stay
+        correlated for about c samples (a motion's unmodelled effects drift; at 1 kHz far longer than
+        at 100 Hz in samples), so the data hold about c times fewer independent samples than rows. With
+        c = 1, g = 1 and ν = 0 this is v, the online prediction's share. What ``predict_model`` returns:
+        the σ of a model frozen and used on other motion (``load_model``, feed-forward), not the σ of the
+        one-step-ahead prediction, whose errors the fast correction tracks. Before any statistics: v.
+
+        Args:
+            v: The residual's relative predictive variance ``φA⁻¹φᵀ``, a scalar or (N,).
+
+        Returns:
+            (t,) for a scalar v, else (N, t); ≥ 0.
+
+        Example:
+            >>> m = ConsistentSemiparametricModel(lambda x: x[None, :1], 1, 3, 1, n_features=8)
+            >>> m.model_variance(0.5).tolist()  # nothing learned yet: v itself
+            [0.5]
+        """
+        s2, noise = self.error_scales()
+        g = self.residual_weight(v)
+        v_arr = np.asarray(v, dtype=np.float64)[..., None]
+        nu = np.clip(self.nonparametric.rls.lam * v_arr, 0.0, 1.0)
+        c = self.correlation_samples()
+        extra = (1.0 - g) ** 2 * s2 * (1.0 - nu) + g * g * c * noise * v_arr + s2 * nu
+        fallback = np.broadcast_to(v_arr, extra.shape)
+        return np.divide(extra, noise, out=np.array(fallback, dtype=np.float64), where=noise > 0.0)
+
+    def correlation_samples(self) -> np.ndarray:
+        """Return c (t,) ≥ 1: about how many consecutive samples the residual's errors stay correlated.
+
+        By batch means: ``m`` smooths the residual's a-priori error ``e = y − ŷ_P − r`` over
+        L = :attr:`CORRELATION_WINDOW` [s] (``a = 1 − β_c``). For white errors the smoothed error keeps
+        ``a/(2 − a)`` of their variance; errors correlated over c ≪ L samples keep about c times more, so
+        ``c = (Σβ m² / Σβ e²) · (2 − a)/a`` (both sums with the residual's memory), at most about 2L. 1
+        before any statistics.
+
+        Example:
+            >>> m = ConsistentSemiparametricModel(lambda x: x[None, :1], 1, 3, 1, n_features=8)
+            >>> m.correlation_samples().tolist()
+            [1.0]
+        """
+        a = 1.0 - self._corr_beta
+        ratio = np.divide(self._corr[1], self._scale_model, out=np.zeros(self.n_outputs),
+                          where=self._scale_model > 0.0)
+        return np.maximum(ratio * (2.0 - a) / a, 1.0)
 
     def _weight_scales(self) -> tuple[np.ndarray, np.ndarray]:
         """``(s², σ²/ν₀)`` of the residual's weight, cached until the next learned sample."""
@@ -679,7 +757,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        yp, r, var, _ = self._model_valid(xv, Phi, self._checked_rigid(rigid))
+        yp, r, var, _ = self._model_valid(xv, Phi, self._checked_rigid(rigid), model_variance=True)
         return Prediction(yp, r, yp + r, var)
 
     def use_rigid(self, rigid: np.ndarray | None) -> None:
@@ -758,7 +836,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             full[:, self._phi_entries] = P[:, t:]
             r = P[:, :t] - full.reshape(n, t, p) @ delta
             r *= self.residual_weight(v)
-            var = var + v[:, None]
+            var = var + self.model_variance(v)
         return Prediction(yp, r, yp + r, var)
 
     # ------------------------------------------------------------------ learning
@@ -801,8 +879,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             self._recent_n += 1
             a = max(1.0 / self._recent_n, 1.0 - self._recent_beta)
             # σ²'s sum of (y − ŷ_P − r)² and s²'s recent mean of (y − ŷ_P)²
-            scale_update(self._scale_model, self._recent_rigid, yv, ctx.prediction.parametric,
-                         ctx.raw_residual, beta, a)
+            scale_update(self._scale_model, self._recent_rigid, self._corr, yv, ctx.prediction.parametric,
+                         ctx.raw_residual, beta, a, 1.0 - self._corr_beta)
             self._weight_cache = None
         if fast_step is not None:
             self.fast.defer_step(fast_step)
@@ -843,7 +921,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         state.update(self.fast.state_dict(f"{prefix}fast."))
         state[f"{prefix}scales"] = np.concatenate([[self._scale_weight, self._recent_n, self._fast_n],
                                                    self._scale_model, self._recent_rigid,
-                                                   self._fast_errors.reshape(-1)])
+                                                   self._fast_errors.reshape(-1), self._corr.reshape(-1)])
         return state
 
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
@@ -872,8 +950,11 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             raise CheckpointError("the checkpoint has no error scales of the residual's weight (written by "
                                   "an older version: learn it again)")
         scales = np.asarray(scales, dtype=np.float64)
-        if (scales.shape != (3 + 4 * t,) or not np.isfinite(scales).all()
-                or bool((scales[:3 + 2 * t] < 0.0).any()) or bool((scales[3 + 3 * t:] < 0.0).any())):
+        if scales.shape == (3 + 4 * t,):  # written before the correlation statistics: none (c = 1)
+            scales = np.concatenate([scales, np.zeros(2 * t)])
+        if (scales.shape != (3 + 6 * t,) or not np.isfinite(scales).all()
+                or bool((scales[:3 + 2 * t] < 0.0).any()) or bool((scales[3 + 3 * t:3 + 4 * t] < 0.0).any())
+                or bool((scales[3 + 5 * t:] < 0.0).any())):
             raise CheckpointError("the residual's error scales have the wrong size or invalid values")
         super().load_state_dict(state, prefix)
         self.tracker, self.fast = tracker, fast
@@ -882,5 +963,6 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._rigid = None  # the projection of the loaded state is solved again
         self._scale_weight, self._recent_n, self._fast_n = float(scales[0]), int(scales[1]), int(scales[2])
         self._scale_model, self._recent_rigid = scales[3:3 + t].copy(), scales[3 + t:3 + 2 * t].copy()
-        self._fast_errors = scales[3 + 2 * t:].reshape(2, t).copy()
+        self._fast_errors = scales[3 + 2 * t:3 + 4 * t].reshape(2, t).copy()
+        self._corr = scales[3 + 4 * t:].reshape(2, t).copy()
         self._weight_cache = self._fast_mask = None

@@ -343,3 +343,72 @@ def test_a_rigid_body_set_by_use_rigid_is_the_one_every_prediction_uses():
     m.use_rigid(other)
     m.reset()
     assert m.rigid_override is None
+
+
+def test_correlation_samples_measure_how_long_the_residuals_errors_stay_correlated():
+    """Errors white or AR(1) with ρ = 0.9 (integrated correlation time (1 + ρ)/(1 − ρ) = 19 samples), at
+    random states so that the residual cannot learn them: c ≈ 1 for white errors and ≈ 19 for AR(1)
+    (batch means over a 1 s window = 1000 samples at 1 kHz, ≫ 19)."""
+    rng = np.random.default_rng(11)
+    n, rho = 20000, 0.9
+    white = 0.1 * rng.normal(size=n)
+    ar = np.empty(n)
+    ar[0] = white[0]
+    for i in range(1, n):  # the same marginal variance: innovations of variance (1 − ρ²)·0.01
+        ar[i] = rho * ar[i - 1] + math.sqrt(1.0 - rho ** 2) * white[i]
+    X = rng.uniform(-1.0, 1.0, size=(n, 3))
+    got = {}
+    for name, noise in (("white", white), ("ar", ar)):
+        m = ConsistentSemiparametricModel(lambda x: np.array([[1.0]]), 1, 3, 1, lam_parametric=1e-3,
+                                          lam_nonparametric=1.0, n_features=20, sigma=1.0, tracker=False,
+                                          standardizer=Standardizer(3, mean=np.zeros(3), scale=np.ones(3)))
+        m.on_period(1e-3)
+        for x, e in zip(X, noise, strict=True):
+            m.learn_one(x, [0.5 + e])
+        got[name] = float(m.correlation_samples()[0])
+    tau = (1 + rho) / (1 - rho)
+    assert 1.0 <= got["white"] < 2.0
+    assert 0.6 * tau < got["ar"] < 1.5 * tau
+
+
+def test_the_model_alone_is_as_uncertain_as_its_residual_is_unsure_and_correlated():
+    """``predict_model``'s relative variance is the rigid-body part's plus ``model_variance(v)``: the error
+    variance of ŷ_P + g r as an estimate of the systematic error, in units of σ² — computed here from the
+    model's statistics by the formula, and checked to be far larger away from the data (where the model
+    abstains and misses the systematic error) than inside them. The online prediction keeps v."""
+    m = model(novelty_scale=1.0)
+    X, Y = data(600, 3)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    s2, noise = m.error_scales()
+    c = m.correlation_samples()
+    assert np.all(noise > 0) and s2[0] > noise[0] and np.all(c >= 1.0)
+    npm, lam = m.nonparametric, m.nonparametric.rls.lam
+    for x in (np.zeros(6), np.full(6, 1.2), np.full(6, 8.0)):
+        v = npm.rls.predict_checked(npm.features_of(x), True)[1][0]
+        var_p = m.parametric.predict_phi(regressor(x), True)[1]
+        g, nu = m.residual_weight(v), min(lam * v, 1.0)
+        want = ((1 - g) ** 2 * s2 * (1 - nu) + g ** 2 * c * noise * v + s2 * nu) / noise
+        np.testing.assert_allclose(m.predict_model(x).variance, var_p + want, rtol=1e-12)
+        np.testing.assert_allclose(m.predict_model_many(x[None]).variance[0], var_p + want, rtol=1e-12)
+        np.testing.assert_allclose(m.predict_one(x, return_variance=True).variance, var_p + v, rtol=1e-12)
+    far = m.model_variance(npm.rls.predict_checked(npm.features_of(np.full(6, 8.0)), True)[1][0])
+    inside = m.model_variance(npm.rls.predict_checked(npm.features_of(np.zeros(6)), True)[1][0])
+    assert inside[0] < 0.1 * far[0]  # the data explain the error inside; far away the model abstains
+
+
+def test_a_checkpoint_without_correlation_statistics_loads_with_none():
+    m = model()
+    X, Y = data(200, 5)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    assert np.any(m.correlation_samples() > 1.0)
+    state = m.state_dict()
+    state["scales"] = state["scales"][:3 + 4 * 2]  # the layout before the correlation statistics
+    old = model()
+    old.load_state_dict(state)
+    np.testing.assert_array_equal(old.correlation_samples(), [1.0, 1.0])
+    np.testing.assert_array_equal(old.predict_one(X[0]).total, m.predict_one(X[0]).total)
+    state["scales"] = np.concatenate([state["scales"], [0.0, 0.0, -1.0, 0.0]])  # a negative Σβm²
+    with pytest.raises(CheckpointError):
+        model().load_state_dict(state)

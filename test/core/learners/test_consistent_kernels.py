@@ -93,22 +93,25 @@ def test_scale_and_saving_updates_are_their_running_means():
     t = 6
     scale_model, recent = rng.uniform(size=t), rng.uniform(size=t)
     fast_errors = rng.normal(size=(2, t))
-    ref_sm, ref_rr, ref_fe = scale_model.copy(), recent.copy(), fast_errors.copy()
+    corr = np.stack([rng.normal(size=t), rng.uniform(size=t)])
+    ref_sm, ref_rr, ref_fe, ref_corr = scale_model.copy(), recent.copy(), fast_errors.copy(), corr.copy()
     for _ in range(20):
         y, rigid, raw = rng.normal(size=t), rng.normal(size=t), rng.normal(size=t)
-        beta, a = float(rng.uniform(0.9, 1.0)), float(rng.uniform(0.01, 0.5))
-        scale_update(scale_model, recent, y, rigid, raw, beta, a)
+        beta, a, a_corr = float(rng.uniform(0.9, 1.0)), float(rng.uniform(0.01, 0.5)), float(rng.uniform())
+        scale_update(scale_model, recent, corr, y, rigid, raw, beta, a, a_corr)
         e_rigid = y - rigid
         e_model = e_rigid - raw
         ref_sm = beta * ref_sm + e_model * e_model
         ref_rr += a * (e_rigid * e_rigid - ref_rr)
+        ref_corr[0] += a_corr * (e_model - ref_corr[0])
+        ref_corr[1] = beta * ref_corr[1] + ref_corr[0] * ref_corr[0]
         model, cand = rng.normal(size=t), rng.normal(size=t)
         saving_update(fast_errors, y, model, cand, a)
         e0 = y - model
         gain = e0 * e0 - (e0 - cand) ** 2
         ref_fe += a * (np.stack([gain, gain * gain]) - ref_fe)
     assert np.array_equal(scale_model, ref_sm) and np.array_equal(recent, ref_rr)
-    assert np.array_equal(fast_errors, ref_fe)
+    assert np.array_equal(fast_errors, ref_fe) and np.array_equal(corr, ref_corr)
 
 
 @pytest.mark.parametrize("seed", range(5))
