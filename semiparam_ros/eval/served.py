@@ -134,6 +134,22 @@ class ServedModel:
         n = self._n
         return self.served.predict(X2[:, :n], X2[:, n:2 * n], X2[:, 2 * n:])[0]
 
+    def coverage(self, X: Any, Y: Any, k: float = 2.0) -> np.ndarray:
+        """Fraction of the errors within ±kσ of the served prediction, per output (σ as served).
+
+        Args:
+            X: (N, 3n) states ``[q, q̇, q̈]`` [rad, rad/s, rad/s²].
+            Y: (N, t) measured outputs (units of y).
+            k: Width in standard deviations.
+
+        Returns:
+            (t,) fractions in [0, 1].
+        """
+        X2 = np.asarray(X, dtype=np.float64)
+        n = self._n
+        total, std = self.served.predict(X2[:, :n], X2[:, n:2 * n], X2[:, 2 * n:])
+        return np.asarray(np.mean(np.abs(np.asarray(Y, dtype=np.float64) - total) <= k * std, axis=0))
+
     def learn_one(self, x: Any, y: Any) -> None:
         """Refuse: a served model is frozen."""
         raise TypeError("a served model does not learn: evaluate it frozen")

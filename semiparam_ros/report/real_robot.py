@@ -146,6 +146,9 @@ class RealRobotComparison:
         injected: The external-torque measurement, or ``None`` if not run.
         horizons: Every model's error by the age of the model (:mod:`semiparam_ros.eval.horizon`), or
             ``None`` if not run.
+        excitation: What the training data excited (:func:`excitation_summary`).
+        coverage: Per learner, the fraction of the test log's errors within ±2σ of its served model
+            frozen (``load_model(...).predict``), per joint.
     """
 
     report: ProtocolReport
@@ -155,6 +158,7 @@ class RealRobotComparison:
     injected: InjectedTorque | None
     horizons: HorizonReport | None = None
     excitation: dict[str, Any] | None = None
+    coverage: dict[str, list[float]] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form."""
@@ -166,6 +170,7 @@ class RealRobotComparison:
             "injected": None if self.injected is None else dict(self.injected.__dict__),
             "horizons": None if self.horizons is None else self.horizons.to_json(),
             "excitation": self.excitation,
+            "coverage": self.coverage,
         }
 
 
@@ -327,8 +332,9 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
                                     components=joints,
                                     frozen_models={k: models[k + FROZEN_SUFFIX] for k in LEARNERS})
     std = dict(zip(joints, (float(s) for s in test.Y.std(axis=0)), strict=True))
+    coverage = {k: [float(c) for c in models[k + FROZEN_SUFFIX].coverage(test.X, test.Y)] for k in LEARNERS}
     return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected, horizon,
-                               excitation_summary(config, models["SP"], test))
+                               excitation_summary(config, models["SP"], test), coverage)
 
 
 def excitation_summary(config: EstimatorConfig, model: Any, test: SampleArrays) -> dict[str, Any]:
@@ -438,6 +444,10 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
         )
     if comparison.horizons is not None:
         text += "\nBy the age of the model [N·m]. " + horizon_markdown(comparison.horizons)
+    if comparison.coverage is not None:
+        text += ("\nServed frozen (`load_model(...).predict`): fraction of the test errors within ±2σ\n\n"
+                 + head + "".join(_row(k, [*v, float(np.mean(v))], ".3f") + "\n"
+                                  for k, v in comparison.coverage.items()))
     exc = comparison.excitation
     if exc is not None:
         weakest = exc["least_excited"][0]
