@@ -221,10 +221,14 @@ class OnlineEstimator:
                 model.learn_ahead_checked(ahead, y)
                 self.n_samples_learned += 1
         else:
-            # gate off: exactly the paper's predict-then-learn (bit-identical predictions)
+            # gate off: exactly the paper's predict-then-learn (bit-identical predictions); the consistent
+            # SP's predict-then-learn is the a-priori prediction above, then learning it
             learned = self.learning_enabled
             if learned:
-                prediction = model.predict_learn_one(x, y)
+                if isinstance(model, ConsistentSemiparametricModel):
+                    model.learn_ahead_checked(ahead, y)
+                else:
+                    prediction = model.predict_learn_one(x, y)
                 self.n_samples_learned += 1
             std = self.noise.std(variance)
             error = y - prediction.total

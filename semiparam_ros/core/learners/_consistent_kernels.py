@@ -2,13 +2,10 @@
 
 Besides its two factor sweeps, a step of
 :class:`~semiparam_ros.core.learners.consistent.ConsistentSemiparametricModel` is a few dozen operations
-on t-vectors (t ≈ 6 outputs): the residual of the current parameters and its weight, the fast
-correction's weight, the tracker's smoothers. In numpy each is a ufunc call of about a microsecond; these
-kernels do the same arithmetic in one call each. Element-wise operations are done in the same order as
-the numpy expressions of the formulas (no ``fastmath``); the one sum, ``Σ_e P_e δ_{c(e)}`` of the
-residual, is accumulated in the order of the regressor's entries rather than by a BLAS product, so it
-agrees with numpy to rounding (``|Σ| ≤ n·ε·Σ|P_e δ_{c(e)}|``), not bit for bit. The tests compare every
-kernel with a numpy implementation of its formula.
+on t-vectors (t ≈ 6 outputs): the residual's weight, the fast correction's weight, the tracker's
+smoothers. In numpy each is a ufunc call of about a microsecond; these kernels do the same arithmetic in
+one call each. Element-wise operations are done in the same order as the numpy expressions of the
+formulas (no ``fastmath``). The tests compare every kernel with a numpy implementation of its formula.
 """
 
 from __future__ import annotations
@@ -23,38 +20,26 @@ __all__ = [
 
 
 @njit(cache=True, nogil=True)
-def weighted_residual(pk: np.ndarray, t: int, rows: np.ndarray, cols: np.ndarray, delta: np.ndarray,
-                      s2: np.ndarray, spread: np.ndarray, lam: float, v: float, raw: np.ndarray,
+def weighted_residual(raw: np.ndarray, s2: np.ndarray, spread: np.ndarray, lam: float, v: float,
                       out: np.ndarray) -> None:
-    """Write the consistent residual of parameters δ and its weight into ``raw`` and ``out`` (t,).
+    """Write the residual r weighted per output into ``out`` (t,): ``out_k = g_k r_k``.
 
-    ``raw_k = p_k − Σ_{e: rows_e = k} p_{t+e} δ_{cols_e}`` (p the residual learner's prediction: the t
-    outputs, then the regressor's learned entries e at (rows_e, cols_e)), and ``out_k = g_k raw_k`` with
     ``g_k = S_k / (S_k + spread_k v)``, ``S_k = s2_k · clip(1 − λv, 0, 1)`` (1 where the denominator is 0).
 
     Args:
-        pk: (t + E,) the residual learner's prediction at x.
-        t: Number of outputs.
-        rows: (E,) output row of each learned regressor entry.
-        cols: (E,) parameter column of each learned entry.
-        delta: (p,) the rigid-body parameters' deviation from the prior.
+        raw: (t,) the residual r before its weight.
         s2: (t,) the rigid-body part's recent systematic error variance.
         spread: (t,) the residual's noise variance over the novelty scale.
         lam: λ of the residual learner.
         v: The residual's relative predictive variance at x (≥ 0).
-        raw: (t,) output, the residual before its weight.
         out: (t,) output, the weighted residual.
     """
-    for k in range(t):
-        raw[k] = pk[k]
-    for e in range(rows.shape[0]):
-        raw[rows[e]] -= pk[t + e] * delta[cols[e]]
     keep = 1.0 - lam * v
     if keep < 0.0:
         keep = 0.0
     elif keep > 1.0:
         keep = 1.0
-    for k in range(t):
+    for k in range(raw.shape[0]):
         signal = s2[k] * keep
         total = signal + spread[k] * v
         g = signal / total if total > 0.0 else 1.0

@@ -86,6 +86,7 @@ import math
 from typing import Any
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 from semiparam_ros.core.learners._consistent_kernels import (
     fast_total,
@@ -413,7 +414,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._phi_entries = structural_entries(regressor, int(n_inputs), t, p)
         self._entry_rows = self._phi_entries // p  # output row and parameter column of each entry
         self._entry_cols = self._phi_entries % p
-        self.nonparametric = NonparametricModel(int(n_inputs), t + self._phi_entries.size,
+        self.nonparametric = NonparametricModel(int(n_inputs), t,
                                                 n_features=n_features,
                                                 sigma=sigma, lam=lam_nonparametric,
                                                 forgetting=forgetting_nonparametric, seed=seed,
@@ -435,6 +436,16 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._raw: np.ndarray | None = None  # r, before its weight, of the last full prediction
         self._fast_candidate = np.zeros(t)   # κ_f Φδ_f of the last full prediction
         self._rigid: np.ndarray | None = None  # the rigid-body parameters predicted with (None: learned)
+        # the residual learner regresses y − Φθ_ref for the reference θ_ref the model predicts with; the
+        # cross-products of its features with the learned regressor entries re-reference it exactly
+        self._reference = self.parametric.prior.copy()   # θ_ref (learner units)
+        self._entries_rhs = np.zeros((self.nonparametric.rls.n_features, self._phi_entries.size))
+        self._pending_phi = np.empty((self.PENDING_ROWS, self.nonparametric.rls.n_features))
+        self._pending_entries = np.empty((self.PENDING_ROWS, self._phi_entries.size))
+        self._pending_beta = np.empty(self.PENDING_ROWS)
+        self._n_pending = 0
+        self._since_reference = 0  # learned samples since θ_ref last followed π̂
+        self._reference_samples = self._reference_count(sample_period_s)
         self._recent_beta = self._scale_forgetting(sample_period_s)
         self._corr_beta = self._correlation_forgetting(sample_period_s)
         self._reset_scales()
@@ -469,6 +480,74 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         samples = max(self.SCALE_TIME_CONSTANT / float(sample_period_s), float(self.SCALE_MIN_SAMPLES))
         return forgetting_factor(samples, 1.0)
 
+    #: Learned samples whose regressor entries are added to their cross-products with the features in one
+    #: matrix product (BLAS 3) instead of one rank-1 update each.
+    PENDING_ROWS = 32
+
+    #: Without a rigid body set by :meth:`use_rigid`, the reference θ_ref follows the learned π̂ every this
+    #: many seconds of learned samples (at least :attr:`REFERENCE_MIN_SAMPLES`; at first after 1, 2, 4, …
+    #: samples): the model's rigid part and its residual are those of π̂ at most that old (one triangular
+    #: solve with t right-hand sides each time, instead of regressing every regressor entry at every
+    #: sample).
+    REFERENCE_PERIOD = 0.1
+    REFERENCE_MIN_SAMPLES = 50
+
+    def _reference_count(self, sample_period_s: float) -> int:
+        """Learned samples between two re-references: max(REFERENCE_PERIOD/T, REFERENCE_MIN_SAMPLES)."""
+        return max(round(self.REFERENCE_PERIOD / float(sample_period_s)), self.REFERENCE_MIN_SAMPLES)
+
+    def _flush_entries(self) -> None:
+        """Add the pending rows to ``B_E = Σ_m β^{n−m} φ_m Φ_E,mᵀ`` (one matrix product)."""
+        k = self._n_pending
+        if k == 0:
+            return
+        beta = self._pending_beta[:k]
+        weights = np.ones(k)  # row m enters with Π_{j>m} β_j; B_E is scaled by Π_j β_j
+        if k > 1:
+            weights[:-1] = np.cumprod(beta[:0:-1])[::-1]
+        scale = float(weights[0] * beta[0])
+        if scale != 1.0:
+            self._entries_rhs *= scale
+        phi = self._pending_phi[:k]
+        if k > 1 and not np.all(weights == 1.0):
+            phi = phi * weights[:, None]
+        self._entries_rhs += phi.T @ self._pending_entries[:k]
+        self._n_pending = 0
+
+    def _learned_parameters(self) -> np.ndarray:
+        """π̂ = π₀ + δ̂, the rigid-body learner's parameters (learner units)."""
+        par_model = self.parametric
+        return np.asarray(par_model.prior + par_model.rls.weights[:, 0])
+
+    def _rereference(self, theta: np.ndarray) -> None:
+        """Make θ the reference: the residual learner becomes exactly the one that learned ``y − Φθ``.
+
+        Its right-hand side changes by ``−Σ_m β^{n−m} φ_m (Φ_m (θ − θ_ref))ᵀ = −B_E S`` (S scattering θ −
+        θ_ref over the learned entries): ``d ← d − R⁻ᵀ B_E S``, one triangular solve with t right-hand
+        sides (:meth:`RecursiveRLS.shift_rhs`).
+        """
+        change = theta - self._reference
+        if self._scale_weight > 0.0 and self._phi_entries.size and np.any(change != 0.0):
+            self._flush_entries()
+            scatter = np.zeros((self._phi_entries.size, self.n_outputs))
+            scatter[np.arange(self._phi_entries.size), self._entry_rows] = change[self._entry_cols]
+            self.nonparametric.rls.shift_rhs(self._entries_rhs @ scatter)
+        self._reference = np.array(theta, dtype=np.float64)
+        self._since_reference = 0
+        self._held = None
+
+    def _entries_residual(self, phi: np.ndarray, change: np.ndarray) -> np.ndarray:
+        """``Σ_e (φA⁻¹B_E)_e change_{c(e)}`` per output row (N, t): what other parameters take off r."""
+        rls = self.nonparametric.rls
+        self._flush_entries()
+        R = rls.R
+        a = solve_triangular(R, solve_triangular(R, phi.T, trans="T", lower=False, check_finite=False),
+                             lower=False, check_finite=False)  # A⁻¹φᵀ (D, N)
+        pe = (a.T @ self._entries_rhs) * change[self._entry_cols]  # (N, E)
+        out = np.zeros((phi.shape[0], self.n_outputs))
+        np.add.at(out.T, self._entry_rows, pe.T)
+        return out
+
     #: Window [s] of the smoothed error that measures how long the residual's errors stay correlated (at
     #: least :attr:`SCALE_MIN_SAMPLES` samples): a correlation longer than it counts as this long.
     CORRELATION_WINDOW = 1.0
@@ -497,6 +576,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self.fast.set_forgetting(self._fast_forgetting(sample_period_s))
         self._recent_beta = self._scale_forgetting(sample_period_s)
         self._corr_beta = self._correlation_forgetting(sample_period_s)
+        self._reference_samples = self._reference_count(sample_period_s)
         return beta
 
     # ------------------------------------------------------------------ prediction
@@ -511,13 +591,10 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         of the online prediction's.
         """
         par_model, npm = self.parametric, self.nonparametric
-        yp, var = par_model.predict_phi(Phi, True)
+        var = par_model.predict_phi(Phi, True)[1]
         assert var is not None  # asked for
-        own = rigid is None  # the model's own rigid part: the learned one, or the one set by use_rigid
-        if own:
-            rigid = self._rigid
-        if rigid is not None:
-            yp = Phi @ rigid
+        own = rigid is None  # the model's own rigid part: the reference θ_ref (see use_rigid)
+        yp = Phi @ (self._reference if rigid is None else rigid)
         if held and self._held is not None:
             r_held, v_held = self._held
             return yp, r_held.copy(), var + v_held, None
@@ -528,11 +605,10 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         phi = npm.features_of(xv)
         P, v = npm.rls.predict_checked(phi, True)
         assert v is not None  # asked for
-        delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
+        raw = P[0] if rigid is None else P[0] - self._entries_residual(phi, rigid - self._reference)[0]
         s2, spread = self._weight_scales()
-        raw, r = np.empty(t), np.empty(t)
-        weighted_residual(P[0], t, self._entry_rows, self._entry_cols, np.ascontiguousarray(delta), s2,
-                          spread, npm.rls.lam, float(v[0]), raw, r)
+        r = np.empty(t)
+        weighted_residual(raw, s2, spread, npm.rls.lam, float(v[0]), r)
         self._raw = raw
         if own:
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
@@ -783,7 +859,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """
         checked = self._checked_rigid(rigid)
         self._rigid = None if checked is None else checked.copy()
-        self._held = None
+        self._rereference(self._learned_parameters() if checked is None else checked)
 
     @property
     def rigid_override(self) -> np.ndarray | None:
@@ -819,23 +895,16 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         X2 = check_finite_array("X", X, (None, self.n_inputs))
         par_model, npm = self.parametric, self.nonparametric
         Phi = par_model.phi_rows(X2)
-        yp, var = par_model.predict_phi_rows(Phi)
+        var = par_model.predict_phi_rows(Phi)[1]
         rigid = self._checked_rigid(rigid)
-        if rigid is None:
-            rigid = self._rigid
-        if rigid is not None:
-            yp = Phi @ rigid
+        yp = Phi @ (self._reference if rigid is None else rigid)
         r = np.zeros_like(yp)
         if npm.standardizer.ready:
-            n, t, p = Phi.shape
             phi = np.ascontiguousarray(npm.rff.map_checked(npm.standardizer.apply_checked(X2)))
             P, v = npm.rls.predict_checked(phi, True)
             assert v is not None  # asked for
-            delta = par_model.rls.weights[:, 0] if rigid is None else rigid - par_model.prior
-            full = np.zeros((n, t * p))
-            full[:, self._phi_entries] = P[:, t:]
-            r = P[:, :t] - full.reshape(n, t, p) @ delta
-            r *= self.residual_weight(v)
+            r = P if rigid is None else P - self._entries_residual(phi, rigid - self._reference)
+            r = r * self.residual_weight(v)
             var = var + self.model_variance(v)
         return Prediction(yp, r, yp + r, var)
 
@@ -869,10 +938,19 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             npm.standardizer.partial_fit(xv)
             par_model.rls.defer_step(par_step)
         else:
-            u = np.concatenate([target, Phi.reshape(-1)[self._phi_entries]]).reshape(1, -1)
-            np_step = RecursiveRLS.checked_step(phi, u, owned=True)
+            # the residual learns y − Φθ_ref; its features' cross-products with the regressor's entries
+            # are kept to re-reference it (_rereference)
+            np_step = RecursiveRLS.checked_step(phi, (yv - Phi @ self._reference).reshape(1, -1), owned=True)
             par_model.rls.defer_step(par_step)
+            beta_np = npm.rls.forgetting
             npm.rls.defer_step(np_step)
+            if self._n_pending == self.PENDING_ROWS:
+                self._flush_entries()
+            k = self._n_pending
+            self._pending_phi[k] = phi[0]
+            self._pending_entries[k] = Phi.reshape(-1)[self._phi_entries]
+            self._pending_beta[k] = beta_np
+            self._n_pending = k + 1
             assert ctx.raw_residual is not None  # computed with φ
             beta = npm.rls.forgetting
             self._scale_weight = beta * self._scale_weight + 1.0
@@ -893,6 +971,11 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         par_model.n_samples_seen += 1
         npm.n_samples_seen += 1
         self.n_samples_seen += 1
+        self._since_reference += 1
+        # the reference follows π̂: every sample while the residual has learned nothing (free then), then
+        # after 1, 2, 4, … learned samples (π̂ moves most at first), then every REFERENCE_PERIOD
+        if self._rigid is None and self._since_reference >= min(self._reference_samples, self._recent_n):
+            self._rereference(self._learned_parameters())
 
     def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
         """Predict x a priori (all parts), then learn (x, y); the prediction when asked for."""
@@ -912,11 +995,18 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._raw = None
         self._rigid = None  # a projection of what was forgotten
         self._reset_scales()
+        self._entries_rhs[:] = 0.0
+        self._n_pending = 0
+        self._reference = self.parametric.prior.copy()
+        self._since_reference = 0
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the learners' and the tracker's state as arrays."""
         state = super().state_dict(prefix)
         state[f"{prefix}phi_entries"] = self._phi_entries.copy()
+        self._flush_entries()
+        state[f"{prefix}entries_rhs"] = self._entries_rhs.copy()
+        state[f"{prefix}reference"] = np.concatenate([self._reference, [self._since_reference]])
         state.update(self.tracker.state_dict(f"{prefix}tracker."))
         state.update(self.fast.state_dict(f"{prefix}fast."))
         state[f"{prefix}scales"] = np.concatenate([[self._scale_weight, self._recent_n, self._fast_n],
@@ -956,8 +1046,22 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                 or bool((scales[:3 + 2 * t] < 0.0).any()) or bool((scales[3 + 3 * t:3 + 4 * t] < 0.0).any())
                 or bool((scales[3 + 5 * t:] < 0.0).any())):
             raise CheckpointError("the residual's error scales have the wrong size or invalid values")
+        state, converted = self._current_layout(state, prefix)
+        D, E, p = self.nonparametric.rls.n_features, self._phi_entries.size, self.n_params
+        try:
+            entries_rhs = np.asarray(state[f"{prefix}entries_rhs"], dtype=np.float64)
+            reference = np.asarray(state[f"{prefix}reference"], dtype=np.float64)
+        except KeyError as err:
+            raise CheckpointError(f"state is missing key {err}") from err
+        if (entries_rhs.shape != (D, E) or reference.shape != (p + 1,) or not np.isfinite(entries_rhs).all()
+                or not np.isfinite(reference).all() or reference[-1] < 0.0):
+            raise CheckpointError("the residual's reference or its regressor cross-products have the wrong "
+                                  "size or invalid values")
         super().load_state_dict(state, prefix)
         self.tracker, self.fast = tracker, fast
+        self._entries_rhs = np.ascontiguousarray(entries_rhs).copy()
+        self._n_pending = 0
+        self._reference, self._since_reference = reference[:p].copy(), int(reference[-1])
         self._held = None
         self._raw = None
         self._rigid = None  # the projection of the loaded state is solved again
@@ -966,3 +1070,34 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._fast_errors = scales[3 + 2 * t:3 + 4 * t].reshape(2, t).copy()
         self._corr = scales[3 + 4 * t:].reshape(2, t).copy()
         self._weight_cache = self._fast_mask = None
+        if converted:  # it predicted with the learned parameters: so does this one
+            self._rereference(self._learned_parameters())
+
+    def _current_layout(self, state: dict[str, np.ndarray], prefix: str
+                        ) -> tuple[dict[str, np.ndarray], bool]:
+        """Convert a state written when the residual regressed every learned regressor entry.
+
+        Its learner held ``d = R⁻ᵀ[B_y | B_E]`` for the targets ``[y − Φπ₀, Φ_E]``: the residual of the
+        reference π₀ is ``[R | d_y]`` and the cross-products are ``B_E = Rᵀ d_E`` (exact). Returns the
+        state unchanged (and False) when it is already in today's layout.
+        """
+        key = f"{prefix}nonparametric.rls."
+        t, E = self.n_outputs, self._phi_entries.size
+        try:
+            n_out = int(state[f"{key}n_outputs"])
+        except KeyError:
+            return state, False  # the learners' own checks name what is missing
+        if n_out != t + E or f"{prefix}entries_rhs" in state:
+            return state, False
+        M = np.asarray(state[f"{key}M"], dtype=np.float64)
+        D = M.shape[0]
+        if M.shape != (D, D + t + E) or not np.isfinite(M).all():
+            raise CheckpointError("the residual learner's state has the wrong size or invalid values")
+        R = np.triu(M[:, :D])
+        new = dict(state)
+        new[f"{key}M"] = np.ascontiguousarray(M[:, :D + t])
+        new[f"{key}n_outputs"] = np.array(t)
+        new[f"{prefix}entries_rhs"] = R.T @ M[:, D + t:]
+        prior = np.asarray(state.get(f"{prefix}parametric.prior", self.parametric.prior), dtype=np.float64)
+        new[f"{prefix}reference"] = np.concatenate([prior.reshape(-1), [0.0]])
+        return new, True

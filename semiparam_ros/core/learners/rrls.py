@@ -233,6 +233,37 @@ class RecursiveRLS:
             self._W = W
         return self._W
 
+    def shift_rhs(self, G: Any) -> None:
+        """Subtract G from the right-hand side ``B = Σ_m β^{n−m} Z_mᵀU_m``: ``d ← d − R⁻ᵀG`` (O(b²t)).
+
+        The learner is then the one that learned targets changed by ΔU_m with ``Σ_m β^{n−m} Z_mᵀΔU_m = −G``
+        (the factor is unchanged): e.g. targets ``y − Φθ`` of a new reference θ, given the cross-products
+        of the features with Φ. One triangular solve with t right-hand sides.
+
+        Args:
+            G: (b, t) in units of Z·U.
+
+        Raises:
+            RejectedSampleError: A wrong shape or a non-finite value (the learner is unchanged).
+
+        Example:
+            >>> import numpy as np
+            >>> rls = RecursiveRLS(n_features=2, n_outputs=1, lam=1e-9)
+            >>> Z = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+            >>> rls.update(Z, np.ones((3, 1)))
+            >>> rls.shift_rhs(Z.T @ np.ones((3, 1)))  # as if the targets had been 0
+            >>> np.round(rls.weights.ravel(), 9) + 0.0
+            array([0., 0.])
+        """
+        G2 = np.asarray(G, dtype=np.float64)
+        if G2.shape != (self.n_features, self.n_outputs) or not np.isfinite(G2).all():
+            raise RejectedSampleError(f"G must be ({self.n_features}, {self.n_outputs}) finite values, "
+                                      f"got shape {G2.shape}")
+        self._flush()
+        b = self.n_features
+        self._M[:, b:] -= solve_triangular(self._M[:, :b], G2, trans="T", lower=False, check_finite=False)
+        self._W = None
+
     def condition_number(self) -> float:
         """``cond₂(R)`` (= √cond(A)), from the singular values of R (O(b³): diagnostics only)."""
         self._flush()

@@ -43,32 +43,41 @@ def model(**kw) -> ConsistentSemiparametricModel:
 
 
 def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
-    """After learning, the residual is the closed-form ridge fit, on the features, of y − Φπ̂ with the
-    *final* π̂ over all samples (never of stale targets), times its weight
-    g = s²(1 − ν)/(s²(1 − ν) + σ²v/ν₀) per output (v = φA⁻¹φᵀ, ν = λv). σ² and s² are recomputed here
-    from the a-priori errors: σ² the mean of (y − ŷ_P − r)², r the ridge fit of the samples before with
-    the parameters of that time, s² the recent mean of (y − ŷ_P)² (memory 1 s at the provisional 100 Hz,
-    i.e. 100 samples) minus σ². Every solve is of a
-    λ = 0.1 system of condition ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
+    """At every sample the model predicts with its reference θ_ref (π̂ as it was at the last re-reference:
+    after 1, 2, 4, … learned samples, then every 50), and its residual is the closed-form ridge fit, on the features, of y − Φθ_ref
+    over *all* the samples before (never of the stale targets it learned with other references), times its
+    weight g = s²(1 − ν)/(s²(1 − ν) + σ²v/ν₀) per output (v = φA⁻¹φᵀ, ν = λv). σ² and s² are recomputed
+    here from the a-priori errors: σ² the mean of (y − ŷ_P − r)², s² the recent mean of (y − ŷ_P)² (memory
+    1 s at the provisional 100 Hz, i.e. 100 samples) minus σ². After learning, the residual of the final
+    π̂ (given explicitly, or made the reference by ``use_rigid(None)``) is the ridge fit of y − Φπ̂. Every
+    solve is of a λ = 0.1 system of condition ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
     m = model()
+    assert m._reference_samples == 50  # max(0.1 s / 10 ms, REFERENCE_MIN_SAMPLES)
     X, Y = data(400, 0)
     Z = np.array([m.nonparametric.features_of(x)[0] for x in X])
     noise_sum, recent = np.zeros(2), np.zeros(2)
     beta = math.exp(-1.0 / 100.0)
+    reference, since = np.zeros(3), 0  # the prior
+    A0 = 0.1 * np.eye(Z.shape[1])
     for i, (x, y) in enumerate(zip(X, Y, strict=True)):
-        pi_before = m.parametric.parameters
-        rigid = regressor(x) @ pi_before
+        rigid = regressor(x) @ reference
         if i:
-            targets = Y[:i] - np.array([regressor(xk) @ pi_before for xk in X[:i]])
-            A = Z[:i].T @ Z[:i] + 0.1 * np.eye(Z.shape[1])
-            r = Z[i] @ np.linalg.solve(A, Z[:i].T @ targets)
+            targets = Y[:i] - np.array([regressor(xk) @ reference for xk in X[:i]])
+            r = Z[i] @ np.linalg.solve(Z[:i].T @ Z[:i] + A0, Z[:i].T @ targets)
+            pred = m.predict_one(x, return_variance=True)
+            raw = m._raw
+            np.testing.assert_allclose(raw, r, rtol=1e-9, atol=1e-12)
         else:
             r = np.zeros(2)
-        np.testing.assert_allclose(m.predict_one(x).parametric, rigid, rtol=1e-12, atol=1e-12)
+            pred = m.predict_one(x, return_variance=True)
+        np.testing.assert_allclose(pred.parametric, rigid, rtol=1e-12, atol=1e-12)
         noise_sum += (y - rigid - r) ** 2
         a = max(1.0 / (i + 1), 1.0 - beta)
         recent += a * ((y - rigid) ** 2 - recent)
         m.learn_one(x, y)
+        since += 1
+        if since >= min(50, i + 1):  # after 1, 2, 4, … 32 learned samples, then every 50
+            reference, since = m.parametric.parameters, 0
     sigma2 = noise_sum / len(X)
     s2 = np.maximum(recent - sigma2, 0.0)
     got_s2, got_sigma2 = m.error_scales()
@@ -76,16 +85,24 @@ def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     np.testing.assert_allclose(got_s2, s2, rtol=1e-8)
     pi = m.parametric.parameters
     targets = Y - np.array([regressor(x) @ pi for x in X])
-    A = Z.T @ Z + 0.1 * np.eye(Z.shape[1])
+    A = Z.T @ Z + A0
     W = np.linalg.solve(A, Z.T @ targets)
     Xt, _ = data(50, 1)
-    for x in Xt:
+
+    def want(x: np.ndarray) -> np.ndarray:
         z = m.nonparametric.features_of(x)[0]
         v = z @ np.linalg.solve(A, z)
         signal = s2 * max(0.0, 1.0 - 0.1 * v)  # s² times the explained fraction 1 − ν, ν = λv
-        want = signal / (signal + sigma2 * v / 0.05) * (z @ W)
+        return signal / (signal + sigma2 * v / 0.05) * (z @ W)
+
+    explicit = m.predict_model_many(Xt, rigid=pi)
+    for k, x in enumerate(Xt):
+        np.testing.assert_allclose(m.predict_model(x, rigid=pi).residual, want(x), rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(explicit.residual[k], want(x), rtol=1e-8, atol=1e-10)
+    m.use_rigid(None)  # the reference follows the learned π̂ now
+    for x in Xt:
         pred = m.predict_one(x)
-        np.testing.assert_allclose(pred.residual, want, rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(pred.residual, want(x), rtol=1e-8, atol=1e-10)
         np.testing.assert_allclose(pred.parametric, regressor(x) @ pi, rtol=1e-12)
         np.testing.assert_allclose(pred.total, pred.parametric + pred.residual, rtol=1e-15)
 
@@ -260,10 +277,10 @@ def test_residual_keeps_only_the_regressor_entries_that_are_not_zero(monkeypatch
                 standardizer=STD, novelty_scale=0.05, tracker=True)
     reduced = ConsistentSemiparametricModel(sparse_regressor, 3, 6, 2, **args)
     np.testing.assert_array_equal(reduced._phi_entries, [0, 1, 4, 5])
-    assert reduced.nonparametric.n_outputs == 2 + 4
+    assert reduced.nonparametric.n_outputs == 2 and reduced._entries_rhs.shape == (60, 4)
     monkeypatch.setattr(mod, "structural_entries", lambda reg, n_in, t, p, samples=8: np.arange(t * p))
     full = ConsistentSemiparametricModel(sparse_regressor, 3, 6, 2, **args)
-    assert full.nonparametric.n_outputs == 2 + 6
+    assert full._entries_rhs.shape == (60, 6)
     X, Y = data(300, 5)
     for x, y in zip(X, Y, strict=True):
         a, b = reduced.predict_learn_one(x, y), full.predict_learn_one(x, y)
@@ -284,6 +301,7 @@ def test_predicting_with_other_rigid_parameters_moves_the_residual_with_them():
     own = m.parametric.parameters
     other = own + np.array([0.3, -0.2, 0.1])
     Xt, _ = data(10, 8)
+    m.use_rigid(None)  # the reference: the learned parameters as they are now
     for x in Xt:
         base = m.predict_model(x)
         same = m.predict_model(x, own)
@@ -308,6 +326,7 @@ def test_a_rigid_body_set_by_use_rigid_is_the_one_every_prediction_uses():
     X, Y = data(300, 11)
     for x, y in zip(X, Y, strict=True):
         m.learn_one(x, y)
+    m.use_rigid(None)  # the reference: the learned parameters as they are now
     other = m.parametric.parameters + np.array([0.3, -0.2, 0.1])
     Xt, _ = data(6, 12)
     explicit = [m.predict_model(x, other) for x in Xt]
@@ -382,7 +401,7 @@ def test_the_model_alone_is_as_uncertain_as_its_residual_is_unsure_and_correlate
         m.learn_one(x, y)
     s2, noise = m.error_scales()
     c = m.correlation_samples()
-    assert np.all(noise > 0) and s2[0] > noise[0] and np.all(c >= 1.0)
+    assert np.all(noise > 0) and s2[0] > 0.0 and np.all(c >= 1.0)
     npm, lam = m.nonparametric, m.nonparametric.rls.lam
     for x in (np.zeros(6), np.full(6, 1.2), np.full(6, 8.0)):
         v = npm.rls.predict_checked(npm.features_of(x), True)[1][0]
@@ -394,7 +413,7 @@ def test_the_model_alone_is_as_uncertain_as_its_residual_is_unsure_and_correlate
         np.testing.assert_allclose(m.predict_one(x, return_variance=True).variance, var_p + v, rtol=1e-12)
     far = m.model_variance(npm.rls.predict_checked(npm.features_of(np.full(6, 8.0)), True)[1][0])
     inside = m.model_variance(npm.rls.predict_checked(npm.features_of(np.zeros(6)), True)[1][0])
-    assert inside[0] < 0.1 * far[0]  # the data explain the error inside; far away the model abstains
+    assert inside[0] < 0.2 * far[0]  # the data explain the error inside; far away the model abstains
 
 
 def test_a_checkpoint_without_correlation_statistics_loads_with_none():
