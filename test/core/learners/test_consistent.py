@@ -44,13 +44,14 @@ def model(**kw) -> ConsistentSemiparametricModel:
 
 def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     """At every sample the model predicts with its reference θ_ref (π̂ as it was at the last re-reference:
-    after 1, 2, 4, … learned samples, then every 50), and its residual is the closed-form ridge fit, on the features, of y − Φθ_ref
-    over *all* the samples before (never of the stale targets it learned with other references), times its
-    weight g = s²(1 − ν)/(s²(1 − ν) + σ²v/ν₀) per output (v = φA⁻¹φᵀ, ν = λv). σ² and s² are recomputed
-    here from the a-priori errors: σ² the mean of (y − ŷ_P − r)², s² the recent mean of (y − ŷ_P)² (memory
-    1 s at the provisional 100 Hz, i.e. 100 samples) minus σ². After learning, the residual of the final
-    π̂ (given explicitly, or made the reference by ``use_rigid(None)``) is the ridge fit of y − Φπ̂. Every
-    solve is of a λ = 0.1 system of condition ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
+    after 1, 2, 4, … learned samples, then every 50), and its residual is the closed-form ridge fit, on
+    the features, of y − Φθ_ref over *all* the samples before (never of the stale targets it learned with
+    other references), times its weight g = s²(1 − ν)/(s²(1 − ν) + σ²v/ν₀) per output (v = φA⁻¹φᵀ,
+    ν = λv). σ² and s² are recomputed here from the a-priori errors: σ² the mean of (y − ŷ_P − r)², s² the
+    recent mean of (y − ŷ_P)² (memory 1 s at the provisional 100 Hz, i.e. 100 samples) minus σ². After
+    learning, the residual of the final π̂ (given explicitly, or made the reference by
+    ``use_rigid(None)``) is the ridge fit of y − Φπ̂. Every solve is of a λ = 0.1 system of condition
+    ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
     m = model()
     assert m._reference_samples == 50  # max(0.1 s / 10 ms, REFERENCE_MIN_SAMPLES)
     X, Y = data(400, 0)
@@ -431,3 +432,37 @@ def test_a_checkpoint_without_correlation_statistics_loads_with_none():
     state["scales"] = np.concatenate([state["scales"], [0.0, 0.0, -1.0, 0.0]])  # a negative Σβm²
     with pytest.raises(CheckpointError):
         model().load_state_dict(state)
+
+
+def test_a_checkpoint_that_regressed_every_regressor_entry_is_converted_exactly():
+    """Before the reference, the residual learner regressed ``[y − Φπ₀, Φ_E]`` (``d = R⁻ᵀ[B_y | B_E]``).
+    Such a state, built here from a trained model's factor and cross-products, loads into today's layout
+    and predicts what the trained model predicts with the learned parameters as its reference."""
+    from scipy.linalg import solve_triangular
+
+    m = model(tracker=True)
+    X, Y = data(300, 13)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    state = m.state_dict()
+    R = m.nonparametric.rls.R
+    C = m.nonparametric.rls.d
+    B_E = m._entries_rhs
+    change = m._reference - m.parametric.prior
+    scatter = np.zeros((B_E.shape[1], 2))
+    scatter[np.arange(B_E.shape[1]), m._entry_rows] = change[m._entry_cols]
+    d_y = C + solve_triangular(R, B_E @ scatter, trans="T")  # the residual of y − Φπ₀
+    d_E = solve_triangular(R, B_E, trans="T")
+    old = {k: v for k, v in state.items() if k not in ("entries_rhs", "reference")}
+    old["nonparametric.rls.M"] = np.concatenate([R, d_y, d_E], axis=1)
+    old["nonparametric.rls.n_outputs"] = np.array(2 + B_E.shape[1])
+    loaded = model(tracker=True)
+    loaded.load_state_dict(old)
+    m.use_rigid(None)  # the trained model with the learned parameters as its reference
+    Xt, _ = data(10, 14)
+    np.testing.assert_allclose(loaded.predict_model_many(Xt).total, m.predict_model_many(Xt).total,
+                               rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(loaded._entries_rhs, B_E, rtol=1e-9, atol=1e-12)
+    old["nonparametric.rls.M"] = old["nonparametric.rls.M"][:, :-1]  # a damaged one is refused
+    with pytest.raises(CheckpointError):
+        model(tracker=True).load_state_dict(old)

@@ -415,3 +415,25 @@ def test_weights_equal_a_lapack_triangular_solve(b, t):
         rls.update(Z, U)
     expect = solve_triangular(np.array(rls.R), np.array(rls.d), lower=False)
     np.testing.assert_allclose(rls.weights, expect, rtol=1e-12, atol=1e-14)
+
+
+def test_shift_rhs_is_learning_the_changed_targets():
+    """Learning targets U with forgetting (prior kept), then ``shift_rhs(Σ_m β^{n−m} Z_mᵀ(U_m − U'_m))``,
+    gives the learner that learned U' (the same factor): the right-hand side's recursion B ← βB + ZᵀU."""
+    rng = np.random.default_rng(5)
+    b, t, beta = 6, 2, 0.97
+    a, c = RecursiveRLS(b, t, 0.1, forgetting=beta), RecursiveRLS(b, t, 0.1, forgetting=beta)
+    G = np.zeros((b, t))
+    for _ in range(40):
+        Z = rng.normal(size=(2, b))
+        U, U2 = rng.normal(size=(2, t)), rng.normal(size=(2, t))
+        a.update(Z, U)
+        c.update(Z, U2)
+        G = beta * G + Z.T @ (U - U2)
+    a.shift_rhs(G)
+    np.testing.assert_allclose(a.weights, c.weights, rtol=1e-10, atol=1e-12)
+    np.testing.assert_array_equal(a.R, c.R)
+    from semiparam_ros.errors import RejectedSampleError
+
+    with pytest.raises(RejectedSampleError):
+        a.shift_rhs(np.full((b, t), np.nan))
