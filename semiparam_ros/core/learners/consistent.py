@@ -482,15 +482,15 @@ class ConsistentSemiparametricModel(_TwoStageModel):
 
     #: Learned samples whose regressor entries are added to their cross-products with the features in one
     #: matrix product (BLAS 3) instead of one rank-1 update each.
-    PENDING_ROWS = 32
+    PENDING_ROWS = 8
 
     #: Without a rigid body set by :meth:`use_rigid`, the reference θ_ref follows the learned π̂ every this
     #: many seconds of learned samples (at least :attr:`REFERENCE_MIN_SAMPLES`; at first after 1, 2, 4, …
     #: samples): the model's rigid part and its residual are those of π̂ at most that old (one triangular
     #: solve with t right-hand sides each time, instead of regressing every regressor entry at every
     #: sample).
-    REFERENCE_PERIOD = 0.1
-    REFERENCE_MIN_SAMPLES = 50
+    REFERENCE_PERIOD = 0.5
+    REFERENCE_MIN_SAMPLES = 10
 
     def _reference_count(self, sample_period_s: float) -> int:
         """Learned samples between two re-references: max(REFERENCE_PERIOD/T, REFERENCE_MIN_SAMPLES)."""

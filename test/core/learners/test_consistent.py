@@ -53,7 +53,7 @@ def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     ``use_rigid(None)``) is the ridge fit of y − Φπ̂. Every solve is of a λ = 0.1 system of condition
     ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
     m = model()
-    assert m._reference_samples == 50  # max(0.1 s / 10 ms, REFERENCE_MIN_SAMPLES)
+    assert m._reference_samples == 50  # max(0.5 s / 10 ms, REFERENCE_MIN_SAMPLES)
     X, Y = data(400, 0)
     Z = np.array([m.nonparametric.features_of(x)[0] for x in X])
     noise_sum, recent = np.zeros(2), np.zeros(2)
