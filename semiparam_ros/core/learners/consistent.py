@@ -498,21 +498,26 @@ class ConsistentSemiparametricModel(_TwoStageModel):
 
     def _flush_entries(self) -> None:
         """Add the pending rows to ``B_E = Σ_m β^{n−m} φ_m Φ_E,mᵀ`` (one matrix product)."""
+        if self._n_pending:
+            self._entries_rhs = self._entries_with_pending()
+            self._n_pending = 0
+
+    def _entries_with_pending(self) -> np.ndarray:
+        """B_E with the pending rows added, without changing the state (reads leave the arithmetic alone)."""
         k = self._n_pending
         if k == 0:
-            return
+            return self._entries_rhs
         beta = self._pending_beta[:k]
         weights = np.ones(k)  # row m enters with Π_{j>m} β_j; B_E is scaled by Π_j β_j
         if k > 1:
             weights[:-1] = np.cumprod(beta[:0:-1])[::-1]
         scale = float(weights[0] * beta[0])
-        if scale != 1.0:
-            self._entries_rhs *= scale
         phi = self._pending_phi[:k]
         if k > 1 and not np.all(weights == 1.0):
             phi = phi * weights[:, None]
-        self._entries_rhs += phi.T @ self._pending_entries[:k]
-        self._n_pending = 0
+        out = self._entries_rhs * scale if scale != 1.0 else self._entries_rhs.copy()
+        out += phi.T @ self._pending_entries[:k]
+        return out
 
     def _learned_parameters(self) -> np.ndarray:
         """π̂ = π₀ + δ̂, the rigid-body learner's parameters (learner units)."""
@@ -534,16 +539,14 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             self.nonparametric.rls.shift_rhs(self._entries_rhs @ scatter)
         self._reference = np.array(theta, dtype=np.float64)
         self._since_reference = 0
-        self._held = None
 
     def _entries_residual(self, phi: np.ndarray, change: np.ndarray) -> np.ndarray:
         """``Σ_e (φA⁻¹B_E)_e change_{c(e)}`` per output row (N, t): what other parameters take off r."""
         rls = self.nonparametric.rls
-        self._flush_entries()
         R = rls.R
         a = solve_triangular(R, solve_triangular(R, phi.T, trans="T", lower=False, check_finite=False),
                              lower=False, check_finite=False)  # A⁻¹φᵀ (D, N)
-        pe = (a.T @ self._entries_rhs) * change[self._entry_cols]  # (N, E)
+        pe = (a.T @ self._entries_with_pending()) * change[self._entry_cols]  # (N, E)
         out = np.zeros((phi.shape[0], self.n_outputs))
         np.add.at(out.T, self._entry_rows, pe.T)
         return out
@@ -860,6 +863,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         checked = self._checked_rigid(rigid)
         self._rigid = None if checked is None else checked.copy()
         self._rereference(self._learned_parameters() if checked is None else checked)
+        self._held = None
 
     @property
     def rigid_override(self) -> np.ndarray | None:
@@ -1004,8 +1008,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """Return the learners' and the tracker's state as arrays."""
         state = super().state_dict(prefix)
         state[f"{prefix}phi_entries"] = self._phi_entries.copy()
-        self._flush_entries()
-        state[f"{prefix}entries_rhs"] = self._entries_rhs.copy()
+        state[f"{prefix}entries_rhs"] = self._entries_with_pending().copy()
         state[f"{prefix}reference"] = np.concatenate([self._reference, [self._since_reference]])
         state.update(self.tracker.state_dict(f"{prefix}tracker."))
         state.update(self.fast.state_dict(f"{prefix}fast."))

@@ -467,8 +467,8 @@ def test_age_counts_the_samples_since_the_newest_learned_one(config, regressor):
 def test_skipped_learning_predicts_with_the_residual_held_and_leaves_the_learned_state(config, regressor):
     """``step(skip_learning=True)``: what a node that falls behind does with a late sample.
 
-    Reference: a second estimator fed only the samples that were learned. The state is the same bit for
-    bit (a held prediction changes nothing); the rigid-body part of a held prediction is the full
+    Reference: a second estimator fed only the samples that were learned. The state is the same to
+    rounding (a held prediction learns nothing); the rigid-body part of a held prediction is the full
     model's; its residual is the one of the last full prediction, which at 100 Hz (a residual moving
     10 ms between samples) is within 10 % of the residual's size of the full prediction.
     """
@@ -497,7 +497,15 @@ def test_skipped_learning_predicts_with_the_residual_held_and_leaves_the_learned
         sizes.append(np.abs(full.residual).max())
     assert est.n_learning_skipped == len(errors) > 100
     assert est.n_samples_learned == ref.n_samples_learned
-    assert_same_state(snapshot(est), snapshot(ref))
+    # the same state to rounding: a held prediction runs the fast correction's deferred rotations before
+    # the next prediction instead of inside it (the same arithmetic in another order, RecursiveRLS)
+    a, b = snapshot(est), snapshot(ref)
+    assert a.keys() == b.keys()
+    for key in a:
+        if a[key].dtype.kind == "f":
+            np.testing.assert_allclose(a[key], b[key], rtol=1e-9, atol=1e-12, err_msg=key)
+        else:
+            assert np.array_equal(a[key], b[key]), key
     assert np.mean(errors) < 0.1 * np.mean(sizes)
 
 
@@ -591,12 +599,22 @@ def test_bad_messages_are_counted_and_do_not_change_learned_state(config, regres
                 injected += 1
     assert injected >= 5 * 14
 
-    # the bad messages changed nothing: same samples, bit-identical predictions and final state
+    # the bad messages changed nothing: same samples, predictions and final state — to rounding, because
+    # this test's own snapshots of the state run the learners' deferred rotations, so the next prediction
+    # is a solve after the update instead of fused with it (RecursiveRLS: the same arithmetic reordered)
     assert len(results) == len(clean_results)
     for a, b in zip(results, clean_results, strict=True):
         assert a.sample.stamp_ns == b.sample.stamp_ns
-        assert_same_prediction(a.prediction, b.prediction)
-    assert_same_state(snapshot(est), snapshot(clean))
+        for part in ("parametric", "residual", "total"):
+            np.testing.assert_allclose(getattr(a.prediction, part), getattr(b.prediction, part),
+                                       rtol=1e-9, atol=1e-12, err_msg=part)
+    final, clean_final = snapshot(est), snapshot(clean)
+    assert final.keys() == clean_final.keys()
+    for key in final:
+        if final[key].dtype.kind == "f":
+            np.testing.assert_allclose(final[key], clean_final[key], rtol=1e-9, atol=1e-12, err_msg=key)
+        else:
+            assert np.array_equal(final[key], clean_final[key]), key
     for reason, count in expected.items():
         assert est.drops[reason] == count
     assert est.drops["acceleration_warmup"] == clean.drops["acceleration_warmup"]
@@ -681,6 +699,7 @@ def test_programming_errors_propagate_and_are_not_counted_as_drops(config, regre
         raise error("injected bug")
 
     monkeypatch.setattr(est.model, "predict_learn_one", buggy)
+    monkeypatch.setattr(est.model, "learn_ahead_checked", buggy)  # how the consistent SP learns
     with pytest.raises(error, match="injected bug"):
         feed(est, msgs[300:310])
     assert est.drops == drops_before and est.n_samples_learned == learned_before
@@ -692,6 +711,7 @@ def test_programming_errors_propagate_and_are_not_counted_as_drops(config, regre
     est = OnlineEstimator(config, regressor=regressor)
     feed(est, msgs[:300])
     monkeypatch.setattr(est.model, "predict_learn_one", rejecting)
+    monkeypatch.setattr(est.model, "learn_ahead_checked", rejecting)
     rejected = feed(est, msgs[300:330])
     n_paired = len(pipeline_samples(config, msgs[:330])) - len(pipeline_samples(config, msgs[:300]))
     assert rejected == [] and n_paired > 0

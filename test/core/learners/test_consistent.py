@@ -447,7 +447,7 @@ def test_a_checkpoint_that_regressed_every_regressor_entry_is_converted_exactly(
     state = m.state_dict()
     R = m.nonparametric.rls.R
     C = m.nonparametric.rls.d
-    B_E = m._entries_rhs
+    B_E = m._entries_with_pending()
     change = m._reference - m.parametric.prior
     scatter = np.zeros((B_E.shape[1], 2))
     scatter[np.arange(B_E.shape[1]), m._entry_rows] = change[m._entry_cols]
