@@ -64,13 +64,22 @@ def test_evaluate_on_a_local_cluster_equals_the_serial_run():
     serial, info_s = evaluate_bags(REPO / "bags" / "icub_xy", REPO / "bags" / "icub_xz", config, **kwargs)
     cluster, info_c = evaluate_bags(REPO / "bags" / "icub_xy", REPO / "bags" / "icub_xz", config,
                                     cluster="local:2", **kwargs)
+    # the same arithmetic, to rounding: the consistent SP's matrix products and triangular solves run in
+    # BLAS, whose blocking and threads may differ between this process and the workers (the Givens sweeps
+    # are the package's own compiled loops, equal to the last bit); 1e-9 of the outputs' scale is far
+    # above what 2200 well-conditioned updates accumulate (≈ 1e-13 measured)
     assert serial.kinds == cluster.kinds
     for kind in serial.kinds:
-        np.testing.assert_array_equal(serial.predictions[kind], cluster.predictions[kind])
+        scale = float(np.abs(serial.predictions[kind]).max())
+        np.testing.assert_allclose(serial.predictions[kind], cluster.predictions[kind], rtol=0,
+                                   atol=1e-9 * scale)
     hs, hc = info_s["horizons"], info_c["horizons"]
     assert list(hs.rmse) == list(hc.rmse) == ["CAD", "P", "NP", "SP", "persistence"]
-    np.testing.assert_equal((hs.rmse, hs.rmse_inside, hs.rmse_outside),  # NaN where no sample: equal too
-                            (hc.rmse, hc.rmse_inside, hc.rmse_outside))
+    for table_s, table_c in ((hs.rmse, hc.rmse), (hs.rmse_inside, hc.rmse_inside),
+                             (hs.rmse_outside, hc.rmse_outside)):
+        for model in table_s:  # NaN where no sample: equal too
+            for label in table_s[model]:
+                np.testing.assert_allclose(table_s[model][label], table_c[model][label], rtol=1e-9)
 
 
 def test_a_worker_killed_mid_run_loses_nothing(tmp_path):

@@ -9,19 +9,27 @@ from the residual stage tracking the latest samples, which says nothing about ot
 separates the two jobs (two time scales) and publishes them apart.
 
 **1. Rigid-body part** — the cascade's parametric stage, fitted alone and first (the physical model keeps
-priority): ``ŷ_P = Φ(x)π̂``, π̂ = π₀ + δ̂ regularized toward the prior π₀ (the URDF's parameters).
+priority): π̂ = π₀ + δ̂ regularized toward the prior π₀ (the URDF's parameters); the model predicts
+``ŷ_P = Φ(x)θ_ref`` with its reference θ_ref (π̂ at most :attr:`REFERENCE_PERIOD` old, or the consistent
+rigid body set by :meth:`use_rigid`; section 2).
 
-**2. Consistent residual** (the slow part: the model's correction). The residual of the *current* π̂ over
-all the data seen (with the learners' forgetting β),
+**2. Consistent residual** (the slow part: the model's correction). The residual of rigid-body
+parameters θ = π₀ + δ over all the data seen (with the learners' forgetting β),
 
     W(δ) = argmin_W Σ_m β^{n−m} ‖y_m − Φ_m π₀ − Φ_m δ − Wᵀφ_m‖² + λ‖W‖²  =  A⁻¹(B_y − Σ_k B_Φk δ),
 
-is linear in δ: one random-feature :class:`~semiparam_ros.core.learners.rrls.RecursiveRLS` regresses the
-columns ``U = [y − Φπ₀, Φ_1, …, Φ_t]`` (``Φ_k`` the k-th row of the regressor) on ``φ(s(x))`` — the same
-statistics as the joint fit of :mod:`semiparam_ros.core.learners.joint`, but π̂ comes from the rigid-body part
-alone. One forward substitution gives ``[p | P_1 … P_t] = φᵀA⁻¹[B_y | B_Φ]`` and the residual of the current
-parameters is ``r_k = p_k − P_k δ̂``: it never goes stale when π̂ moves (the consistency correction of
-adaptive semiparametric dynamics learning, here exact).
+is linear in δ. The model predicts with a **reference** θ_ref: the rigid body set by :meth:`use_rigid`
+(the node's physically consistent projection), or else the learned π̂, followed every
+:attr:`REFERENCE_PERIOD` of learned samples. One random-feature
+:class:`~semiparam_ros.core.learners.rrls.RecursiveRLS` regresses ``y − Φθ_ref`` on ``φ(s(x))`` (t
+columns, like the cascade's), and the cross-products ``B_E = Σ_m β^{n−m} φ_m Φ_E,mᵀ`` of the features
+with the regressor's non-zero entries are kept beside it (one matrix product per :attr:`PENDING_ROWS`
+samples). A new reference θ changes the learner's right-hand side by ``−B_E S(θ − θ_ref)`` (S scatters the
+change over the entries): one triangular solve with t right-hand sides (:meth:`RecursiveRLS.shift_rhs`)
+makes it exactly the learner that learned ``y − Φθ`` from the start. So ``r = φᵀA⁻¹B(θ_ref)`` is the
+residual of the rigid body the model predicts with: it never goes stale when the rigid body moves (the
+consistency correction of adaptive semiparametric dynamics learning, here exact), and other parameters
+θ' are predicted with ``r − (φᵀA⁻¹B_E) S(θ' − θ_ref)`` (two triangular solves: off the sample path).
 
 **3. The residual's weight.** The same forward substitution gives the residual stage's relative
 predictive variance ``v = φA⁻¹φᵀ`` (``ν = λv`` is the fraction of its prior variance left at x: ≈ 0 where
