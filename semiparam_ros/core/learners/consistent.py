@@ -490,7 +490,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
 
     #: Learned samples whose regressor entries are added to their cross-products with the features in one
     #: matrix product (BLAS 3) instead of one rank-1 update each.
-    PENDING_ROWS = 8
+    PENDING_ROWS = 32
 
     #: Without a rigid body set by :meth:`use_rigid`, the reference θ_ref follows the learned π̂ every this
     #: many seconds of learned samples (at least :attr:`REFERENCE_MIN_SAMPLES`; at first after 1, 2, 4, …
@@ -504,25 +504,38 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """Learned samples between two re-references: max(REFERENCE_PERIOD/T, REFERENCE_MIN_SAMPLES)."""
         return max(round(self.REFERENCE_PERIOD / float(sample_period_s)), self.REFERENCE_MIN_SAMPLES)
 
+    def _pending_terms(self) -> tuple[float, np.ndarray]:
+        """``(Π_j β_j, Φ_pendingᵀ-weighted features)``: B_E ← scale·B_E + φ_wᵀ Φ_E over the pending rows.
+
+        Row m enters with ``Π_{j>m} β_j`` (the forgetting of the rows after it).
+        """
+        k = self._n_pending
+        beta = self._pending_beta[:k]
+        weights = np.ones(k)
+        if k > 1:
+            weights[:-1] = np.cumprod(beta[:0:-1])[::-1]
+        phi = self._pending_phi[:k]
+        if k > 1 and not np.all(weights == 1.0):
+            phi = phi * weights[:, None]
+        return float(weights[0] * beta[0]), phi
+
     def _flush_entries(self) -> None:
-        """Add the pending rows to ``B_E = Σ_m β^{n−m} φ_m Φ_E,mᵀ`` (one matrix product)."""
-        if self._n_pending:
-            self._entries_rhs = self._entries_with_pending()
-            self._n_pending = 0
+        """Add the pending rows to ``B_E = Σ_m β^{n−m} φ_m Φ_E,mᵀ`` in place (one matrix product)."""
+        k = self._n_pending
+        if k == 0:
+            return
+        scale, phi = self._pending_terms()
+        if scale != 1.0:
+            self._entries_rhs *= scale
+        self._entries_rhs += phi.T @ self._pending_entries[:k]
+        self._n_pending = 0
 
     def _entries_with_pending(self) -> np.ndarray:
         """B_E with the pending rows added, without changing the state (reads leave the arithmetic alone)."""
         k = self._n_pending
         if k == 0:
             return self._entries_rhs
-        beta = self._pending_beta[:k]
-        weights = np.ones(k)  # row m enters with Π_{j>m} β_j; B_E is scaled by Π_j β_j
-        if k > 1:
-            weights[:-1] = np.cumprod(beta[:0:-1])[::-1]
-        scale = float(weights[0] * beta[0])
-        phi = self._pending_phi[:k]
-        if k > 1 and not np.all(weights == 1.0):
-            phi = phi * weights[:, None]
+        scale, phi = self._pending_terms()
         out = self._entries_rhs * scale if scale != 1.0 else self._entries_rhs.copy()
         out += phi.T @ self._pending_entries[:k]
         return out
