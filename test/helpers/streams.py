@@ -170,3 +170,13 @@ def assert_same_state(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> Non
     assert a.keys() == b.keys()
     for key in a:
         assert np.array_equal(a[key], b[key]), key
+
+
+def assert_close_state(a: dict[str, np.ndarray], b: dict[str, np.ndarray], rtol: float = 1e-9) -> None:
+    """The same state to rounding: float arrays within ``rtol`` (and 1e-12 absolute), the rest equal."""
+    assert a.keys() == b.keys()
+    for key in a:
+        if a[key].dtype.kind == "f":
+            np.testing.assert_allclose(a[key], b[key], rtol=rtol, atol=1e-12, err_msg=key)
+        else:
+            assert np.array_equal(a[key], b[key]), key

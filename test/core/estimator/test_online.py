@@ -29,6 +29,7 @@ from helpers.streams import (
     WARMUP,
     Stream,
     _stream,
+    assert_close_state,
     assert_same_state,
     feed,
     make_trajectory,
@@ -499,13 +500,7 @@ def test_skipped_learning_predicts_with_the_residual_held_and_leaves_the_learned
     assert est.n_samples_learned == ref.n_samples_learned
     # the same state to rounding: a held prediction runs the fast correction's deferred rotations before
     # the next prediction instead of inside it (the same arithmetic in another order, RecursiveRLS)
-    a, b = snapshot(est), snapshot(ref)
-    assert a.keys() == b.keys()
-    for key in a:
-        if a[key].dtype.kind == "f":
-            np.testing.assert_allclose(a[key], b[key], rtol=1e-9, atol=1e-12, err_msg=key)
-        else:
-            assert np.array_equal(a[key], b[key]), key
+    assert_close_state(snapshot(est), snapshot(ref))
     assert np.mean(errors) < 0.1 * np.mean(sizes)
 
 
@@ -608,13 +603,7 @@ def test_bad_messages_are_counted_and_do_not_change_learned_state(config, regres
         for part in ("parametric", "residual", "total"):
             np.testing.assert_allclose(getattr(a.prediction, part), getattr(b.prediction, part),
                                        rtol=1e-9, atol=1e-12, err_msg=part)
-    final, clean_final = snapshot(est), snapshot(clean)
-    assert final.keys() == clean_final.keys()
-    for key in final:
-        if final[key].dtype.kind == "f":
-            np.testing.assert_allclose(final[key], clean_final[key], rtol=1e-9, atol=1e-12, err_msg=key)
-        else:
-            assert np.array_equal(final[key], clean_final[key]), key
+    assert_close_state(snapshot(est), snapshot(clean))
     for reason, count in expected.items():
         assert est.drops[reason] == count
     assert est.drops["acceleration_warmup"] == clean.drops["acceleration_warmup"]
