@@ -1030,7 +1030,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         state = super().state_dict(prefix)
         state[f"{prefix}phi_entries"] = self._phi_entries.copy()
         state[f"{prefix}entries_rhs"] = self._entries_with_pending().copy()
-        state[f"{prefix}reference"] = np.concatenate([self._reference, [self._since_reference]])
+        # θ_ref, the samples since it followed π̂, and whether use_rigid set it (not restored on load)
+        state[f"{prefix}reference"] = np.concatenate([self._reference, [self._since_reference,
+                                                                       float(self._rigid is not None)]])
         state.update(self.tracker.state_dict(f"{prefix}tracker."))
         state.update(self.fast.state_dict(f"{prefix}fast."))
         state[f"{prefix}scales"] = np.concatenate([[self._scale_weight, self._recent_n, self._fast_n],
@@ -1077,15 +1079,17 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             reference = np.asarray(state[f"{prefix}reference"], dtype=np.float64)
         except KeyError as err:
             raise CheckpointError(f"state is missing key {err}") from err
-        if (entries_rhs.shape != (D, E) or reference.shape != (p + 1,) or not np.isfinite(entries_rhs).all()
-                or not np.isfinite(reference).all() or reference[-1] < 0.0):
+        if reference.shape == (p + 1,):  # without the flag: a reference that followed π̂
+            reference = np.concatenate([reference, [0.0]])
+        if (entries_rhs.shape != (D, E) or reference.shape != (p + 2,) or not np.isfinite(entries_rhs).all()
+                or not np.isfinite(reference).all() or reference[p] < 0.0):
             raise CheckpointError("the residual's reference or its regressor cross-products have the wrong "
                                   "size or invalid values")
         super().load_state_dict(state, prefix)
         self.tracker, self.fast = tracker, fast
         self._entries_rhs = np.ascontiguousarray(entries_rhs).copy()
         self._n_pending = 0
-        self._reference, self._since_reference = reference[:p].copy(), int(reference[-1])
+        self._reference, self._since_reference = reference[:p].copy(), int(reference[p])
         self._held = None
         self._raw = None
         self._rigid = None  # the projection of the loaded state is solved again
@@ -1094,7 +1098,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._fast_errors = scales[3 + 2 * t:3 + 4 * t].reshape(2, t).copy()
         self._corr = scales[3 + 4 * t:].reshape(2, t).copy()
         self._weight_cache = self._fast_mask = None
-        if converted:  # it predicted with the learned parameters: so does this one
+        if converted or reference[p + 1] != 0.0:
+            # it predicted with the learned parameters, or with a rigid body set by use_rigid, which is not
+            # restored (solved again from the state): the learned parameters until then
             self._rereference(self._learned_parameters())
 
     def _current_layout(self, state: dict[str, np.ndarray], prefix: str
@@ -1123,5 +1129,5 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         new[f"{key}n_outputs"] = np.array(t)
         new[f"{prefix}entries_rhs"] = R.T @ M[:, D + t:]
         prior = np.asarray(state.get(f"{prefix}parametric.prior", self.parametric.prior), dtype=np.float64)
-        new[f"{prefix}reference"] = np.concatenate([prior.reshape(-1), [0.0]])
+        new[f"{prefix}reference"] = np.concatenate([prior.reshape(-1), [0.0, 0.0]])
         return new, True

@@ -358,8 +358,10 @@ def test_a_rigid_body_set_by_use_rigid_is_the_one_every_prediction_uses():
     for x, ref in zip(Xt, learned, strict=True):
         np.testing.assert_allclose(m.predict_model(x).total, ref.total, rtol=1e-12, atol=1e-12)
     m.use_rigid(other)
-    m.load_state_dict(state)
+    m.load_state_dict(state)  # saved while `other` was set: loaded, it predicts with the learned parameters
     assert m.rigid_override is None
+    for x, ref in zip(Xt, learned, strict=True):
+        np.testing.assert_allclose(m.predict_model(x).total, ref.total, rtol=1e-9, atol=1e-12)
     m.use_rigid(other)
     m.reset()
     assert m.rigid_override is None
