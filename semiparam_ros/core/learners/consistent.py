@@ -540,11 +540,6 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         out += phi.T @ self._pending_entries[:k]
         return out
 
-    def _learned_parameters(self) -> np.ndarray:
-        """π̂ = π₀ + δ̂, the rigid-body learner's parameters (learner units)."""
-        par_model = self.parametric
-        return np.asarray(par_model.prior + par_model.rls.weights[:, 0])
-
     def _rereference(self, theta: np.ndarray) -> None:
         """Make θ the reference: the residual learner becomes exactly the one that learned ``y − Φθ``.
 
@@ -883,7 +878,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """
         checked = self._checked_rigid(rigid)
         self._rigid = None if checked is None else checked.copy()
-        self._rereference(self._learned_parameters() if checked is None else checked)
+        self._rereference(self.parameters if checked is None else checked)
         self._held = None
 
     @property
@@ -967,17 +962,16 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             # are kept to re-reference it (_rereference)
             np_step = RecursiveRLS.checked_step(phi, (yv - Phi @ self._reference).reshape(1, -1), owned=True)
             par_model.rls.defer_step(par_step)
-            beta_np = npm.rls.forgetting
+            beta = npm.rls.forgetting  # this step's β: the cross-products forget as the learner does
             npm.rls.defer_step(np_step)
             if self._n_pending == self.PENDING_ROWS:
                 self._flush_entries()
             k = self._n_pending
             self._pending_phi[k] = phi[0]
             self._pending_entries[k] = Phi.reshape(-1)[self._phi_entries]
-            self._pending_beta[k] = beta_np
+            self._pending_beta[k] = beta
             self._n_pending = k + 1
             assert ctx.raw_residual is not None  # computed with φ
-            beta = npm.rls.forgetting
             self._scale_weight = beta * self._scale_weight + 1.0
             self._recent_n += 1
             a = max(1.0 / self._recent_n, 1.0 - self._recent_beta)
@@ -1000,7 +994,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         # the reference follows π̂: every sample while the residual has learned nothing (free then), then
         # after 1, 2, 4, … learned samples (π̂ moves most at first), then every REFERENCE_PERIOD
         if self._rigid is None and self._since_reference >= min(self._reference_samples, self._recent_n):
-            self._rereference(self._learned_parameters())
+            self._rereference(self.parameters)
 
     def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
         """Predict x a priori (all parts), then learn (x, y); the prediction when asked for."""
@@ -1101,7 +1095,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         if converted or reference[p + 1] != 0.0:
             # it predicted with the learned parameters, or with a rigid body set by use_rigid, which is not
             # restored (solved again from the state): the learned parameters until then
-            self._rereference(self._learned_parameters())
+            self._rereference(self.parameters)
 
     def _current_layout(self, state: dict[str, np.ndarray], prefix: str
                         ) -> tuple[dict[str, np.ndarray], bool]:
