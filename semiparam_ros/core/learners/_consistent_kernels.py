@@ -14,7 +14,8 @@ import numpy as np
 from numba import njit
 
 __all__ = [
-    "fast_total", "saving_update", "scale_update", "shrunk_choice", "significant_saving", "tracker_update",
+    "fast_total", "saving_step", "saving_update", "scale_step", "scale_update", "shrunk_choice",
+    "significant_saving", "stage_pending", "state_weight", "tracker_step", "tracker_update",
     "weighted_residual",
 ]
 
@@ -49,11 +50,11 @@ def weighted_residual(raw: np.ndarray, s2: np.ndarray, spread: np.ndarray, lam: 
 @njit(cache=True, nogil=True)
 def fast_total(model_total: np.ndarray, c: np.ndarray, v: np.ndarray, noise: np.ndarray, kappa_fast: float,
                useful: np.ndarray, kappa: float, used: np.ndarray, applied: np.ndarray, fast: np.ndarray,
-               total: np.ndarray) -> None:
-    """Write the model plus its fast corrections into ``applied``, ``fast`` and ``total`` (t,).
+               total: np.ndarray, rigid: np.ndarray, residual: np.ndarray, correction: np.ndarray) -> None:
+    """Write the model plus its fast corrections into ``applied``, ``fast`` and ``total`` (t,), and the parts.
 
     ``applied = κ_f c``; ``fast = model + [useful] w·applied`` with ``w = max(0, 1 − 9 r̂ v / c²)`` (0 where
-    ``c² ≤ 9 r̂ v``); ``total = fast + κ b̂``.
+    ``c² ≤ 9 r̂ v``); ``total = fast + κ b̂``; ``residual = total − ŷ_P``, ``correction = total − model``.
 
     Args:
         model_total: (t,) model(x).
@@ -67,6 +68,9 @@ def fast_total(model_total: np.ndarray, c: np.ndarray, v: np.ndarray, noise: np.
         applied: (t,) output.
         fast: (t,) output.
         total: (t,) output.
+        rigid: (t,) ŷ_P, the rigid-body part.
+        residual: (t,) output, everything but the rigid-body part.
+        correction: (t,) output, the fast corrections.
     """
     for k in range(model_total.shape[0]):
         a = kappa_fast * c[k]
@@ -79,6 +83,8 @@ def fast_total(model_total: np.ndarray, c: np.ndarray, v: np.ndarray, noise: np.
                 w = 1.0 - nk / c2
         fast[k] = model_total[k] + w * a
         total[k] = fast[k] + kappa * used[k]
+        residual[k] = total[k] - rigid[k]
+        correction[k] = total[k] - model_total[k]
 
 
 @njit(cache=True, nogil=True)
@@ -209,3 +215,147 @@ def significant_saving(fast_errors: np.ndarray, n: int, out: np.ndarray) -> None
         if spread < 0.0:
             spread = 0.0
         out[k] = mean > 2.0 * np.sqrt(spread / n)
+
+
+@njit(cache=True, nogil=True)
+def scale_step(scale_model: np.ndarray, recent_rigid: np.ndarray, corr: np.ndarray, y: np.ndarray,
+               rigid: np.ndarray, raw: np.ndarray, beta: float, a: float, a_corr: float, weight: float,
+               novelty_scale: float, s2: np.ndarray, spread: np.ndarray) -> None:
+    """:func:`scale_update`, then the residual weight's scales it gives, into ``s2`` and ``spread`` (t,).
+
+    With σ² = ``scale_model / weight`` (weight = Σ β^{n−m} > 0, after this sample):
+    ``s2 = max(recent_rigid − σ², 0)``, ``spread = σ² / novelty_scale``.
+
+    Args:
+        scale_model: As :func:`scale_update`.
+        recent_rigid: As :func:`scale_update`.
+        corr: As :func:`scale_update`.
+        y: As :func:`scale_update`.
+        rigid: As :func:`scale_update`.
+        raw: As :func:`scale_update`.
+        beta: As :func:`scale_update`.
+        a: As :func:`scale_update`.
+        a_corr: As :func:`scale_update`.
+        weight: Σ β^{n−m} over the learned samples, including this one (> 0).
+        novelty_scale: ν₀ > 0.
+        s2: (t,) output, the rigid-body part's systematic error variance.
+        spread: (t,) output, the residual's noise variance over ν₀.
+    """
+    scale_update(scale_model, recent_rigid, corr, y, rigid, raw, beta, a, a_corr)
+    for k in range(y.shape[0]):
+        noise = scale_model[k] / weight
+        diff = recent_rigid[k] - noise
+        s2[k] = diff if diff > 0.0 else 0.0
+        spread[k] = noise / novelty_scale
+
+
+@njit(cache=True, nogil=True)
+def saving_step(fast_errors: np.ndarray, y: np.ndarray, model: np.ndarray, candidate: np.ndarray, a: float,
+                n: int, useful: np.ndarray) -> None:
+    """:func:`saving_update`, then :func:`significant_saving` of the new means over n samples into ``useful``.
+
+    Args:
+        fast_errors: As :func:`saving_update`.
+        y: As :func:`saving_update`.
+        model: As :func:`saving_update`.
+        candidate: As :func:`saving_update`.
+        a: As :func:`saving_update`.
+        n: The samples the means average over.
+        useful: (t,) bool output.
+    """
+    saving_update(fast_errors, y, model, candidate, a)
+    significant_saving(fast_errors, n, useful)
+
+
+@njit(cache=True, nogil=True)
+def state_weight(x: np.ndarray, inv_scale: np.ndarray, state: np.ndarray) -> float:
+    """``κ = exp(−½ Σ_i (x_i s_i − state_i)²)`` over the first ``len(state)`` coordinates of x.
+
+    Args:
+        x: The input; its first m entries are used.
+        inv_scale: (m,) the inverse length scales s.
+        state: (m,) the scaled state of the last learned sample.
+
+    Returns:
+        κ ∈ [0, 1].
+    """
+    acc = 0.0
+    for i in range(state.shape[0]):
+        d = x[i] * inv_scale[i] - state[i]
+        acc += d * d
+    return np.exp(-0.5 * acc)
+
+
+@njit(cache=True, nogil=True)
+def tracker_step(estimates: np.ndarray, errors: np.ndarray, gains: np.ndarray, last_error: np.ndarray,
+                 last_increment: np.ndarray, cov_increment: np.ndarray, state: np.ndarray,
+                 inv_scale: np.ndarray, x: np.ndarray, y: np.ndarray, model: np.ndarray, weight: float,
+                 n_errors: int, stats_samples: int, z2: float, noise: np.ndarray, used: np.ndarray) -> None:
+    """Absorb one learned sample into the error tracker, in place, and write its noise and used estimate.
+
+    With ``e = y − model`` and n = ``n_errors`` (before this sample), S = ``stats_samples``: the increment
+    ``d = e − last_error`` (n ≥ 1) updates ``cov_increment ← cov + b(d·last_increment − cov)``,
+    ``b = max(1/(n − 1), 1/S)`` (n ≥ 2) and becomes ``last_increment``; :func:`tracker_update` with
+    ``a = max(1/(n + 1), 1/S)``; ``state = x[:m]·inv_scale``; ``last_error = e``; then
+    ``noise = max(−cov_increment, 0)`` and ``used`` = :func:`shrunk_choice` (ready once n + 1 ≥ 2).
+
+    Args:
+        estimates: (k, t) the smoothers' estimates.
+        errors: (k, t) their running a-priori squared errors.
+        gains: (k,) the gains K.
+        last_error: (t,) the previous sample's error, replaced by e.
+        last_increment: (t,) its increment, replaced by d (n ≥ 1).
+        cov_increment: (t,) the running E[d_m d_{m−1}].
+        state: (m,) output, the scaled state of this sample.
+        inv_scale: (m,) the inverse length scales.
+        x: The input (its first m entries are the state).
+        y: (t,) the measurement.
+        model: (t,) the prediction the error is relative to.
+        weight: κ at the sample's state (before this update).
+        n_errors: Learned samples before this one.
+        stats_samples: S.
+        z2: z² of the shrinkage.
+        noise: (t,) output, the white-noise variance r̂.
+        used: (t,) output, the used estimate.
+    """
+    t = y.shape[0]
+    e = np.empty(t)
+    for k in range(t):
+        e[k] = y[k] - model[k]
+    a = max(1.0 / (n_errors + 1), 1.0 / stats_samples)
+    if n_errors >= 1:
+        b = max(1.0 / (n_errors - 1), 1.0 / stats_samples) if n_errors >= 2 else 0.0
+        for k in range(t):
+            d = e[k] - last_error[k]
+            if n_errors >= 2:
+                cov_increment[k] += b * (d * last_increment[k] - cov_increment[k])
+            last_increment[k] = d
+    tracker_update(estimates, errors, gains, e, weight, a)
+    for i in range(state.shape[0]):
+        state[i] = x[i] * inv_scale[i]
+    for k in range(t):
+        last_error[k] = e[k]
+        noise[k] = max(-cov_increment[k], 0.0)
+    shrunk_choice(estimates, errors, gains, noise, z2, n_errors + 1 >= 2, used)
+
+
+@njit(cache=True, nogil=True)
+def stage_pending(pending_phi: np.ndarray, pending_entries: np.ndarray, pending_beta: np.ndarray, k: int,
+                  phi: np.ndarray, Phi_flat: np.ndarray, entries: np.ndarray, beta: float) -> None:
+    """Copy one learned sample's features, regressor entries and β into row k of the pending buffers.
+
+    Args:
+        pending_phi: (K, D) buffer; row k ← phi.
+        pending_entries: (K, E) buffer; row k ← Phi_flat[entries].
+        pending_beta: (K,) buffer; entry k ← beta.
+        k: The row.
+        phi: (D,) the features.
+        Phi_flat: The regressor, flattened.
+        entries: (E,) indices of its learned entries.
+        beta: The step's forgetting factor.
+    """
+    for i in range(phi.shape[0]):
+        pending_phi[k, i] = phi[i]
+    for i in range(entries.shape[0]):
+        pending_entries[k, i] = Phi_flat[entries[i]]
+    pending_beta[k] = beta

@@ -98,11 +98,13 @@ from scipy.linalg import solve_triangular
 
 from semiparam_ros.core.learners._consistent_kernels import (
     fast_total,
-    saving_update,
-    scale_update,
+    saving_step,
+    scale_step,
     shrunk_choice,
     significant_saving,
-    tracker_update,
+    stage_pending,
+    state_weight,
+    tracker_step,
     weighted_residual,
 )
 from semiparam_ros.core.learners.adaptation import forgetting_factor
@@ -189,15 +191,11 @@ class ErrorTracker:
         self._used: np.ndarray | None = None   # used_estimate, until the next update
         self._noise: np.ndarray | None = None  # noise_variance(), until the next update
 
-    def _scaled(self, x: np.ndarray) -> np.ndarray:
-        return x[:2 * self.n_joints] * self._inv_scale
-
     def weight(self, x: np.ndarray) -> float:
         """κ ∈ [0, 1] at the state x = [q, q̇, q̈] (0 before any learned sample)."""
         if self.state is None:
             return 0.0
-        d = self._scaled(x) - self.state
-        return math.exp(-0.5 * float(d @ d))
+        return float(state_weight(x, self._inv_scale, self.state))
 
     @property
     def chosen(self) -> np.ndarray:
@@ -249,19 +247,17 @@ class ErrorTracker:
             model: The prediction the error is relative to (t,).
             weight: ``weight(x)`` if already computed for this state (nothing updated since).
         """
-        e = y - model
-        a = max(1.0 / (self.n_errors + 1), 1.0 / self.stats_samples)
-        if self.n_errors >= 1:
-            d = e - self.last_error
-            if self.n_errors >= 2:
-                b = max(1.0 / (self.n_errors - 1), 1.0 / self.stats_samples)
-                self.cov_increment += b * (d * self.last_increment - self.cov_increment)
-            self.last_increment = d
-        tracker_update(self.estimates, self.errors, self.GAINS, e,
-                       self.weight(x) if weight is None else weight, a)
-        self.state = self._scaled(x)
-        self.last_error = e
-        self._used = self._noise = None
+        if weight is None:
+            weight = self.weight(x)
+        if self.state is None:
+            self.state = np.empty(2 * self.n_joints)
+        t = self.n_outputs
+        noise, used = np.empty(t), np.empty(t)  # new arrays: values handed out before stay as they were
+        # e = y − model: the increments' covariance, the smoothers, the state, r̂ and b̂ (one compiled call)
+        tracker_step(self.estimates, self.errors, self.GAINS, self.last_error, self.last_increment,
+                     self.cov_increment, self.state, self._inv_scale, x, y, model, weight, self.n_errors,
+                     self.stats_samples, self.SHRINK_Z ** 2, noise, used)
+        self._noise, self._used = noise, used
         self.n_errors += 1
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
@@ -298,12 +294,13 @@ class ErrorTracker:
                or (st.size and (st.shape != (2 * n,) or not np.isfinite(st).all())))
         if bad:
             raise CheckpointError("tracker state has the wrong sizes or non-finite values")
+        # own, writable copies: the update changes them in place
         self.estimates = np.ascontiguousarray(banks["estimates"]).copy()
         self.errors = np.ascontiguousarray(banks["errors"]).copy()
         self._used = self._noise = None
-        self.last_error, self.last_increment = vals["last_error"], vals["last_increment"]
-        self.cov_increment = vals["cov_increment"]
-        self.state = st if st.size else None
+        self.last_error, self.last_increment = vals["last_error"].copy(), vals["last_increment"].copy()
+        self.cov_increment = vals["cov_increment"].copy()
+        self.state = st.copy() if st.size else None
         self.n_errors = n_errors
 
 
@@ -341,13 +338,16 @@ def structural_entries(regressor: Regressor, n_inputs: int, n_outputs: int, n_pa
 class _Context(PredictionContext):
     """A prediction context that also keeps the local tracker's reference prediction and weight at x."""
 
-    __slots__ = ("fast_candidate", "kappa", "model_total", "raw_residual")
+    __slots__ = ("fast_candidate", "kappa", "model_only", "model_total", "raw_residual", "reference")
 
     def __init__(self, prediction: Prediction, model: Any, x: np.ndarray, Phi: np.ndarray | None,
                  phi: np.ndarray | None, model_total: np.ndarray, kappa: float,
-                 raw_residual: np.ndarray | None, fast_candidate: np.ndarray) -> None:
+                 raw_residual: np.ndarray | None, fast_candidate: np.ndarray, model_only: np.ndarray,
+                 reference: np.ndarray) -> None:
         super().__init__(prediction, model, x, Phi, phi)
         self.model_total = model_total
+        self.model_only = model_only  # model(x) = ŷ_P + g·r, without the fast corrections
+        self.reference = reference  # θ_ref the rigid-body part ŷ_P was predicted with
         self.kappa = kappa  # the tracker's weight at x
         self.raw_residual = raw_residual  # r before its weight (None before the residual is ready)
         self.fast_candidate = fast_candidate  # κ_f Φδ_f at x before its weight (zeros without a tracker)
@@ -443,6 +443,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._held: tuple[np.ndarray, float] | None = None  # (g·r, its relative variance) last computed
         self._raw: np.ndarray | None = None  # r, before its weight, of the last full prediction
         self._fast_candidate = np.zeros(t)   # κ_f Φδ_f of the last full prediction
+        self._model_only = np.zeros(t)       # model(x) of the last full prediction
         self._rigid: np.ndarray | None = None  # the rigid-body parameters predicted with (None: learned)
         # the residual learner regresses y − Φθ_ref for the reference θ_ref the model predicts with; the
         # cross-products of its features with the learned regressor entries re-reference it exactly
@@ -610,7 +611,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         of the online prediction's.
         """
         par_model, npm = self.parametric, self.nonparametric
-        var = par_model.predict_phi(Phi, True)[1]
+        var = par_model.rls.predict_checked(np.ascontiguousarray(Phi), True)[1]  # diag(Φ A⁻¹ Φᵀ)
         assert var is not None  # asked for
         own = rigid is None  # the model's own rigid part: the reference θ_ref (see use_rigid)
         yp = Phi @ (self._reference if rigid is None else rigid)
@@ -750,7 +751,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                        ) -> tuple[Prediction, np.ndarray, np.ndarray | None, float]:
         """Return the prediction, ``model(x) + wΦδ_f`` (the local tracker's reference), φ and κ(x)."""
         yp, r, var, phi = self._model_valid(xv, Phi, held=held)
-        model_total = yp + r
+        model_total = self._model_only = yp + r
         if not self.use_tracker:
             return Prediction(yp, r, model_total, var, np.zeros(self.n_outputs)), model_total, phi, 0.0
         kappa_state = self.tracker.weight(xv)
@@ -765,11 +766,12 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             useful = self._fast_mask = self._fast_useful()
         t = self.n_outputs
         applied, fast, total = np.empty(t), np.empty(t), np.empty(t)
-        # fast = model + [useful]·max(0, 1 − 9r̂v/c²)·κ_f c, total = fast + κ b̂ (one compiled call)
+        residual, correction = np.empty(t), np.empty(t)
+        # fast = model + [useful]·max(0, 1 − 9r̂v/c²)·κ_f c, total = fast + κ b̂ and the parts (one call)
         fast_total(model_total, np.ascontiguousarray(P[:, 0]), v, self.tracker.noise_variance(), kappa_fast,
-                   useful, kappa, self.tracker.used_estimate, applied, fast, total)
+                   useful, kappa, self.tracker.used_estimate, applied, fast, total, yp, residual, correction)
         self._fast_candidate = applied
-        return Prediction(yp, total - yp, total, var, total - model_total), fast, phi, kappa
+        return Prediction(yp, residual, total, var, correction), fast, phi, kappa
 
     def age_fade(self) -> float:
         """Weight of both fast corrections for the age of the learned state: ``exp(−a/τ_f)``.
@@ -936,7 +938,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._fast_candidate = np.zeros(self.n_outputs)
         pred, model_total, phi, kappa = self.predict_checked(xv, Phi)
         raw = None if phi is None else self._raw
-        return _Context(pred, self, xv, Phi, phi, model_total, kappa, raw, self._fast_candidate)
+        return _Context(pred, self, xv, Phi, phi, model_total, kappa, raw, self._fast_candidate,
+                        self._model_only, self._reference)
 
     def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
         """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
@@ -949,44 +952,51 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         # both learners' rows are checked before either changes: a refused value leaves the model as it was
         par_step = par_model.rls.checked_step(Phi, target.reshape(-1, 1), owned=True)
         fast_step = None
+        model_only = ctx.model_only
         if self.use_tracker:
-            # the fast correction learns the error of model(x) (the a-priori model, without corrections)
-            pred = ctx.prediction
-            model_only = pred.total if pred.correction is None else pred.total - pred.correction
-            fast_step = RecursiveRLS.checked_step(Phi, (yv - model_only).reshape(-1, 1))
+            # the fast correction learns the error of model(x) (the a-priori model, without corrections);
+            # Φ is shared with the rigid-body step (nobody writes to it)
+            fast_step = RecursiveRLS.checked_step(Phi, (yv - model_only).reshape(-1, 1), owned=True)
         if phi is None:
             npm.standardizer.partial_fit(xv)
             par_model.rls.defer_step(par_step)
         else:
             # the residual learns y − Φθ_ref; its features' cross-products with the regressor's entries
             # are kept to re-reference it (_rereference)
-            np_step = RecursiveRLS.checked_step(phi, (yv - Phi @ self._reference).reshape(1, -1), owned=True)
+            # (ŷ_P of the prediction is Φθ_ref unless the reference changed since)
+            same = ctx.reference is self._reference
+            rigid_part = ctx.prediction.parametric if same else Phi @ self._reference
+            np_step = RecursiveRLS.checked_step(phi, (yv - rigid_part).reshape(1, -1), owned=True)
             par_model.rls.defer_step(par_step)
             beta = npm.rls.forgetting  # this step's β: the cross-products forget as the learner does
             npm.rls.defer_step(np_step)
             if self._n_pending == self.PENDING_ROWS:
                 self._flush_entries()
-            k = self._n_pending
-            self._pending_phi[k] = phi[0]
-            self._pending_entries[k] = Phi.reshape(-1)[self._phi_entries]
-            self._pending_beta[k] = beta
-            self._n_pending = k + 1
+            stage_pending(self._pending_phi, self._pending_entries, self._pending_beta, self._n_pending,
+                          phi[0], Phi.reshape(-1), self._phi_entries, beta)
+            self._n_pending += 1
             assert ctx.raw_residual is not None  # computed with φ
             self._scale_weight = beta * self._scale_weight + 1.0
             self._recent_n += 1
             a = max(1.0 / self._recent_n, 1.0 - self._recent_beta)
-            # σ²'s sum of (y − ŷ_P − r)² and s²'s recent mean of (y − ŷ_P)²
-            scale_update(self._scale_model, self._recent_rigid, self._corr, yv, ctx.prediction.parametric,
-                         ctx.raw_residual, beta, a, 1.0 - self._corr_beta)
-            self._weight_cache = None
+            # σ²'s sum of (y − ŷ_P − r)² and s²'s recent mean of (y − ŷ_P)², then the weight's (s², σ²/ν₀)
+            t = self.n_outputs
+            s2, spread = np.empty(t), np.empty(t)
+            scale_step(self._scale_model, self._recent_rigid, self._corr, yv, ctx.prediction.parametric,
+                       ctx.raw_residual, beta, a, 1.0 - self._corr_beta, self._scale_weight,
+                       self.novelty_scale, s2, spread)
+            self._weight_cache = (s2, spread)
         if fast_step is not None:
             self.fast.defer_step(fast_step)
             self.tracker.update(xv, yv, ctx.model_total, ctx.kappa)
             self._fast_n += 1
             a = max(1.0 / self._fast_n, 1.0 / self.tracker.stats_samples)
-            # what the full correction saved, e² − (e − κ_f Φδ_f)² with e = y − model(x): mean and square
-            saving_update(self._fast_errors, yv, model_only, ctx.fast_candidate, a)
-            self._fast_mask = None
+            # what the full correction saved, e² − (e − κ_f Φδ_f)² with e = y − model(x): mean and square,
+            # then where it is significant (_fast_useful)
+            useful = np.empty(self.n_outputs, dtype=np.bool_)
+            saving_step(self._fast_errors, yv, model_only, ctx.fast_candidate, a,
+                        min(self._fast_n, 2 * self.tracker.stats_samples - 1), useful)
+            self._fast_mask = useful
         par_model.n_samples_seen += 1
         npm.n_samples_seen += 1
         self.n_samples_seen += 1

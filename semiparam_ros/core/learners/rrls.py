@@ -261,8 +261,29 @@ class RecursiveRLS:
                                       f"got shape {G2.shape}")
         self._flush()
         b = self.n_features
-        self._M[:, b:] -= solve_triangular(self._M[:, :b], G2, trans="T", lower=False, check_finite=False)
+        self._M[:, b:] -= self._solve_rt(G2)
         self._W = None
+
+    #: Rows of R per block of :meth:`_solve_rt`.
+    SOLVE_BLOCK = 128
+
+    def _solve_rt(self, G: np.ndarray) -> np.ndarray:
+        """``R⁻ᵀG`` (b, t) by blocks of rows of R, in place of the factor (no copy of R).
+
+        R is a strided view of ``[R | d]``, which a triangular solve of the whole would copy first (8 MB at
+        b = 1000); by blocks, each diagonal block is solved (a small copy) and the rest of G updated by one
+        matrix product with the block's rows (BLAS 3, reading R in place): ``X_i = R_iiᵀ⁻¹ G_i``,
+        ``G_j ← G_j − R_ijᵀ X_i`` for the blocks j after i.
+        """
+        b, nb = self.n_features, self.SOLVE_BLOCK
+        R = self._M[:, :b]
+        X = np.array(G, dtype=np.float64, order="C")
+        for i0 in range(0, b, nb):
+            i1 = min(i0 + nb, b)
+            X[i0:i1] = solve_triangular(R[i0:i1, i0:i1], X[i0:i1], trans="T", lower=False, check_finite=False)
+            if i1 < b:
+                X[i1:] -= R[i0:i1, i1:].T @ X[i0:i1]
+        return X
 
     def condition_number(self) -> float:
         """``cond₂(R)`` (= √cond(A)), from the singular values of R (O(b³): diagnostics only)."""

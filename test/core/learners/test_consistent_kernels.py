@@ -12,10 +12,15 @@ import pytest
 
 from semiparam_ros.core.learners._consistent_kernels import (
     fast_total,
+    saving_step,
     saving_update,
+    scale_step,
     scale_update,
     shrunk_choice,
     significant_saving,
+    stage_pending,
+    state_weight,
+    tracker_step,
     tracker_update,
     weighted_residual,
 )
@@ -54,7 +59,9 @@ def test_fast_total_is_the_model_plus_the_weighted_corrections(seed):
     used = rng.normal(size=t)
     kappa_fast, kappa = float(rng.uniform()), float(rng.uniform())
     applied, fast, total = np.empty(t), np.empty(t), np.empty(t)
-    fast_total(model, c, v, noise, kappa_fast, useful, kappa, used, applied, fast, total)
+    rigid, residual, correction = rng.normal(size=t), np.empty(t), np.empty(t)
+    fast_total(model, c, v, noise, kappa_fast, useful, kappa, used, applied, fast, total, rigid, residual,
+               correction)
     ref_applied = kappa_fast * c
     nk = 9.0 * noise * v
     c2 = c * c
@@ -63,6 +70,7 @@ def test_fast_total_is_the_model_plus_the_weighted_corrections(seed):
     assert np.array_equal(applied, ref_applied)
     assert np.array_equal(fast, ref_fast)
     assert np.array_equal(total, ref_fast + kappa * used)
+    assert np.array_equal(residual, total - rigid) and np.array_equal(correction, total - model)
 
 
 def test_tracker_update_is_the_smoothers_recursion():
@@ -139,3 +147,83 @@ def test_significant_saving_is_two_standard_errors():
             continue
         ref = mean > 2.0 * np.sqrt(np.maximum(square - mean * mean, 0.0) / n)
         assert np.array_equal(out, ref)
+
+
+def test_scale_step_is_the_update_then_the_weight_scales():
+    rng = np.random.default_rng(6)
+    t = 5
+    sm, rr = rng.uniform(size=t), rng.uniform(size=t)
+    corr = np.stack([rng.normal(size=t), rng.uniform(size=t)])
+    ref_sm, ref_rr, ref_corr = sm.copy(), rr.copy(), corr.copy()
+    y, rigid, raw = rng.normal(size=t), rng.normal(size=t), rng.normal(size=t)
+    raw[0] = y[0] - rigid[0]  # an output the residual explains: s² clipped at 0 below
+    s2, spread = np.empty(t), np.empty(t)
+    scale_step(sm, rr, corr, y, rigid, raw, 0.98, 0.1, 0.05, 3.5, 0.25, s2, spread)
+    scale_update(ref_sm, ref_rr, ref_corr, y, rigid, raw, 0.98, 0.1, 0.05)
+    assert np.array_equal(sm, ref_sm) and np.array_equal(rr, ref_rr) and np.array_equal(corr, ref_corr)
+    noise = ref_sm / 3.5
+    assert np.array_equal(s2, np.maximum(ref_rr - noise, 0.0)) and np.array_equal(spread, noise / 0.25)
+
+
+def test_saving_step_is_the_update_then_its_significance():
+    rng = np.random.default_rng(7)
+    t = 6
+    fe = rng.normal(size=(2, t))
+    ref = fe.copy()
+    y, model, cand = rng.normal(size=t), rng.normal(size=t), rng.normal(size=t)
+    useful = np.empty(t, dtype=np.bool_)
+    saving_step(fe, y, model, cand, 0.2, 9, useful)
+    saving_update(ref, y, model, cand, 0.2)
+    expect = np.empty(t, dtype=np.bool_)
+    significant_saving(ref, 9, expect)
+    assert np.array_equal(fe, ref) and np.array_equal(useful, expect)
+
+
+def test_state_weight_is_the_gaussian_of_the_scaled_distance():
+    rng = np.random.default_rng(8)
+    x, inv, state = rng.normal(size=9), rng.uniform(0.5, 5.0, size=6), rng.normal(size=6)
+    d = x[:6] * inv - state
+    # a sum of 6 squares: rounding ≤ 6ε relative in the exponent's argument
+    assert state_weight(x, inv, state) == pytest.approx(np.exp(-0.5 * np.sum(d * d)), rel=1e-14)
+
+
+def test_tracker_step_is_the_trackers_recursion():
+    """The increments' covariance, the smoothers, the state and r̂, b̂ against their numpy formulas."""
+    rng = np.random.default_rng(9)
+    t, m, S = 4, 6, 10
+    gains = np.array([0.0, 0.1, 0.3, 1.0])
+    est, err = np.zeros((4, t)), np.zeros((4, t))
+    last_e, last_d, cov = np.zeros(t), np.zeros(t), np.zeros(t)
+    state, inv = np.empty(m), rng.uniform(0.5, 5.0, size=m)
+    r_est, r_err, r_last_e, r_last_d, r_cov = est.copy(), err.copy(), last_e.copy(), last_d.copy(), cov.copy()
+    for n in range(15):
+        x, y, model = rng.normal(size=9), rng.normal(size=t), rng.normal(size=t)
+        w = float(rng.uniform())
+        noise, used = np.empty(t), np.empty(t)
+        tracker_step(est, err, gains, last_e, last_d, cov, state, inv, x, y, model, w, n, S, 4.0, noise, used)
+        e = y - model
+        a = max(1.0 / (n + 1), 1.0 / S)
+        if n >= 1:
+            d = e - r_last_e
+            if n >= 2:
+                r_cov += max(1.0 / (n - 1), 1.0 / S) * (d * r_last_d - r_cov)
+            r_last_d = d
+        tracker_update(r_est, r_err, gains, e, w, a)
+        r_last_e = e
+        ref_noise = np.maximum(-r_cov, 0.0)
+        ref_used = np.empty(t)
+        shrunk_choice(r_est, r_err, gains, ref_noise, 4.0, n + 1 >= 2, ref_used)
+        assert np.array_equal(est, r_est) and np.array_equal(err, r_err) and np.array_equal(cov, r_cov)
+        assert np.array_equal(last_e, r_last_e) and np.array_equal(last_d, r_last_d)
+        assert np.array_equal(state, x[:m] * inv)
+        assert np.array_equal(noise, ref_noise) and np.array_equal(used, ref_used)
+
+
+def test_stage_pending_copies_the_row():
+    rng = np.random.default_rng(10)
+    pphi, pent, pbeta = np.zeros((4, 7)), np.zeros((4, 3)), np.zeros(4)
+    phi, Phi = rng.normal(size=7), rng.normal(size=(2, 5))
+    entries = np.array([0, 4, 8])
+    stage_pending(pphi, pent, pbeta, 2, phi, Phi.reshape(-1), entries, 0.9)
+    assert np.array_equal(pphi[2], phi) and np.array_equal(pent[2], Phi.reshape(-1)[entries])
+    assert pbeta[2] == 0.9 and not pphi[[0, 1, 3]].any() and not pent[[0, 1, 3]].any()

@@ -10,7 +10,7 @@ from helpers.reference_rrls import ReferenceQRRLS
 from helpers.rrls import closed_form, random_steps
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg import cho_factor, cho_solve, solve_triangular
 
 from semiparam_ros.core import checkpoint
 from semiparam_ros.core.learners.rrls import RecursiveRLS
@@ -407,8 +407,6 @@ def test_rows_out_update_the_residual_matrix(k, beta):
 @pytest.mark.parametrize(("b", "t"), [(1, 1), (17, 1), (64, 6), (65, 3)])
 def test_weights_equal_a_lapack_triangular_solve(b, t):
     """Small factors use the compiled back-substitution, larger ones LAPACK: both equal scipy's solve."""
-    from scipy.linalg import solve_triangular
-
     rng = np.random.default_rng(b)
     rls = RecursiveRLS(b, t, 0.5)
     for Z, U in random_steps(rng, 3 * b, 2, b, t):
@@ -437,3 +435,20 @@ def test_shift_rhs_is_learning_the_changed_targets():
 
     with pytest.raises(RejectedSampleError):
         a.shift_rhs(np.full((b, t), np.nan))
+
+
+def test_shift_rhs_by_blocks_equals_one_triangular_solve():
+    """Several blocks of R (the last one partial): ``d`` moves by ``R⁻ᵀG`` as one solve on a copy of R
+    gives, to the rounding bound of a triangular solve, ``b·ε·cond(R)`` relative."""
+    rng = np.random.default_rng(6)
+    b, t = 2 * RecursiveRLS.SOLVE_BLOCK + 44, 3
+    rls = RecursiveRLS(b, t, 0.5, forgetting=0.99)
+    for _ in range(60):
+        rls.update(rng.normal(size=(8, b)), rng.normal(size=(8, t)))
+    R, d0 = np.array(rls.R), np.array(rls.d)
+    G = rng.normal(size=(b, t))
+    rls.shift_rhs(G)
+    expect = d0 - solve_triangular(R, G, trans="T", lower=False)
+    bound = b * np.finfo(float).eps * np.linalg.cond(R) * np.abs(solve_triangular(R, G, trans="T")).max()
+    assert np.abs(np.array(rls.d) - expect).max() <= bound
+    np.testing.assert_array_equal(rls.R, R)
