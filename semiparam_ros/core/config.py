@@ -21,6 +21,7 @@ the allowed range.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -429,7 +430,13 @@ def describe_parameters() -> str:
     return "\n".join(lines)
 
 
+#: A number in exponent notation that YAML 1.1 (PyYAML) reads as a string: ``1e-6``, ``1.0e5``, ``2E+3``.
+_EXPONENT_LITERAL = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+")
+
+
 def _number(name: str, value: Any, integer: bool) -> float | int:
+    if isinstance(value, str) and _EXPONENT_LITERAL.fullmatch(value.strip()):
+        value = float(value)  # what the user wrote is a number; only the YAML version disagrees
     if isinstance(value, bool) or not isinstance(value, int | float):
         kind = "an integer" if integer else "a number"
         raise ConfigurationError(f"parameter {name!r} must be {kind}, got {value!r}")

@@ -155,3 +155,23 @@ def test_build_pipeline_applies_acceleration_and_limit_parameters():
 
     assert restarts(build_pipeline(config)) == pytest.approx(0.01)  # the dropout is not averaged in
     assert restarts(build_pipeline(config.with_overrides({"acceleration.max_gap_s": 0.0}))) > 0.01
+
+
+def test_numbers_in_exponent_notation_are_numbers(tmp_path):
+    """PyYAML reads ``1e-6`` and ``1.0e5`` as strings (YAML 1.1 wants a dot and a signed exponent): a
+    parameter file or ``--set`` written that way gets the number, and other strings stay refused."""
+    assert yaml.safe_load("1e-6") == "1e-6"  # the loader's behaviour the rule exists for
+    path = tmp_path / "arm.yaml"
+    doc = yaml.safe_load(ICUB.read_text())
+    text = yaml.safe_dump(doc)
+    assert "n_features: 500" in text
+    path.write_text(text.replace("n_features: 500", "n_features: 2E+2"))
+    loaded = load_config(path).with_overrides({"parametric.lam": "1.0e-3"})
+    assert loaded.to_flat()["nonparametric.n_features"] == 200
+    assert loaded.to_flat()["parametric.lam"] == float("1.0e-3")
+    assert validate_value("nonparametric.sigma", " 2.5e1 ") == 25.0
+    for bad, fragment in (("nan", "must be a number"), ("1e-6x", "must be a number"), ("1e999", "finite"),
+                          ("2.5e0", "must be an integer")):
+        name = "nonparametric.n_features" if bad == "2.5e0" else "nonparametric.sigma"
+        with pytest.raises(ValueError, match=fragment):
+            validate_value(name, bad)
