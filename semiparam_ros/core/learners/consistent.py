@@ -78,7 +78,10 @@ the predicted one, set by the estimator from the stamps): one sample after a lea
 a contact the gate holds out, or for a model queried h seconds after its last update, the correction of
 errors that old fades out with the memory it was learned with.
 
-Prediction: ``model(x) + α(w Φ(x)δ_f + κ b̂)``; a frozen model is ``model(x)`` (:meth:`predict_model`).
+Prediction: ``model(x) + α(w Φ(x)δ_f + κ b̂)``; a frozen model is ``model(x)`` (:meth:`predict_model`),
+its residual weighted for the error it has on other motion: the residual's errors stay correlated over
+c samples (:meth:`correlation_samples`), so its error there is ``c σ² v`` rather than ``σ² v``
+(:meth:`residual_weight` with ``served``).
 
 Parts (:class:`~semiparam_ros.core.learners.semiparametric.Prediction`): ``parametric = ŷ_P``,
 ``residual = g·r + correction``, ``correction = wΦδ_f + κb̂`` (so ``total − correction`` is model(x)),
@@ -627,16 +630,18 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         assert v is not None  # asked for
         raw = P[0] if rigid is None else P[0] - self._entries_residual(phi, rigid - self._reference)[0]
         s2, spread = self._weight_scales()
+        if model_variance:
+            spread = spread * self.correlation_samples()
         r = np.empty(t)
         weighted_residual(raw, s2, spread, npm.rls.lam, float(v[0]), r)
         self._raw = raw
-        if own:
+        if own and not model_variance:
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
         if model_variance:
             return yp, r, var + self.model_variance(float(v[0])), phi
         return yp, r, var + float(v[0]), phi
 
-    def residual_weight(self, v: Any) -> np.ndarray:
+    def residual_weight(self, v: Any, served: bool = False) -> np.ndarray:
         """Weight g ∈ [0, 1] of the residual per output at relative variance v.
 
         ``g = s²(1 − ν) / (s²(1 − ν) + κ σ² v)``: ``s²`` is the variance of the rigid-body part's recent
@@ -649,13 +654,22 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         (s² ≫ σ²v) a residual of moderate confidence is used, where it is excellent (s² → 0) or the state
         is novel (ν → 1) the model abstains. Before any statistics: 1 (the residual is then zero).
 
+        ``served``: the weight of the model used alone (:meth:`predict_model`, a frozen or served copy),
+        ``s²(1 − ν) / (s²(1 − ν) + κ c σ² v)`` with c = :meth:`correlation_samples`: its residual's error
+        on other motion is ``c σ² v`` (errors correlated over c samples), and this weight minimises the
+        error variance the model reports for itself (:meth:`model_variance`, κ = 1). The online prediction,
+        whose correlated errors the fast correction tracks, keeps ``σ² v``.
+
         Args:
             v: The residual's relative predictive variance, a scalar or (N,).
+            served: The model used alone (see above).
 
         Returns:
             g, (t,) for a scalar v, else (N, t).
         """
         s2, spread = self._weight_scales()
+        if served:
+            spread = spread * self.correlation_samples()
         v_arr = np.asarray(v, dtype=np.float64)[..., None]
         signal = s2 * np.clip(1.0 - self.nonparametric.rls.lam * v_arr, 0.0, 1.0)  # s²(1 − ν)
         total = signal + spread * v_arr
@@ -664,7 +678,8 @@ class ConsistentSemiparametricModel(_TwoStageModel):
     def model_variance(self, v: Any) -> np.ndarray:
         """Return the residual stage's share of the relative variance of model(x) = ŷ_P + g·r used alone.
 
-        Per output, in units of the residual's noise variance σ²:
+        Per output, in units of the residual's noise variance σ², with g the served weight
+        (:meth:`residual_weight` with ``served``):
 
             ``[(1 − g)² s²(1 − ν) + g² c σ² v + s² ν] / σ²``
 
@@ -690,7 +705,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             [0.5]
         """
         s2, noise = self.error_scales()
-        g = self.residual_weight(v)
+        g = self.residual_weight(v, served=True)
         v_arr = np.asarray(v, dtype=np.float64)[..., None]
         nu = np.clip(self.nonparametric.rls.lam * v_arr, 0.0, 1.0)
         c = self.correlation_samples()
@@ -842,7 +857,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
     def predict_model(self, x: Any, rigid: np.ndarray | None = None) -> Prediction:
         """Predict model(x) alone (rigid-body part + weighted residual; no fast correction).
 
-        What a feed-forward term at a desired state uses: it does not depend on the last measurement.
+        What a feed-forward term at a desired state uses: it does not depend on the last measurement. The
+        residual has the weight of the model used alone (:meth:`residual_weight` with ``served``) and the
+        variance is :meth:`model_variance`'s.
 
         Args:
             x: The input ``[q, q̇, q̈]``.
@@ -926,7 +943,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             P, v = npm.rls.predict_checked(phi, True)
             assert v is not None  # asked for
             r = P if rigid is None else P - self._entries_residual(phi, rigid - self._reference)
-            r = r * self.residual_weight(v)
+            r = r * self.residual_weight(v, served=True)
             var = var + self.model_variance(v)
         return Prediction(yp, r, yp + r, var)
 

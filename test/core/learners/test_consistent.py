@@ -50,13 +50,15 @@ def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     ν = λv). σ² and s² are recomputed here from the a-priori errors: σ² the mean of (y − ŷ_P − r)², s² the
     recent mean of (y − ŷ_P)² (memory 1 s at the provisional 100 Hz, i.e. 100 samples) minus σ². After
     learning, the residual of the final π̂ (given explicitly, or made the reference by
-    ``use_rigid(None)``) is the ridge fit of y − Φπ̂. Every solve is of a λ = 0.1 system of condition
-    ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
+    ``use_rigid(None)``) is the ridge fit of y − Φπ̂; used alone (``predict_model``) its weight counts
+    the residual's error c times (c by batch means of the same a-priori errors). Every solve is of a
+    λ = 0.1 system of condition ≲ 1e3: agreement to 1e-9 relative is far above rounding."""
     m = model()
     assert m._reference_samples == 50  # max(0.5 s / 10 ms, REFERENCE_MIN_SAMPLES)
     X, Y = data(400, 0)
     Z = np.array([m.nonparametric.features_of(x)[0] for x in X])
     noise_sum, recent = np.zeros(2), np.zeros(2)
+    smooth, smooth_sum, a_c = np.zeros(2), np.zeros(2), 1.0 - m._corr_beta  # batch means of the errors
     beta = math.exp(-1.0 / 100.0)
     reference, since = np.zeros(3), 0  # the prior
     A0 = 0.1 * np.eye(Z.shape[1])
@@ -73,6 +75,8 @@ def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
             pred = m.predict_one(x, return_variance=True)
         np.testing.assert_allclose(pred.parametric, rigid, rtol=1e-12, atol=1e-12)
         noise_sum += (y - rigid - r) ** 2
+        smooth += a_c * (y - rigid - r - smooth)
+        smooth_sum += smooth ** 2
         a = max(1.0 / (i + 1), 1.0 - beta)
         recent += a * ((y - rigid) ** 2 - recent)
         m.learn_one(x, y)
@@ -90,16 +94,21 @@ def test_residual_is_the_ridge_fit_of_what_the_final_parameters_leave():
     W = np.linalg.solve(A, Z.T @ targets)
     Xt, _ = data(50, 1)
 
-    def want(x: np.ndarray) -> np.ndarray:
+    # the model used alone weighs the residual's error by c, the samples its errors stay correlated
+    c = np.maximum(smooth_sum / noise_sum * (2.0 - a_c) / a_c, 1.0)
+    np.testing.assert_allclose(m.correlation_samples(), c, rtol=1e-8)
+    assert np.any(c > 1.5)  # (correlated errors on an output: the weights below differ there)
+
+    def want(x: np.ndarray, corr: np.ndarray | float = 1.0) -> np.ndarray:
         z = m.nonparametric.features_of(x)[0]
         v = z @ np.linalg.solve(A, z)
         signal = s2 * max(0.0, 1.0 - 0.1 * v)  # s² times the explained fraction 1 − ν, ν = λv
-        return signal / (signal + sigma2 * v / 0.05) * (z @ W)
+        return signal / (signal + corr * sigma2 * v / 0.05) * (z @ W)
 
     explicit = m.predict_model_many(Xt, rigid=pi)
     for k, x in enumerate(Xt):
-        np.testing.assert_allclose(m.predict_model(x, rigid=pi).residual, want(x), rtol=1e-8, atol=1e-10)
-        np.testing.assert_allclose(explicit.residual[k], want(x), rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(m.predict_model(x, rigid=pi).residual, want(x, c), rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(explicit.residual[k], want(x, c), rtol=1e-8, atol=1e-10)
     m.use_rigid(None)  # the reference follows the learned π̂ now
     for x in Xt:
         pred = m.predict_one(x)
@@ -409,8 +418,18 @@ def test_the_model_alone_is_as_uncertain_as_its_residual_is_unsure_and_correlate
     for x in (np.zeros(6), np.full(6, 1.2), np.full(6, 8.0)):
         v = npm.rls.predict_checked(npm.features_of(x), True)[1][0]
         var_p = m.parametric.predict_phi(regressor(x), True)[1]
-        g, nu = m.residual_weight(v), min(lam * v, 1.0)
+        g, nu = m.residual_weight(v, served=True), min(lam * v, 1.0)
+        # the weight of the model used alone: the Wiener weight with the residual's correlated error c σ² v
+        signal = s2 * (1 - nu)
+        total = signal + c * noise * v
+        np.testing.assert_allclose(g, np.where(total > 0, signal / total, 1.0), rtol=1e-12)
         want = ((1 - g) ** 2 * s2 * (1 - nu) + g ** 2 * c * noise * v + s2 * nu) / noise
+        # ... which minimises the variance it reports (ν₀ = 1): any other weight (the online one too) is worse
+        for other in (m.residual_weight(v), np.clip(g + 0.05, 0, 1), np.clip(g - 0.05, 0, 1)):
+            worse = ((1 - other) ** 2 * s2 * (1 - nu) + other ** 2 * c * noise * v + s2 * nu) / noise
+            assert np.all(worse >= want - 1e-12 * np.abs(want))
+        raw = npm.rls.predict_checked(npm.features_of(x), True)[0][0]
+        np.testing.assert_allclose(m.predict_model(x).residual, g * raw, rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(m.predict_model(x).variance, var_p + want, rtol=1e-12)
         np.testing.assert_allclose(m.predict_model_many(x[None]).variance[0], var_p + want, rtol=1e-12)
         np.testing.assert_allclose(m.predict_one(x, return_variance=True).variance, var_p + v, rtol=1e-12)
