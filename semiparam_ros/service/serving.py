@@ -319,6 +319,8 @@ class LearnedModel:
             if not isinstance(model, ConsistentSemiparametricModel | ParametricModel):
                 raise ValueError("consistent=True needs the consistent SP (the default) or the P learner")
             rigid = self.estimator.column_scale * self.consistent().base
+        elif isinstance(model, ParametricModel) and model.rigid_override is not None:
+            rigid = model.parameters  # asked for the learned π̂, not the projection the live P predicts with
         if isinstance(model, ConsistentSemiparametricModel):
             if X.shape[0] == 1:
                 pred = model.predict_model(X[0], rigid)

@@ -31,7 +31,7 @@ from semiparam_ros.core.estimator.state import check_magnitudes, meta_arrays, re
 from semiparam_ros.core.learners._step_kernels import joined_within
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.learners.contract import Prediction
-from semiparam_ros.core.learners.semiparametric import rigid_body_part
+from semiparam_ros.core.learners.semiparametric import ParametricModel, rigid_body_part
 from semiparam_ros.core.learners.uncertainty import NoiseScale
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, consistent_parameters
@@ -332,10 +332,11 @@ class OnlineEstimator:
     def projects(self) -> bool:
         """Whether this estimator's model predicts with a consistent projection once one is solved.
 
-        The node's rule: ``parametric.consistent`` on, joint torques, the consistent SP (the default).
+        The node's rule: ``parametric.consistent`` on, joint torques, and a model that predicts with one
+        rigid body: the consistent SP (the default) or the rigid-body model P.
         """
         return (bool(self.config["parametric.consistent"]) and self.config["robot.output"] == "joint_torques"
-                and isinstance(self.model, ConsistentSemiparametricModel))
+                and isinstance(self.model, ConsistentSemiparametricModel | ParametricModel))
 
     def _project_if_due(self, stamp_ns: int) -> None:
         """Solve the consistent projection if the node's schedule, in the samples' time, says it is due.
@@ -346,7 +347,7 @@ class OnlineEstimator:
         solved before the first learned sample (the projection of the prior is the prior).
         """
         model = self.model
-        if not (self.projects and isinstance(model, ConsistentSemiparametricModel)):
+        if not (self.projects and isinstance(model, ConsistentSemiparametricModel | ParametricModel)):
             return
         last = self._projected_at
         if last is not None and stamp_ns - last < self.config["parametric.consistent_period"] * 1e9:
@@ -363,7 +364,7 @@ class OnlineEstimator:
         self._projected_learned = learned
 
     def use_consistent(self, estimate: ConsistentEstimate | None) -> bool:
-        """Predict with a consistent projection's rigid body from now on (the consistent SP; None: learned).
+        """Predict with a consistent projection's rigid body from now on (consistent SP, P; None: learned).
 
         Where ``parametric.consistent`` is on, the node hands each new solution of its projection worker
         to the model it predicts with, so that its per-sample predictions, the feed-forward and
@@ -376,14 +377,14 @@ class OnlineEstimator:
                 estimator's rigid-body learner, or None to predict with the learned parameters.
 
         Returns:
-            Whether the model took it (False for a model other than the consistent SP, which always
-            predicts with its learned parameters).
+            Whether the model took it (False for the cascade, the joint fit and NP, which always predict
+            with their learned parameters: the cascade's residual learned the errors of those).
 
         Raises:
             RejectedSampleError: An estimate of another size or with non-finite values (model unchanged).
         """
         model = self.model
-        if not isinstance(model, ConsistentSemiparametricModel):
+        if not isinstance(model, ConsistentSemiparametricModel | ParametricModel):
             return False
         model.use_rigid(None if estimate is None else self._scale * np.asarray(estimate.base))
         return True

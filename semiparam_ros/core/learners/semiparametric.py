@@ -314,6 +314,39 @@ class ParametricModel(_Model):
         # the last x and its regressor: predicting then learning the same sample (the contact gate's
         # order) evaluates Φ(x) once; the regressor must be a pure function of x
         self._phi_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._rigid: np.ndarray | None = None  # the parameters predicted with (None: the learned π̂)
+
+    def use_rigid(self, rigid: np.ndarray | None) -> None:
+        """Predict with these parameters instead of the learned π̂, from now on (None: the learned ones).
+
+        For the physically consistent projection of π̂, re-solved off the sample path: the predictions
+        are ``Φ(x)π``; the learner keeps learning π̂ unconstrained (what the projection starts from) and
+        the variance stays the learner's. Not part of the saved state; reset and load clear it.
+
+        Args:
+            rigid: (p,) parameters in the learner's units, or None.
+
+        Raises:
+            RejectedSampleError: A wrong size or a non-finite value (the model is unchanged).
+
+        Example:
+            >>> m = ParametricModel(lambda x: np.array([[x[0]]]), n_params=1, n_outputs=1)
+            >>> m.use_rigid(np.array([2.0]))
+            >>> float(m.predict_one([3.0]).total[0])  # Φ(x)π = 3 · 2
+            6.0
+        """
+        if rigid is None:
+            self._rigid = None
+            return
+        arr = np.asarray(rigid, dtype=np.float64)
+        if arr.shape != (self.n_params,) or not np.isfinite(arr).all():
+            raise RejectedSampleError(f"rigid must be {self.n_params} finite parameters")
+        self._rigid = arr.copy()
+
+    @property
+    def rigid_override(self) -> np.ndarray | None:
+        """The parameters set by :meth:`use_rigid` (learner units), or None (the learned ones)."""
+        return None if self._rigid is None else self._rigid.copy()
 
     def _set_prior(self, prior: Any) -> None:
         p = np.asarray(prior, dtype=np.float64)
@@ -332,8 +365,13 @@ class ParametricModel(_Model):
     def predict_phi(
         self, Phi: np.ndarray, want_variance: bool = False
     ) -> tuple[np.ndarray, np.ndarray | None]:
-        """``Φ(π₀ + δ̂)`` (t,) for a validated regressor, and ``diag(Φ A⁻¹ Φᵀ)`` when asked (one pass)."""
+        """``Φ(π₀ + δ̂)`` (t,) for a validated regressor, and ``diag(Φ A⁻¹ Φᵀ)`` when asked (one pass).
+
+        ``Φπ`` instead where :meth:`use_rigid` set π.
+        """
         P, var = self.rls.predict_checked(np.ascontiguousarray(Phi), want_variance)
+        if self._rigid is not None:
+            return Phi @ self._rigid, var
         yp = P[:, 0]
         y0 = self.prior_output(Phi)
         return (yp if y0 is None else yp + y0), var
@@ -360,6 +398,8 @@ class ParametricModel(_Model):
         yp, var = self.predict_phi_rows(Phi)
         if rigid is not None:
             yp = Phi @ check_finite_array("rigid", rigid, (self.n_params,))
+        elif self._rigid is not None:
+            yp = Phi @ self._rigid
         return Prediction(yp, np.zeros_like(yp), yp.copy(), var)
 
     def phi_rows(self, X2: np.ndarray) -> np.ndarray:
@@ -484,6 +524,8 @@ class ParametricModel(_Model):
             self.n_samples_seen += 1
             return None
         yp = self.predict_update_phi(Phi, yv)
+        if self._rigid is not None:
+            yp = Phi @ self._rigid
         self.n_samples_seen += 1
         return Prediction(yp, np.zeros(self.n_outputs), yp.copy())
 
@@ -496,9 +538,10 @@ class ParametricModel(_Model):
         """Do nothing: the rigid-body stage has no standardizer (same interface as NP and SP)."""
 
     def reset(self) -> None:
-        """Forget everything learned (π̂ back to the prior π₀)."""
+        """Forget everything learned (π̂ back to the prior π₀) and any parameters set by :meth:`use_rigid`."""
         self.rls.reset()
         self.n_samples_seen = 0
+        self._rigid = None
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return the learned state (not the regressor) as arrays."""
@@ -533,6 +576,7 @@ class ParametricModel(_Model):
                                   f"({self.n_params},) finite")
         self._set_prior(prior)
         self.rls, self.n_samples_seen = rls, n_seen
+        self._rigid = None
 
 
 class NonparametricModel(_Model):

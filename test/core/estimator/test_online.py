@@ -953,3 +953,45 @@ def test_an_inline_projection_that_fails_keeps_the_last_solution_and_loses_no_sa
     assert len(calls) >= 3 and learned_at_failures == [True, True]
     assert est.drops["rejected_sample"] == 0
     assert est.model.rigid_override is not None and np.isfinite(est.model.rigid_override).all()
+
+
+def test_the_rigid_body_model_predicts_with_the_consistent_projection_it_serves(tmp_path):
+    """P takes the projection too: after the first solution its predictions are Φ(x)θ with θ the solution
+    it was handed, while it keeps learning π̂ unconstrained — equal to a twin that never took one; a new
+    solution is the projection of its state in learner units; None and a bad value leave the learned π̂."""
+    from helpers.bags import ur5_config, write_ur5_torque_bag
+
+    from semiparam_ros.core.learners.semiparametric import ParametricModel
+    from semiparam_ros.core.rigid_body.identification import consistent_parameters
+    from semiparam_ros.eval.replay import load_samples
+
+    write_ur5_torque_bag(tmp_path / "log", 4.0, seed=4)
+    cfg = ur5_config().with_overrides({"parametric.consistent_period": 1.0, "gate.enabled": False})
+    data, _ = load_samples(tmp_path / "log", cfg)
+    est, twin = OnlineEstimator(cfg, kind="P"), OnlineEstimator(cfg, kind="P")
+    est.inline_projection = True
+    assert isinstance(est.model, ParametricModel) and est.projects
+    n = len(cfg["robot.joints"])
+    samples = [Sample(int(s), x[:n], x[n:2 * n], x[2 * n:], y)
+               for s, x, y in zip(data.stamps_ns, data.X, data.Y, strict=True)]
+    for s in samples[:-1]:
+        est.step(s)
+        twin.step(s)
+    theta = est.model.rigid_override
+    assert theta is not None
+    np.testing.assert_array_equal(est.model.parameters, twin.model.parameters)  # learning unchanged
+    last = samples[-1]
+    got = est.step(last).prediction
+    Phi = est.model.regressor(np.concatenate([last.q, last.dq, last.ddq]))
+    np.testing.assert_allclose(got.total, Phi @ theta, rtol=1e-12, atol=1e-12)
+    assert np.abs(got.total - twin.step(last).prediction.total).max() > 1e-6  # not the learned π̂
+    # the projection of the final state, solved the same way, is what a new solution would set
+    rigid, R, lam = est.rigid_body_state()
+    sol = consistent_parameters(est.regressor, rigid, R, est.column_scale, lam)
+    est.use_consistent(sol)
+    np.testing.assert_allclose(est.model.rigid_override, est.column_scale * np.asarray(sol.base), rtol=1e-15)
+    est.use_consistent(None)
+    assert est.model.rigid_override is None
+    with pytest.raises(RejectedSampleError):
+        est.model.use_rigid(np.full(est.model.n_params, np.nan))
+    assert est.model.rigid_override is None

@@ -88,6 +88,36 @@ def test_parametric_model_is_closed_form_ridge_on_stacked_rows():
     assert p.n_samples_seen == 300 and p.rls.n_samples_seen == 600
 
 
+def test_parametric_model_with_other_parameters_predicts_them_and_learns_as_before(tmp_path):
+    """``use_rigid(θ)``: every prediction path gives Φ(x)θ (computed here from the regressor), the learned
+    π̂ stays the closed-form ridge fit (the same as a twin's); reset and a loaded state clear θ."""
+    rng = np.random.default_rng(2)
+    X, Y = toy_data(rng, 120, with_residual=False)
+    p, twin = ParametricModel(regressor, 4, 2, lam=0.5), ParametricModel(regressor, 4, 2, lam=0.5)
+    theta = np.array([1.0, 2.5, -0.2, 0.1])
+    p.use_rigid(theta)
+    for x, y in zip(X[:60], Y[:60], strict=True):
+        np.testing.assert_allclose(p.predict_learn_one(x, y).total, regressor(x) @ theta, rtol=1e-13)
+        twin.learn_one(x, y)
+    for x, y in zip(X[60:], Y[60:], strict=True):
+        ctx = p.predict_ahead(x)
+        np.testing.assert_allclose(ctx.prediction.total, regressor(x) @ theta, rtol=1e-13)
+        p.learn_ahead(ctx, y)
+        twin.learn_one(x, y)
+    np.testing.assert_array_equal(p.parameters, twin.parameters)
+    np.testing.assert_allclose(p.predict_many(X[:5]).total, [regressor(x) @ theta for x in X[:5]], rtol=1e-13)
+    np.testing.assert_allclose(p.predict_one(X[0], return_variance=True).variance,
+                               twin.predict_one(X[0], return_variance=True).variance, rtol=1e-13)
+    p.save(tmp_path / "p.npz")
+    loaded = ParametricModel(regressor, 4, 2, lam=0.5)
+    loaded.use_rigid(theta)
+    loaded.load(tmp_path / "p.npz")
+    assert loaded.rigid_override is None  # not part of the state: predicts with the learned π̂
+    np.testing.assert_allclose(loaded.predict_one(X[0]).total, regressor(X[0]) @ twin.parameters, rtol=1e-10)
+    p.reset()
+    assert p.rigid_override is None
+
+
 def test_semiparametric_composition_matches_closed_form():
     """SP = ridge on Φ rows, then ridge of y − ŷ_apriori on φ([x, ŷ_apriori]), each solved directly."""
     rng = np.random.default_rng(2)
