@@ -10,6 +10,7 @@ is fed. The checkpoint format is :mod:`semiparam_ros.core.estimator.state`.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -82,6 +83,24 @@ class StepResult:
         otherwise (σ = :attr:`std`).
         """
         return self.sample.y - self.prediction.total
+
+
+def _saved_period(state: dict[str, np.ndarray], path: str | Path) -> float | None:
+    """Return the sample period [s] a checkpoint was learned at (``meta.sample_period_s``), or None.
+
+    Raises:
+        CheckpointError: A stored period that is not one finite number > 0.
+    """
+    if "meta.sample_period_s" not in state:
+        return None
+    try:
+        period = float(np.asarray(state["meta.sample_period_s"], dtype=np.float64).item())
+    except (TypeError, ValueError) as err:
+        raise CheckpointError(f"{path}: corrupt checkpoint: meta.sample_period_s: {err}") from err
+    if not (math.isfinite(period) and period > 0.0):
+        raise CheckpointError(f"{path}: corrupt checkpoint: meta.sample_period_s = {period!r} is not a "
+                              "period > 0 s")
+    return period
 
 
 class OnlineEstimator:
@@ -540,6 +559,10 @@ class OnlineEstimator:
         if self.payload is not None:
             state.update(self.payload.state_dict("payload."))
         state.update(meta_arrays(self.config, self.kind, self.regressor, self.n_samples_learned))
+        if self.sample_period_s is not None:
+            # the period the learner converted its constants in seconds at: a loaded model takes it until
+            # its own stream's period is measured (e.g. the served model's correlation window)
+            state["meta.sample_period_s"] = np.array(self.sample_period_s)
         return state
 
     def load(self, path: str | Path) -> None:
@@ -592,8 +615,11 @@ class OnlineEstimator:
         if not finite:
             raise CheckpointError(f"{path}: corrupt checkpoint: its model's prediction at q = q̇ = q̈ = 0 is "
                                   "not finite")
+        saved_period = _saved_period(state, path)
         if self.sample_period_s is not None:  # the restored learner takes the stream's period too
             model.on_period(self.sample_period_s)
+        elif saved_period is not None:  # else the period it learned at (measured again once data come)
+            model.on_period(saved_period)
         self.model = model
         self.noise = noise
         self.gate = gate

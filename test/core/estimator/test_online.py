@@ -995,3 +995,47 @@ def test_the_rigid_body_model_predicts_with_the_consistent_projection_it_serves(
     with pytest.raises(RejectedSampleError):
         est.model.use_rigid(np.full(est.model.n_params, np.nan))
     assert est.model.rigid_override is None
+
+
+def test_a_checkpoint_carries_the_period_it_was_learned_at(tmp_path):
+    """A loaded model converts its constants in seconds at the period its state was learned at (not the
+    provisional one) until its own stream's period is measured: the consistent SP's correlation window,
+    so its served weight and σ, equal the live model's (served predictions to 1e-9). A corrupt stored
+    period is refused with the estimator unchanged; a checkpoint without one loads as before."""
+    from helpers.bags import ur5_config, write_ur5_torque_bag
+
+    from semiparam_ros import load_model
+    from semiparam_ros.core.checkpoint import atomic_save_npz as save_npz
+    from semiparam_ros.core.checkpoint import load_npz
+    from semiparam_ros.eval.replay import load_samples
+
+    write_ur5_torque_bag(tmp_path / "log", 4.0, seed=5, rate_hz=250.0)
+    cfg = ur5_config()
+    data, _ = load_samples(tmp_path / "log", cfg)
+    est = OnlineEstimator(cfg)
+    n = len(cfg["robot.joints"])
+    for s, x, y in zip(data.stamps_ns, data.X, data.Y, strict=True):
+        est.step(Sample(int(s), x[:n], x[n:2 * n], x[2 * n:], y))
+    period = est.sample_period_s
+    assert period is not None and abs(period - 0.01) > 1e-3  # another rate than the provisional 100 Hz
+    est.save(tmp_path / "a.npz")
+    served = load_model(tmp_path / "a.npz")
+    np.testing.assert_allclose(served.estimator.model.correlation_samples(), est.model.correlation_samples(),
+                               rtol=1e-12)
+    X = data.X[::50]
+    want = est.model.predict_model_many(X)
+    got = served.estimator.model.predict_model_many(X)
+    np.testing.assert_allclose(got.total, want.total, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(got.variance, want.variance, rtol=1e-9)
+    state = load_npz(tmp_path / "a.npz")
+    for bad in (np.array(-1.0), np.array(np.nan), np.array("fast")):
+        broken = dict(state, **{"meta.sample_period_s": bad})
+        save_npz(tmp_path / "b.npz", broken)
+        fresh = OnlineEstimator(cfg)
+        before = fresh.model.predict_one(data.X[0]).total
+        with pytest.raises(CheckpointError, match="sample_period_s"):
+            fresh.load(tmp_path / "b.npz")
+        np.testing.assert_array_equal(fresh.model.predict_one(data.X[0]).total, before)
+    old = {k: v for k, v in state.items() if k != "meta.sample_period_s"}
+    save_npz(tmp_path / "c.npz", old)
+    OnlineEstimator(cfg).load(tmp_path / "c.npz")  # written before the period was stored: loads
