@@ -10,7 +10,6 @@ is fed. The checkpoint format is :mod:`semiparam_ros.core.estimator.state`.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +27,7 @@ from semiparam_ros.core.estimator.build import (
     column_scale,
     gate_config,
 )
-from semiparam_ros.core.estimator.state import check_magnitudes, meta_arrays, read_meta
+from semiparam_ros.core.estimator.state import check_magnitudes, meta_arrays, read_meta, read_period
 from semiparam_ros.core.learners._step_kernels import joined_within
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.learners.contract import Prediction
@@ -85,22 +84,8 @@ class StepResult:
         return self.sample.y - self.prediction.total
 
 
-def _saved_period(state: dict[str, np.ndarray], path: str | Path) -> float | None:
-    """Return the sample period [s] a checkpoint was learned at (``meta.sample_period_s``), or None.
-
-    Raises:
-        CheckpointError: A stored period that is not one finite number > 0.
-    """
-    if "meta.sample_period_s" not in state:
-        return None
-    try:
-        period = float(np.asarray(state["meta.sample_period_s"], dtype=np.float64).item())
-    except (TypeError, ValueError) as err:
-        raise CheckpointError(f"{path}: corrupt checkpoint: meta.sample_period_s: {err}") from err
-    if not (math.isfinite(period) and period > 0.0):
-        raise CheckpointError(f"{path}: corrupt checkpoint: meta.sample_period_s = {period!r} is not a "
-                              "period > 0 s")
-    return period
+#: The models that predict with one rigid body, so with a consistent projection once one is solved.
+_TAKES_RIGID = (ConsistentSemiparametricModel, ParametricModel)
 
 
 class OnlineEstimator:
@@ -355,7 +340,7 @@ class OnlineEstimator:
         rigid body: the consistent SP (the default) or the rigid-body model P.
         """
         return (bool(self.config["parametric.consistent"]) and self.config["robot.output"] == "joint_torques"
-                and isinstance(self.model, ConsistentSemiparametricModel | ParametricModel))
+                and isinstance(self.model, _TAKES_RIGID))
 
     def _project_if_due(self, stamp_ns: int) -> None:
         """Solve the consistent projection if the node's schedule, in the samples' time, says it is due.
@@ -366,7 +351,7 @@ class OnlineEstimator:
         solved before the first learned sample (the projection of the prior is the prior).
         """
         model = self.model
-        if not (self.projects and isinstance(model, ConsistentSemiparametricModel | ParametricModel)):
+        if not (self.projects and isinstance(model, _TAKES_RIGID)):
             return
         last = self._projected_at
         if last is not None and stamp_ns - last < self.config["parametric.consistent_period"] * 1e9:
@@ -403,7 +388,7 @@ class OnlineEstimator:
             RejectedSampleError: An estimate of another size or with non-finite values (model unchanged).
         """
         model = self.model
-        if not isinstance(model, ConsistentSemiparametricModel | ParametricModel):
+        if not isinstance(model, _TAKES_RIGID):
             return False
         model.use_rigid(None if estimate is None else self._scale * np.asarray(estimate.base))
         return True
@@ -558,11 +543,8 @@ class OnlineEstimator:
         state.update(self.gate.state_dict("gate."))
         if self.payload is not None:
             state.update(self.payload.state_dict("payload."))
-        state.update(meta_arrays(self.config, self.kind, self.regressor, self.n_samples_learned))
-        if self.sample_period_s is not None:
-            # the period the learner converted its constants in seconds at: a loaded model takes it until
-            # its own stream's period is measured (e.g. the served model's correlation window)
-            state["meta.sample_period_s"] = np.array(self.sample_period_s)
+        state.update(meta_arrays(self.config, self.kind, self.regressor, self.n_samples_learned,
+                                 self.sample_period_s))
         return state
 
     def load(self, path: str | Path) -> None:
@@ -615,7 +597,7 @@ class OnlineEstimator:
         if not finite:
             raise CheckpointError(f"{path}: corrupt checkpoint: its model's prediction at q = q̇ = q̈ = 0 is "
                                   "not finite")
-        saved_period = _saved_period(state, path)
+        saved_period = read_period(state, path)
         if self.sample_period_s is not None:  # the restored learner takes the stream's period too
             model.on_period(self.sample_period_s)
         elif saved_period is not None:  # else the period it learned at (measured again once data come)

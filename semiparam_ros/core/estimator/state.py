@@ -10,6 +10,7 @@ assembles the learned parts.
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -76,7 +77,7 @@ def robot_identity(regressor: RigidBodyRegressor) -> dict[str, Any]:
 
 
 def meta_arrays(config: EstimatorConfig, kind: str, regressor: RigidBodyRegressor,
-                n_samples_learned: int) -> dict[str, np.ndarray]:
+                n_samples_learned: int, sample_period_s: float | None = None) -> dict[str, np.ndarray]:
     """Return a checkpoint's ``meta.*`` arrays: what :func:`read_meta` checks; they make it self-contained.
 
     Args:
@@ -84,11 +85,14 @@ def meta_arrays(config: EstimatorConfig, kind: str, regressor: RigidBodyRegresso
         kind: Its learner kind (``P``, ``NP``, ``SP``).
         regressor: Its regressor (``meta.urdf``, ``meta.robot``).
         n_samples_learned: Samples learned so far.
+        sample_period_s: The measured sample period [s] the learner converted its constants in seconds at
+            (``meta.sample_period_s``, when known: a loaded model takes it until its own stream's period is
+            measured, :func:`read_period`).
 
     Returns:
-        Arrays by key: version, fingerprint, samples learned, configuration, URDF, robot, versions.
+        Arrays by key: version, fingerprint, samples learned, configuration, URDF, robot, versions, period.
     """
-    return {
+    meta = {
         "meta.version": np.array(CHECKPOINT_VERSION),
         "meta.fingerprint": np.array(fingerprint(config, kind, regressor)),
         "meta.n_samples_learned": np.array(n_samples_learned),
@@ -97,6 +101,31 @@ def meta_arrays(config: EstimatorConfig, kind: str, regressor: RigidBodyRegresso
         "meta.robot": np.array(json.dumps(robot_identity(regressor), sort_keys=True)),
         "meta.versions": np.array(json.dumps(software_versions(), sort_keys=True)),
     }
+    if sample_period_s is not None:
+        meta["meta.sample_period_s"] = np.array(float(sample_period_s))
+    return meta
+
+
+def read_period(state: dict[str, np.ndarray], path: str | Path) -> float | None:
+    """Return the sample period [s] a checkpoint was learned at (``meta.sample_period_s``), or None.
+
+    Args:
+        state: Checkpoint arrays.
+        path: Where they came from, for messages.
+
+    Raises:
+        CheckpointError: A stored period that is not one finite number > 0.
+    """
+    if "meta.sample_period_s" not in state:
+        return None
+    try:
+        period = float(np.asarray(state["meta.sample_period_s"], dtype=np.float64).item())
+    except (TypeError, ValueError) as err:
+        raise CheckpointError(f"{path}: corrupt checkpoint: meta.sample_period_s: {err}") from err
+    if not (math.isfinite(period) and period > 0.0):
+        raise CheckpointError(f"{path}: corrupt checkpoint: meta.sample_period_s = {period!r} is not a "
+                              "period > 0 s")
+    return period
 
 
 def read_meta(state: dict[str, np.ndarray], path: str | Path, config: EstimatorConfig, kind: str,

@@ -119,9 +119,10 @@ from semiparam_ros.core.learners.semiparametric import (
     ParametricModel,
     Regressor,
     _TwoStageModel,
+    checked_rigid,
 )
 from semiparam_ros.core.validation import check_finite_array, check_positive_int, check_range
-from semiparam_ros.errors import CheckpointError, RejectedSampleError
+from semiparam_ros.errors import CheckpointError
 
 __all__ = ["ConsistentSemiparametricModel", "ErrorTracker", "structural_entries"]
 
@@ -629,9 +630,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         P, v = npm.rls.predict_checked(phi, True)
         assert v is not None  # asked for
         raw = P[0] if rigid is None else P[0] - self._entries_residual(phi, rigid - self._reference)[0]
-        s2, spread = self._weight_scales()
-        if model_variance:
-            spread = spread * self.correlation_samples()
+        s2, spread = self._weight_scales(served=model_variance)
         r = np.empty(t)
         weighted_residual(raw, s2, spread, npm.rls.lam, float(v[0]), r)
         self._raw = raw
@@ -667,9 +666,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         Returns:
             g, (t,) for a scalar v, else (N, t).
         """
-        s2, spread = self._weight_scales()
-        if served:
-            spread = spread * self.correlation_samples()
+        s2, spread = self._weight_scales(served)
         v_arr = np.asarray(v, dtype=np.float64)[..., None]
         signal = s2 * np.clip(1.0 - self.nonparametric.rls.lam * v_arr, 0.0, 1.0)  # s²(1 − ν)
         total = signal + spread * v_arr
@@ -732,13 +729,16 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                           where=self._scale_model > 0.0)
         return np.maximum(ratio * (2.0 - a) / a, 1.0)
 
-    def _weight_scales(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(s², σ²/ν₀)`` of the residual's weight, cached until the next learned sample."""
+    def _weight_scales(self, served: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """``(s², σ²/ν₀)`` of the residual's weight, cached until the next learned sample.
+
+        ``served``: ``(s², c σ²/ν₀)``, the model used alone (see :meth:`residual_weight`).
+        """
         cache = self._weight_cache  # the scales change only when a sample is learned
         if cache is None:
             s2, noise = self.error_scales()
             cache = self._weight_cache = (s2, noise / self.novelty_scale)
-        return cache
+        return (cache[0], cache[1] * self.correlation_samples()) if served else cache
 
     def error_scales(self) -> tuple[np.ndarray, np.ndarray]:
         """``(s², σ²)`` (t,) each: the rigid-body part's systematic error and the residual's noise variances.
@@ -906,12 +906,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         return None if self._rigid is None else self._rigid.copy()
 
     def _checked_rigid(self, rigid: np.ndarray | None) -> np.ndarray | None:
-        if rigid is None:
-            return None
-        arr = np.asarray(rigid, dtype=np.float64)
-        if arr.shape != (self.n_params,) or not np.isfinite(arr).all():
-            raise RejectedSampleError(f"rigid must be {self.n_params} finite parameters")
-        return arr
+        return checked_rigid(rigid, self.n_params)
 
     def predict_model_many(self, X: Any, rigid: np.ndarray | None = None) -> Prediction:
         """:meth:`predict_model` of N inputs at once (arrays of shape (N, t); ``variance`` included).

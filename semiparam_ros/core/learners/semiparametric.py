@@ -54,7 +54,7 @@ from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSa
 
 __all__ = [
     "NonparametricModel", "ParametricModel", "SemiparametricModel",
-    "rigid_body_part",
+    "checked_rigid", "rigid_body_part",
 ]
 
 Regressor = Callable[[np.ndarray], np.ndarray]
@@ -264,6 +264,24 @@ class _Model:
         raise NotImplementedError
 
 
+def checked_rigid(rigid: Any, n_params: int) -> np.ndarray | None:
+    """Return rigid-body parameters to predict with as a float64 array (None stays None), checked.
+
+    Args:
+        rigid: (p,) parameters in the learner's units, or None.
+        n_params: p.
+
+    Raises:
+        RejectedSampleError: A wrong size or a non-finite value.
+    """
+    if rigid is None:
+        return None
+    arr = np.asarray(rigid, dtype=np.float64)
+    if arr.shape != (n_params,) or not np.isfinite(arr).all():
+        raise RejectedSampleError(f"rigid must be {n_params} finite parameters")
+    return arr
+
+
 class ParametricModel(_Model):
     """Rigid-body (parametric) estimator: recursive ridge regression of y on the rows of ``Φ(x)``.
 
@@ -335,13 +353,8 @@ class ParametricModel(_Model):
             >>> float(m.predict_one([3.0]).total[0])  # Φ(x)π = 3 · 2
             6.0
         """
-        if rigid is None:
-            self._rigid = None
-            return
-        arr = np.asarray(rigid, dtype=np.float64)
-        if arr.shape != (self.n_params,) or not np.isfinite(arr).all():
-            raise RejectedSampleError(f"rigid must be {self.n_params} finite parameters")
-        self._rigid = arr.copy()
+        checked = checked_rigid(rigid, self.n_params)
+        self._rigid = None if checked is None else checked.copy()
 
     @property
     def rigid_override(self) -> np.ndarray | None:
