@@ -23,13 +23,15 @@ is linear in δ. The model predicts with a **reference** θ_ref: the rigid body 
 :attr:`REFERENCE_PERIOD` of learned samples. One random-feature
 :class:`~semiparam_ros.core.learners.rrls.RecursiveRLS` regresses ``y − Φθ_ref`` on ``φ(s(x))`` (t
 columns, like the cascade's), and the cross-products ``B_E = Σ_m β^{n−m} φ_m Φ_E,mᵀ`` of the features
-with the regressor's non-zero entries are kept beside it (one matrix product per :attr:`PENDING_ROWS`
-samples). A new reference θ changes the learner's right-hand side by ``−B_E S(θ − θ_ref)`` (S scatters the
-change over the entries): one triangular solve with t right-hand sides (:meth:`RecursiveRLS.shift_rhs`)
-makes it exactly the learner that learned ``y − Φθ`` from the start. So ``r = φᵀA⁻¹B(θ_ref)`` is the
-residual of the rigid body the model predicts with: it never goes stale when the rigid body moves (the
-consistency correction of adaptive semiparametric dynamics learning, here exact), and other parameters
-θ' are predicted with ``r − (φᵀA⁻¹B_E) S(θ' − θ_ref)`` (two triangular solves: off the sample path).
+with the regressor's non-zero entries are kept beside it
+(:class:`~semiparam_ros.core.learners.cross_products.EntryCrossProducts`: one matrix product per 32
+samples, on a worker thread off the sample path). A new reference θ changes the learner's right-hand side
+by ``−B_E S(θ − θ_ref)`` (S scatters the change over the entries): one triangular solve with t right-hand
+sides (:meth:`RecursiveRLS.shift_rhs`) makes it exactly the learner that learned ``y − Φθ`` from the
+start. So ``r = φᵀA⁻¹B(θ_ref)`` is the residual of the rigid body the model predicts with: it never goes
+stale when the rigid body moves (the consistency correction of adaptive semiparametric dynamics learning,
+here exact), and other parameters θ' are predicted with ``r − (φᵀA⁻¹B_E) S(θ' − θ_ref)`` (two triangular
+solves: off the sample path).
 
 **3. The residual's weight.** The same forward substitution gives the residual stage's relative
 predictive variance ``v = φA⁻¹φᵀ`` (``ν = λv`` is the fraction of its prior variance left at x: ≈ 0 where
@@ -112,6 +114,7 @@ from semiparam_ros.core.learners._consistent_kernels import (
 )
 from semiparam_ros.core.learners.adaptation import forgetting_factor
 from semiparam_ros.core.learners.contract import Prediction, PredictionContext
+from semiparam_ros.core.learners.cross_products import EntryCrossProducts
 from semiparam_ros.core.learners.features import Standardizer
 from semiparam_ros.core.learners.rrls import RecursiveRLS
 from semiparam_ros.core.learners.semiparametric import (
@@ -452,11 +455,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         # the residual learner regresses y − Φθ_ref for the reference θ_ref the model predicts with; the
         # cross-products of its features with the learned regressor entries re-reference it exactly
         self._reference = self.parametric.prior.copy()   # θ_ref (learner units)
-        self._entries_rhs = np.zeros((self.nonparametric.rls.n_features, self._phi_entries.size))
-        self._pending_phi = np.empty((self.PENDING_ROWS, self.nonparametric.rls.n_features))
-        self._pending_entries = np.empty((self.PENDING_ROWS, self._phi_entries.size))
-        self._pending_beta = np.empty(self.PENDING_ROWS)
-        self._n_pending = 0
+        self._cross = EntryCrossProducts(self.nonparametric.rls.n_features, self._phi_entries.size)
         self._since_reference = 0  # learned samples since θ_ref last followed π̂
         self._reference_samples = self._reference_count(sample_period_s)
         self._recent_beta = self._scale_forgetting(sample_period_s)
@@ -493,10 +492,6 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         samples = max(self.SCALE_TIME_CONSTANT / float(sample_period_s), float(self.SCALE_MIN_SAMPLES))
         return forgetting_factor(samples, 1.0)
 
-    #: Learned samples whose regressor entries are added to their cross-products with the features in one
-    #: matrix product (BLAS 3) instead of one rank-1 update each.
-    PENDING_ROWS = 32
-
     #: Without a rigid body set by :meth:`use_rigid`, the reference θ_ref follows the learned π̂ every this
     #: many seconds of learned samples (at least :attr:`REFERENCE_MIN_SAMPLES`; at first after 1, 2, 4, …
     #: samples): the model's rigid part and its residual are those of π̂ at most that old (one triangular
@@ -509,42 +504,6 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """Learned samples between two re-references: max(REFERENCE_PERIOD/T, REFERENCE_MIN_SAMPLES)."""
         return max(round(self.REFERENCE_PERIOD / float(sample_period_s)), self.REFERENCE_MIN_SAMPLES)
 
-    def _pending_terms(self) -> tuple[float, np.ndarray]:
-        """``(Π_j β_j, Φ_pendingᵀ-weighted features)``: B_E ← scale·B_E + φ_wᵀ Φ_E over the pending rows.
-
-        Row m enters with ``Π_{j>m} β_j`` (the forgetting of the rows after it).
-        """
-        k = self._n_pending
-        beta = self._pending_beta[:k]
-        weights = np.ones(k)
-        if k > 1:
-            weights[:-1] = np.cumprod(beta[:0:-1])[::-1]
-        phi = self._pending_phi[:k]
-        if k > 1 and not np.all(weights == 1.0):
-            phi = phi * weights[:, None]
-        return float(weights[0] * beta[0]), phi
-
-    def _flush_entries(self) -> None:
-        """Add the pending rows to ``B_E = Σ_m β^{n−m} φ_m Φ_E,mᵀ`` in place (one matrix product)."""
-        k = self._n_pending
-        if k == 0:
-            return
-        scale, phi = self._pending_terms()
-        if scale != 1.0:
-            self._entries_rhs *= scale
-        self._entries_rhs += phi.T @ self._pending_entries[:k]
-        self._n_pending = 0
-
-    def _entries_with_pending(self) -> np.ndarray:
-        """B_E with the pending rows added, without changing the state (reads leave the arithmetic alone)."""
-        k = self._n_pending
-        if k == 0:
-            return self._entries_rhs
-        scale, phi = self._pending_terms()
-        out = self._entries_rhs * scale if scale != 1.0 else self._entries_rhs.copy()
-        out += phi.T @ self._pending_entries[:k]
-        return out
-
     def _rereference(self, theta: np.ndarray) -> None:
         """Make θ the reference: the residual learner becomes exactly the one that learned ``y − Φθ``.
 
@@ -554,10 +513,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """
         change = theta - self._reference
         if self._scale_weight > 0.0 and self._phi_entries.size and np.any(change != 0.0):
-            self._flush_entries()
             scatter = np.zeros((self._phi_entries.size, self.n_outputs))
             scatter[np.arange(self._phi_entries.size), self._entry_rows] = change[self._entry_cols]
-            self.nonparametric.rls.shift_rhs(self._entries_rhs @ scatter)
+            self.nonparametric.rls.shift_rhs(self._cross.settled() @ scatter)
         self._reference = np.array(theta, dtype=np.float64)
         self._since_reference = 0
 
@@ -567,7 +525,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         R = rls.R
         a = solve_triangular(R, solve_triangular(R, phi.T, trans="T", lower=False, check_finite=False),
                              lower=False, check_finite=False)  # A⁻¹φᵀ (D, N)
-        pe = (a.T @ self._entries_with_pending()) * change[self._entry_cols]  # (N, E)
+        pe = (a.T @ self._cross.with_pending()) * change[self._entry_cols]  # (N, E)
         out = np.zeros((phi.shape[0], self.n_outputs))
         np.add.at(out.T, self._entry_rows, pe.T)
         return out
@@ -982,11 +940,10 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             par_model.rls.defer_step(par_step)
             beta = npm.rls.forgetting  # this step's β: the cross-products forget as the learner does
             npm.rls.defer_step(np_step)
-            if self._n_pending == self.PENDING_ROWS:
-                self._flush_entries()
-            stage_pending(self._pending_phi, self._pending_entries, self._pending_beta, self._n_pending,
-                          phi[0], Phi.reshape(-1), self._phi_entries, beta)
-            self._n_pending += 1
+            rows_phi, rows_entries, rows_beta, k = self._cross.staging
+            stage_pending(rows_phi, rows_entries, rows_beta, k, phi[0], Phi.reshape(-1), self._phi_entries,
+                          beta)
+            self._cross.staged()
             assert ctx.raw_residual is not None  # computed with φ
             self._scale_weight = beta * self._scale_weight + 1.0
             self._recent_n += 1
@@ -1036,8 +993,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         self._raw = None
         self._rigid = None  # a projection of what was forgotten
         self._reset_scales()
-        self._entries_rhs[:] = 0.0
-        self._n_pending = 0
+        self._cross.reset()
         self._reference = self.parametric.prior.copy()
         self._since_reference = 0
 
@@ -1045,7 +1001,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """Return the learners' and the tracker's state as arrays."""
         state = super().state_dict(prefix)
         state[f"{prefix}phi_entries"] = self._phi_entries.copy()
-        state[f"{prefix}entries_rhs"] = self._entries_with_pending().copy()
+        state[f"{prefix}entries_rhs"] = self._cross.with_pending()
         # θ_ref, the samples since it followed π̂, and whether use_rigid set it (not restored on load)
         state[f"{prefix}reference"] = np.concatenate([self._reference, [self._since_reference,
                                                                        float(self._rigid is not None)]])
@@ -1103,8 +1059,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
                                   "size or invalid values")
         super().load_state_dict(state, prefix)
         self.tracker, self.fast = tracker, fast
-        self._entries_rhs = np.ascontiguousarray(entries_rhs).copy()
-        self._n_pending = 0
+        self._cross.load(entries_rhs)
         self._reference, self._since_reference = reference[:p].copy(), int(reference[p])
         self._held = None
         self._raw = None

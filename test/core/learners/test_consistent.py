@@ -287,10 +287,10 @@ def test_residual_keeps_only_the_regressor_entries_that_are_not_zero(monkeypatch
                 standardizer=STD, novelty_scale=0.05, tracker=True)
     reduced = ConsistentSemiparametricModel(sparse_regressor, 3, 6, 2, **args)
     np.testing.assert_array_equal(reduced._phi_entries, [0, 1, 4, 5])
-    assert reduced.nonparametric.n_outputs == 2 and reduced._entries_rhs.shape == (60, 4)
+    assert reduced.nonparametric.n_outputs == 2 and reduced._cross.shape == (60, 4)
     monkeypatch.setattr(mod, "structural_entries", lambda reg, n_in, t, p, samples=8: np.arange(t * p))
     full = ConsistentSemiparametricModel(sparse_regressor, 3, 6, 2, **args)
-    assert full._entries_rhs.shape == (60, 6)
+    assert full._cross.shape == (60, 6)
     X, Y = data(300, 5)
     for x, y in zip(X, Y, strict=True):
         a, b = reduced.predict_learn_one(x, y), full.predict_learn_one(x, y)
@@ -468,7 +468,7 @@ def test_a_checkpoint_that_regressed_every_regressor_entry_is_converted_exactly(
     state = m.state_dict()
     R = m.nonparametric.rls.R
     C = m.nonparametric.rls.d
-    B_E = m._entries_with_pending()
+    B_E = m._cross.with_pending()
     change = m._reference - m.parametric.prior
     scatter = np.zeros((B_E.shape[1], 2))
     scatter[np.arange(B_E.shape[1]), m._entry_rows] = change[m._entry_cols]
@@ -483,7 +483,7 @@ def test_a_checkpoint_that_regressed_every_regressor_entry_is_converted_exactly(
     Xt, _ = data(10, 14)
     np.testing.assert_allclose(loaded.predict_model_many(Xt).total, m.predict_model_many(Xt).total,
                                rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(loaded._entries_rhs, B_E, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(loaded._cross.settled(), B_E, rtol=1e-9, atol=1e-12)
     old["nonparametric.rls.M"] = old["nonparametric.rls.M"][:, :-1]  # a damaged one is refused
     with pytest.raises(CheckpointError):
         model(tracker=True).load_state_dict(old)
