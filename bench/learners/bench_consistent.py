@@ -5,7 +5,8 @@ the contact gate, learning) in one process on the same samples, for the two comb
 blocks of 200 samples so that the machine's load hits both alike; after an untimed warm-up (the
 standardizer and gate warm-ups). Robots: the iCub F/T set-up on ``bags/icub_xy`` (4 joints, 6 outputs)
 and a 7-joint arm on a simulated Panda log (200 Hz excitation, joint torques). D ∈ {500, 1000}. Reported:
-median and p99 per step [µs] and the ratio of the medians. One BLAS thread. Usage::
+median and p99 per step [µs] and the ratio of the medians, and the CPU time per step of all the
+process's threads (the consistent SP's worker thread included). One BLAS thread. Usage::
 
     PYTHONPATH=$PWD .venv/bin/python bench/learners/bench_consistent.py [--quick] [--json PATH]
 """
@@ -47,18 +48,29 @@ def run(config, samples: list[Sample], warmup: int, block: int) -> dict[str, dic
         for s in samples[:warmup]:
             est.step(s)
     times: dict[str, list[float]] = {c: [] for c in ests}
+    cpu = dict.fromkeys(ests, 0.0)
     clock = time.perf_counter
     for start in range(warmup, len(samples), block):
         for c, est in ests.items():
+            c0 = time.process_time()
             for s in samples[start:start + block]:
                 t0 = clock()
                 est.step(s)
                 times[c].append(clock() - t0)
+            # the consistent SP adds its cross-products' blocks on a worker thread: its CPU time (all the
+            # process's threads) counts the block in flight, waited for before the other model runs
+            cross = getattr(est.model, "_cross", None)
+            if cross is not None:
+                cross.wait()
+            cpu[c] += time.process_time() - c0
     out = {}
     for c, t in times.items():
         us = np.array(t) * 1e6
-        out[c] = {"median_us": float(np.median(us)), "p99_us": float(np.percentile(us, 99)), "n": len(us)}
+        out[c] = {"median_us": float(np.median(us)), "p99_us": float(np.percentile(us, 99)), "n": len(us),
+                  "cpu_us_per_step": 1e6 * cpu[c] / len(us)}
     out["ratio_median"] = {"consistent/cascade": out["consistent"]["median_us"] / out["cascade"]["median_us"]}
+    out["ratio_cpu"] = {"consistent/cascade": out["consistent"]["cpu_us_per_step"]
+                        / out["cascade"]["cpu_us_per_step"]}
     return out
 
 
@@ -86,7 +98,10 @@ def main() -> int:
                 print(f"{name}, D={d}: cascade {res['cascade']['median_us']:.0f} µs (p99 "
                       f"{res['cascade']['p99_us']:.0f}), consistent {res['consistent']['median_us']:.0f} µs "
                       f"(p99 {res['consistent']['p99_us']:.0f}), ratio "
-                      f"{res['ratio_median']['consistent/cascade']:.2f}", flush=True)
+                      f"{res['ratio_median']['consistent/cascade']:.2f}; CPU per step "
+                      f"{res['cascade']['cpu_us_per_step']:.0f}"
+                      f" / {res['consistent']['cpu_us_per_step']:.0f} µs, ratio "
+                      f"{res['ratio_cpu']['consistent/cascade']:.2f}", flush=True)
     meta = {"machine": platform.machine(), "python": platform.python_version(), "cpus": os.cpu_count(),
             "load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -123,6 +123,10 @@ class EntryCrossProducts:
         buf_beta[k] = beta
         self.staged()
 
+    def wait(self) -> None:
+        """Wait for the block in flight, if any (for CPU accounting); its exception is raised here."""
+        self._wait()
+
     def _wait(self) -> None:
         """Wait for the block in flight; its exception, if any, is raised here."""
         future, self._future = self._future, None
