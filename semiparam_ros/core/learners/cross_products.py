@@ -128,10 +128,14 @@ class EntryCrossProducts:
         self._wait()
 
     def _wait(self) -> None:
-        """Wait for the block in flight; its exception, if any, is raised here."""
-        future, self._future = self._future, None
+        """Wait for the block in flight; its exception, if any, is raised here and at every later wait.
+
+        B is not known after a failed block, so it is never read again.
+        """
+        future = self._future
         if future is not None:
             future.result()
+            self._future = None  # cleared once done: a second waiter (under the caller's lock) waits too
 
     def _submit(self) -> None:
         """Add the current buffer's rows to B (on the worker when in background) and stage into the other."""

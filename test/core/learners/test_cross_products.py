@@ -70,6 +70,8 @@ def test_an_error_on_the_worker_is_raised_in_the_caller(monkeypatch):
         cp.stage(phi[m], e[m], beta[m])
     with pytest.raises(RuntimeError, match="programming error"):
         cp.settled()
+    with pytest.raises(RuntimeError, match="programming error"):  # B is not known after it: every read fails
+        pickle.dumps(cp)
 
 
 def test_reset_and_load():
