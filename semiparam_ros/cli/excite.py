@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="traj.yaml (message fields) or traj.mcap (a bag)")
     p.add_argument("--period", type=float, default=10.0,
                    help="wished period (s; adjusted to divide the duration, default %(default)s)")
-    p.add_argument("--harmonics", type=int, default=6, help="harmonics per joint (default %(default)s)")
+    p.add_argument("--harmonics", type=int, default=10, help="harmonics per joint (default %(default)s)")
     p.add_argument("--margin", type=float, default=0.1,
                    help="fraction of each position range, velocity, acceleration and effort limit kept free "
                    "(default %(default)s)")
@@ -49,7 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--limit", action="append", default=[], metavar="JOINT.KIND=VALUE",
                    help="set or replace a limit (KIND: lower, upper, velocity, acceleration, effort; rad, "
                    "rad/s, rad/s², N·m), e.g. for a joint the URDF leaves unlimited (repeatable)")
-    p.add_argument("--iterations", type=int, default=60, help="optimiser iterations (default %(default)s)")
+    p.add_argument("--iterations", type=int, default=200,
+                   help="optimiser iterations (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's starts (default %(default)s)")
     p.add_argument("--point-rate", type=float, default=100.0,
                    help="trajectory points per s (default %(default)s)")

@@ -212,3 +212,39 @@ def test_simulator_drives_the_arm_on_the_excitation(small, tmp_path, capsys):
                           "--trajectory", str(tmp_path / "traj.yaml")]) == 2
     assert "joints" in capsys.readouterr().err
     assert math.isfinite(small.condition_number)
+
+
+def test_the_objective_s_gradient_equals_its_finite_differences(ur5):
+    """``value_and_gradient`` (one difference of the regressor per joint and kind, then the chain through the
+    scaling, the Fourier maps and the rest constraint) against central differences of ``objective`` in
+    every coefficient, with and without the effort penalty active."""
+    from semiparam_ros.core.rigid_body.excitation import _Design
+
+    rng = np.random.default_rng(3)
+    for effort in (None, 0.35):
+        full = ExcitationLimits.from_regressor(ur5).effort
+        overrides = {} if effort is None else {f"{j}.effort": effort * e
+                                               for j, e in zip(ur5.joint_names, full, strict=True)}
+        lim = ExcitationLimits.from_regressor(ur5, margin=0.1, overrides=overrides)
+        design = _Design(ur5, lim, 10.0, 4, 60)
+        z = 0.5 * rng.standard_normal(design.size)
+        value, grad = design.value_and_gradient(z)
+        assert value == pytest.approx(design.objective(z), rel=1e-12)
+        h = 1e-6
+        numeric = np.array([(design.objective(z + h * e) - design.objective(z - h * e)) / (2 * h)
+                            for e in np.eye(design.size)])
+        # central differences: O(h²) truncation and O(ε|f|/h) rounding; the gradient's own differences of the
+        # regressor are forward, O(FD_STEP) relative
+        np.testing.assert_allclose(grad, numeric, rtol=1e-3, atol=1e-4 * np.abs(numeric).max())
+        if effort is not None:
+            _, usage = value, design.scaled(z)
+            assert float(np.max(limit_usage(ur5, usage, lim)["effort"])) > 1.0  # the penalty is active
+
+
+def test_cli_defaults_are_the_library_s():
+    from semiparam_ros.core.rigid_body import excitation
+
+
+    args = excite.build_parser().parse_args(["--config", "c.yaml", "--duration", "1", "--out", "t.yaml"])
+    assert (args.harmonics, args.iterations, args.period) == (
+        excitation.DEFAULT_HARMONICS, excitation.DEFAULT_ITERATIONS, excitation.DEFAULT_PERIOD_S)
