@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="traj.yaml (message fields) or traj.mcap (a bag)")
     p.add_argument("--period", type=float, default=10.0,
                    help="wished period (s; adjusted to divide the duration, default %(default)s)")
-    p.add_argument("--harmonics", type=int, default=10, help="harmonics per joint (default %(default)s)")
+    p.add_argument("--harmonics", type=int, default=6, help="harmonics per joint (default %(default)s)")
     p.add_argument("--margin", type=float, default=0.1,
                    help="fraction of each position range, velocity, acceleration and effort limit kept free "
                    "(default %(default)s)")

@@ -85,9 +85,10 @@ _SOFT_POWER = 8.0
 _RESTART_GAIN = 1e-4
 #: Random draws optimised side by side before the best of them gets the rest of the budget.
 _OPTIMISED_STARTS = 3
-#: Default wished period (s) and harmonics: frequencies up to 1 Hz, the trajectory repeated in 20 s.
+#: Default wished period (s) and harmonics: frequencies up to 0.6 Hz, the trajectory repeated in 20 s.
+#: (10 harmonics, to 1 Hz, lower κ but identify a worse rigid body: docs/identification.md.)
 DEFAULT_PERIOD_S = 10.0
-DEFAULT_HARMONICS = 10
+DEFAULT_HARMONICS = 6
 #: Default optimiser iterations (L-BFGS with the gradient of :meth:`_Design.value_and_gradient`).
 DEFAULT_ITERATIONS = 200
 
@@ -561,7 +562,7 @@ def _optimise(design: _Design, z: np.ndarray, f: float, iterations: int) -> tupl
 
 def design_excitation(regressor: RigidBodyRegressor, limits: ExcitationLimits, *, duration: float,
                       period: float = DEFAULT_PERIOD_S, n_harmonics: int = DEFAULT_HARMONICS,
-                      iterations: int = DEFAULT_ITERATIONS, n_starts: int = 16, n_grid: int = 200,
+                      iterations: int = DEFAULT_ITERATIONS, n_starts: int = 16, n_grid: int = 100,
                       rate: float = 1000.0,
                       seed: int = 0) -> Excitation:
     """Design a periodic excitation minimising κ of the base regressor under the limits (module docstring).
