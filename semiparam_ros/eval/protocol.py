@@ -458,6 +458,9 @@ def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, te
 
     Each model is trained in place on all of ``train_data`` (one sample at a time); then for every split of
     ``test_data`` an independent ``copy()`` of the trained model predicts and learns each sample in turn.
+    The models take turns every :data:`INTERLEAVE` samples (the same numbers as one after the other: each
+    has its own state), so that a machine's load falls on all of them alike and their update times
+    compare.
     Models named in ``frozen`` only predict the test parts (:func:`predict_only`, no updates): what the
     trained model generalizes to, as used without online learning.
 
@@ -501,29 +504,42 @@ def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, te
     kinds = tuple(models)
     total = len(kinds) * (len(train_data) + len(bounds) * length)
     bar, tick = _progress(progress, total)
+    # The models take turns every INTERLEAVE samples (each on its own state, so the numbers are those of
+    # one model after the other): a machine's load then falls on all of them alike, and their update
+    # times compare.
     try:
-        train_ns: dict[str, int] = {}
-        predictions: dict[str, np.ndarray] = {}
-        update_ns: dict[str, np.ndarray] = {}
-        for kind, model in models.items():
-            t0 = time.perf_counter_ns()
-            if kind in trained:
-                if tick is not None:
-                    tick(len(train_data))
-            else:
-                train(model, train_data, tick)
-            train_ns[kind] = time.perf_counter_ns() - t0 if kind not in trained else 0
-            preds, times = [], []
-            for start, stop in bounds:
-                if kind in frozen:
-                    pred, ns = predict_only(model, test_data.X[start:stop], tick)
-                else:
-                    pred, ns = test_then_train(model.copy(), test_data.X[start:stop],
-                                               test_data.Y[start:stop], tick, test_data.stamps_ns[start:stop])
-                preds.append(pred)
-                times.append(ns)
-            predictions[kind] = np.stack(preds)
-            update_ns[kind] = np.stack(times)
+        train_ns = dict.fromkeys(kinds, 0)
+        for start in range(0, len(train_data), INTERLEAVE):
+            stop = min(start + INTERLEAVE, len(train_data))
+            for kind, model in models.items():
+                if kind in trained:
+                    continue
+                t0 = time.perf_counter_ns()
+                test_then_train(model, train_data.X[start:stop], train_data.Y[start:stop], tick,
+                                train_data.stamps_ns[start:stop])
+                train_ns[kind] += time.perf_counter_ns() - t0
+        if tick is not None:
+            for _ in trained:
+                tick(len(train_data))
+        preds: dict[str, list[np.ndarray]] = {k: [] for k in kinds}
+        times: dict[str, list[np.ndarray]] = {k: [] for k in kinds}
+        for start, stop in bounds:
+            # a frozen model predicts with the trained one; the others learn an independent copy per part
+            part = {k: m if k in frozen else m.copy() for k, m in models.items()}
+            blocks: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {k: [] for k in kinds}
+            for a in range(start, stop, INTERLEAVE):
+                b = min(a + INTERLEAVE, stop)
+                for kind, model in part.items():
+                    if kind in frozen:
+                        blocks[kind].append(predict_only(model, test_data.X[a:b], tick))
+                    else:
+                        blocks[kind].append(test_then_train(model, test_data.X[a:b], test_data.Y[a:b], tick,
+                                                            test_data.stamps_ns[a:b]))
+            for kind in kinds:
+                preds[kind].append(np.concatenate([p for p, _ in blocks[kind]]))
+                times[kind].append(np.concatenate([t for _, t in blocks[kind]]))
+        predictions = {k: np.stack(preds[k]) for k in kinds}
+        update_ns = {k: np.stack(times[k]) for k in kinds}
     finally:
         if bar is not None:
             bar.close()
@@ -536,6 +552,10 @@ def run_protocol(models: Mapping[str, OnlineModel], train_data: SampleArrays, te
                           first=first, first_s=first_s, update_ns=update_ns, train_ns=train_ns,
                           samples_train=len(train_data), output=output,
                           stamps_ns=np.stack([test_data.stamps_ns[a:b] for a, b in bounds]))
+
+
+#: Samples each model runs before the next takes its turn in :func:`run_protocol`.
+INTERLEAVE = 250
 
 
 def progress_enabled(requested: bool) -> bool:
