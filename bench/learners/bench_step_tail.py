@@ -22,12 +22,12 @@ import tempfile
 import time
 
 import numpy as np
+from bench_consistent import samples_of  # this folder: run as a script
 from threadpoolctl import threadpool_limits
 
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import Sample
-from semiparam_ros.eval.replay import load_samples
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_step_tail.json"
@@ -66,10 +66,7 @@ def main() -> int:
         bag = write_recording(rec, pathlib.Path(tmp) / "panda")
         config = load_config(ROOT / "config" / "panda.yaml").with_overrides(
             {"nonparametric.n_features": args.features})
-        data, _ = load_samples(bag, config)
-        n = data.X.shape[1] // 3
-        samples = [Sample(int(s), x[:n], x[n:2 * n], x[2 * n:], y)
-                   for s, x, y in zip(data.stamps_ns, data.X, data.Y, strict=True)]
+        samples = samples_of(config, bag)
         runs = []
         for r in range(args.repeats):
             us = timed_steps(config, samples)

@@ -829,7 +829,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             RejectedSampleError: Bad x or regressor output.
         """
         xv, _, Phi = self._check(x)
-        yp, r, var, _ = self._model_valid(xv, Phi, self._checked_rigid(rigid), model_variance=True)
+        yp, r, var, _ = self._model_valid(xv, Phi, checked_rigid(rigid, self.n_params), model_variance=True)
         return Prediction(yp, r, yp + r, var)
 
     def use_rigid(self, rigid: np.ndarray | None) -> None:
@@ -853,7 +853,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             >>> float(m.predict_model([3.0, 0.0, 0.0]).parametric[0])  # Φ(x)π = 3 · 2
             6.0
         """
-        checked = self._checked_rigid(rigid)
+        checked = checked_rigid(rigid, self.n_params)
         self._rigid = None if checked is None else checked.copy()
         self._rereference(self.parameters if checked is None else checked)
         self._held = None
@@ -862,9 +862,6 @@ class ConsistentSemiparametricModel(_TwoStageModel):
     def rigid_override(self) -> np.ndarray | None:
         """The rigid-body parameters set by :meth:`use_rigid` (learner units), or None (the learned ones)."""
         return None if self._rigid is None else self._rigid.copy()
-
-    def _checked_rigid(self, rigid: np.ndarray | None) -> np.ndarray | None:
-        return checked_rigid(rigid, self.n_params)
 
     def predict_model_many(self, X: Any, rigid: np.ndarray | None = None) -> Prediction:
         """:meth:`predict_model` of N inputs at once (arrays of shape (N, t); ``variance`` included).
@@ -888,7 +885,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         par_model, npm = self.parametric, self.nonparametric
         Phi = par_model.phi_rows(X2)
         var = par_model.predict_phi_rows(Phi)[1]
-        rigid = self._checked_rigid(rigid)
+        rigid = checked_rigid(rigid, self.n_params)
         yp = Phi @ (self._reference if rigid is None else rigid)
         r = np.zeros_like(yp)
         if npm.standardizer.ready:
@@ -940,7 +937,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             par_model.rls.defer_step(par_step)
             beta = npm.rls.forgetting  # this step's β: the cross-products forget as the learner does
             npm.rls.defer_step(np_step)
-            rows_phi, rows_entries, rows_beta, k = self._cross.staging
+            rows_phi, rows_entries, rows_beta, k = self._cross.staging()
             stage_pending(rows_phi, rows_entries, rows_beta, k, phi[0], Phi.reshape(-1), self._phi_entries,
                           beta)
             self._cross.staged()

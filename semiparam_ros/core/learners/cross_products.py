@@ -99,11 +99,11 @@ class EntryCrossProducts:
         """(D, E)."""
         return self._B.shape
 
-    @property
     def staging(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-        """``(φ rows, e rows, β, k)``: the buffer the next row goes to (row k), for a compiled stager.
+        """Return ``(φ rows, e rows, β, k)``: the buffer the next row goes to (row k), for a compiled stager.
 
-        A caller that writes row k itself calls :meth:`staged` after it (or :meth:`stage` does both).
+        A full buffer is handed to the worker first. A caller that writes row k itself calls :meth:`staged`
+        after it (or :meth:`stage` does both).
         """
         phi, entries, beta = self._buffers[self._current]
         if self._k == self.ROWS:
@@ -112,23 +112,19 @@ class EntryCrossProducts:
         return phi, entries, beta, self._k
 
     def staged(self) -> None:
-        """Count the row written at :attr:`staging`'s k."""
+        """Count the row written at :meth:`staging`'s k."""
         self._k += 1
 
     def stage(self, phi: np.ndarray, entries: np.ndarray, beta: float) -> None:
         """Stage one sample's features (D,), entries (E,) and its step's forgetting factor β."""
-        buf_phi, buf_entries, buf_beta, k = self.staging
+        buf_phi, buf_entries, buf_beta, k = self.staging()
         buf_phi[k] = phi
         buf_entries[k] = entries
         buf_beta[k] = beta
         self.staged()
 
     def wait(self) -> None:
-        """Wait for the block in flight, if any (for CPU accounting); its exception is raised here."""
-        self._wait()
-
-    def _wait(self) -> None:
-        """Wait for the block in flight; its exception, if any, is raised here and at every later wait.
+        """Wait for the block in flight, if any; its exception is raised here and at every later wait.
 
         B is not known after a failed block, so it is never read again.
         """
@@ -139,7 +135,7 @@ class EntryCrossProducts:
 
     def _submit(self) -> None:
         """Add the current buffer's rows to B (on the worker when in background) and stage into the other."""
-        self._wait()  # one block in flight at a time: B and the other buffer are free again
+        self.wait()  # one block in flight at a time: B and the other buffer are free again
         if self._k == 0:
             return
         phi, entries, beta = self._buffers[self._current]
@@ -152,7 +148,7 @@ class EntryCrossProducts:
 
     def settled(self) -> np.ndarray:
         """Return B with every staged row added (the object's own array: read it before staging more)."""
-        self._wait()
+        self.wait()
         if self._k:
             phi, entries, beta = self._buffers[self._current]
             _add_block(self._B, phi, entries, beta, self._k)
@@ -161,7 +157,7 @@ class EntryCrossProducts:
 
     def with_pending(self) -> np.ndarray:
         """Return a copy of B with the staged rows added, leaving the staging as it is."""
-        self._wait()
+        self.wait()
         out = self._B.copy()
         if self._k:
             phi, entries, beta = self._buffers[self._current]
@@ -170,7 +166,7 @@ class EntryCrossProducts:
 
     def reset(self) -> None:
         """Forget everything: B = 0, nothing staged."""
-        self._wait()
+        self.wait()
         self._B[:] = 0.0
         self._k = 0
 
@@ -183,11 +179,11 @@ class EntryCrossProducts:
         B = np.asarray(B, dtype=np.float64)
         if B.shape != self._B.shape:
             raise ValueError(f"cross-products of shape {B.shape}, expected {self._B.shape}")
-        self._wait()
+        self.wait()
         self._B = np.ascontiguousarray(B).copy()
         self._k = 0
 
     def __getstate__(self) -> dict[str, Any]:
         """Wait for the block in flight, then return the state to copy or pickle (a future is not copied)."""
-        self._wait()
+        self.wait()
         return dict(self.__dict__)

@@ -345,14 +345,16 @@ def _efforts(regressor: RigidBodyRegressor, q: np.ndarray, dq: np.ndarray, ddq: 
     return out
 
 
-def _soft_log_condition(s: np.ndarray, p: float = _SOFT_POWER) -> float:
-    """Return a smooth upper bound of log κ: p-norm means of σ and of 1/σ in place of max and min.
+def _soft_log_condition(s: np.ndarray, p: float = _SOFT_POWER) -> tuple[float, np.ndarray]:
+    """Return a smooth upper bound of log κ and its derivatives ∂/∂σᵢ.
 
-    ``log (Σσᵢᵖ)^{1/p} + log (Σσᵢ⁻ᵖ)^{1/p} ≥ log σ_max − log σ_min``, and unlike log κ it is differentiable
-    where singular values cross: the optimiser does not stall between clustered smallest σ.
+    p-norm means of σ and of 1/σ in place of max and min: ``log (Σσᵢᵖ)^{1/p} + log (Σσᵢ⁻ᵖ)^{1/p} ≥ log σ_max
+    − log σ_min``, and unlike log κ it is differentiable where singular values cross: the optimiser does
+    not stall between clustered smallest σ.
     """
     r = s / s[0]
-    return float(np.log(np.sum(r**p)) / p + np.log(np.sum(r ** (-p))) / p)
+    hi, lo = np.sum(r**p), np.sum(r ** (-p))
+    return float(np.log(hi) / p + np.log(lo) / p), (r ** (p - 1) / hi - r ** (-p - 1) / lo) / s[0]
 
 
 class _Design:
@@ -388,21 +390,25 @@ class _Design:
         centre = self.mid + 0.999 * self.half * np.tanh(z[-1])
         return a, b, centre
 
+    def _unscaled(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return the coefficients' positions about the centre, velocities and accelerations on the grid."""
+        C, S, kw = self.C, self.S, self.kw[:, None]
+        return C @ a + S @ b, S @ (-kw * a) + C @ (kw * b), -(C @ (kw**2 * a) + S @ (kw**2 * b))
+
     def scaled(self, z: np.ndarray) -> FourierTrajectory:
         """Return the trajectory of z, each joint scaled to the largest amplitude its grid limits allow."""
         a, b, centre = self.coefficients(z)
-        u = self.C @ a + self.S @ b
-        du = self.S @ (-self.kw[:, None] * a) + self.C @ (self.kw[:, None] * b)
-        ddu = -(self.C @ (self.kw[:, None] ** 2 * a) + self.S @ (self.kw[:, None] ** 2 * b))
-        tiny = 1e-300
-        with np.errstate(divide="ignore"):
-            s = np.minimum.reduce([
-                (self.limits.upper - centre) / np.maximum(u.max(0), tiny),
-                (centre - self.limits.lower) / np.maximum(-u.min(0), tiny),
-                self.limits.velocity / np.maximum(np.abs(du).max(0), tiny),
-                self.limits.acceleration / np.maximum(np.abs(ddu).max(0), tiny),
-            ])
+        s = self._scales(*self._unscaled(a, b), centre)[0]
         return FourierTrajectory(self.omega, centre, a * s, b * s)
+
+    def _effort_penalty(self, tau: np.ndarray) -> tuple[float, np.ndarray]:
+        """Return the penalty on the CAD efforts τ (grid, n) above their limits, and its derivatives ∂/∂τ."""
+        cols = np.arange(self.n)
+        peak = np.argmax(np.abs(tau), axis=0)
+        excess = np.maximum(np.abs(tau[peak, cols]) / self.limits.effort - 1.0, 0.0)
+        d_tau = np.zeros_like(tau)  # non-zero at each joint's peak sample only
+        d_tau[peak, cols] = 2.0 * _EFFORT_PENALTY * excess * np.sign(tau[peak, cols]) / self.limits.effort
+        return float(_EFFORT_PENALTY * np.sum(excess * excess)), d_tau
 
     #: Step of the per-sample finite differences of the regressor (rad, rad/s, rad/s²), relative to the
     #: largest |value| of each kind over the grid.
@@ -450,9 +456,7 @@ class _Design:
         """
         a, b, centre = self.coefficients(z)
         C, S, kw = self.C, self.S, self.kw[:, None]
-        u = C @ a + S @ b
-        du = S @ (-kw * a) + C @ (kw * b)
-        ddu = -(C @ (kw**2 * a) + S @ (kw**2 * b))
+        u, du, ddu = self._unscaled(a, b)
         scale, d_centre, which, sample, d_value = self._scales(u, du, ddu, centre)
         x = [centre + scale * u, scale * du, scale * ddu]  # q, q̇, q̈ on the grid
         full = self.reg.regressor(*x)
@@ -461,20 +465,10 @@ class _Design:
         U, sv, Vt = np.linalg.svd(Y, full_matrices=False)
         if not sv[-1] > 0:
             return 1e3, np.zeros_like(z)
-        p = _SOFT_POWER
-        r = sv / sv[0]
-        hi, lo = np.sum(r**p), np.sum(r ** (-p))
-        value = float(np.log(hi) / p + np.log(lo) / p)
-        w = (r ** (p - 1) / hi - r ** (-p - 1) / lo) / sv[0]  # ∂f/∂σ_i
+        value, w = _soft_log_condition(sv)  # w = ∂f/∂σ_i
         G = ((U * w) @ Vt).reshape(full.shape[0], full.shape[1], nb)  # ∂f/∂Y per sample
-        tau = full @ self.pi
-        peak = np.argmax(np.abs(tau), axis=0)
-        cols = np.arange(self.n)
-        ratio = np.abs(tau[peak, cols]) / self.limits.effort
-        excess = np.maximum(ratio - 1.0, 0.0)
-        value += float(_EFFORT_PENALTY * np.sum(excess * excess))
-        d_tau = np.zeros_like(tau)  # ∂(penalty)/∂τ at each joint's peak sample
-        d_tau[peak, cols] = 2.0 * _EFFORT_PENALTY * excess * np.sign(tau[peak, cols]) / self.limits.effort
+        penalty, d_tau = self._effort_penalty(full @ self.pi)
+        value += penalty
         grads = []
         for kind in range(3):
             g = np.empty_like(u)
@@ -509,13 +503,11 @@ class _Design:
         traj = self.scaled(z)
         q, dq, ddq = traj.evaluate(_grid(traj.period, self.C.shape[0]))
         full = self.reg.regressor(q, dq, ddq)
-        tau = full @ self.pi
         Y = full[..., self.base].reshape(-1, self.base.size)
         s = np.linalg.svd(Y, compute_uv=False)
         if not s[-1] > 0:
             return 1e3
-        excess = np.maximum(np.abs(tau).max(0) / self.limits.effort - 1.0, 0.0)
-        return float(_soft_log_condition(s) + _EFFORT_PENALTY * np.sum(excess * excess))
+        return _soft_log_condition(s)[0] + self._effort_penalty(full @ self.pi)[0]
 
 
 def _shrink_to_limits(regressor: RigidBodyRegressor, traj: FourierTrajectory, limits: ExcitationLimits, *,
