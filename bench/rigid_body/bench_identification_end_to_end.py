@@ -14,7 +14,8 @@ body from the start:
 The same is done with the simulator's own random multi-sine of the same duration (no ``--trajectory``),
 side by side. Every step is the command a user runs (their ``main``), in one process. Usage::
 
-    PYTHONPATH=$PWD .venv/bin/python bench/rigid_body/bench_identification_end_to_end.py [--json PATH]
+    PYTHONPATH=$PWD .venv/bin/python bench/rigid_body/bench_identification_end_to_end.py [--json PATH] \\
+        [--robots panda ur5] [--seeds 1 2] [--soft-power P]
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from excitation_scale_floor import soft_power  # this folder: run as a script
 
 from semiparam_ros.cli import excite, export_urdf, learn, simulate
 from semiparam_ros.core.rigid_body.excitation import ExcitationLimits, condition_number, random_multisine
@@ -121,7 +123,17 @@ def main() -> int:
     ap.add_argument("--json", type=pathlib.Path, default=RESULTS)
     ap.add_argument("--robots", nargs="+", default=["panda", "ur5"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[1, 2])
+    ap.add_argument("--soft-power", type=float, default=None,
+                    help="an experiment: excite minimises the smooth κ of this power (the library's: 8)")
     args = ap.parse_args()
+    if args.soft_power is not None:
+        with soft_power(args.soft_power):
+            return run(args)
+    return run(args)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Design, record, learn and export for each robot and seed; print and save the table."""
     rows, designs = [], {}
     with tempfile.TemporaryDirectory() as tmp:
         folder = pathlib.Path(tmp)
