@@ -237,13 +237,11 @@ def test_the_objective_s_gradient_equals_its_finite_differences(ur5):
         # regressor are forward, O(FD_STEP) relative
         np.testing.assert_allclose(grad, numeric, rtol=1e-3, atol=1e-4 * np.abs(numeric).max())
         if effort is not None:
-            _, usage = value, design.scaled(z)
-            assert float(np.max(limit_usage(ur5, usage, lim)["effort"])) > 1.0  # the penalty is active
+            assert float(np.max(limit_usage(ur5, design.scaled(z), lim)["effort"])) > 1.0  # the penalty acts
 
 
 def test_cli_defaults_are_the_library_s():
     from semiparam_ros.core.rigid_body import excitation
-
 
     args = excite.build_parser().parse_args(["--config", "c.yaml", "--duration", "1", "--out", "t.yaml"])
     assert (args.harmonics, args.iterations, args.period) == (
