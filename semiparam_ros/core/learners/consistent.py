@@ -868,7 +868,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
 
         The regressors are evaluated row by row; both learners then predict all rows with one matrix
         product and one triangular solve each (BLAS level 3): equal to N calls of :meth:`predict_model` to
-        rounding (the residual's weight ``exp(−(ν/ν₀)²)`` is smooth in ν).
+        rounding (the residual's weight :meth:`residual_weight` is smooth in v).
 
         Args:
             X: (N, n_inputs) inputs ``[q, q̇, q̈]``.
