@@ -9,9 +9,11 @@ sequential parts of the test log, RMSE over each part's second half, mean over j
 1. **The residual's warm-up.** The residual (NP, and SP's residual) learns nothing while its input
    standardizer warms up (``nonparametric.standardizer_warmup_s``, 2 s by default): the first 2 s of log 1
    are in the rigid-body part only. Log 2 repeats log 1, so on log 2's first part the frozen residuals
-   abstain or extrapolate. P, NP and SP are scored with the default warm-up and with a short one
-   (``--short-warmup``, 0.25 s: an experiment, not a default), beside log 1's own torque at log 2's states
-   (the repetition floor of ``repeatability.py``), and per part for 1 → 2.
+   abstain or extrapolate. NP and SP are scored as served and with the warm-up learned: the same
+   estimator given, from its first sample, the standardizer its warm-up ends with (fitted on the same
+   first 2 s), so that the residual learns every sample — what learning the warm-up's samples once the
+   standardizer is ready would give (an experiment, not the package's behaviour). Beside them P and log
+   1's own torque at log 2's states (the repetition floor of ``repeatability.py``), and per part for 1 → 2.
 2. **SP against P on new motion**, per part: the paired differences over the 10 parts of 1 → 3 and 2 → 3,
    their mean, a paired t statistic and its two-sided p, and per joint; with the residual's correlation
    length taken as one property of the motion (the median over outputs, ``--variants``) instead of per
@@ -20,7 +22,7 @@ sequential parts of the test log, RMSE over each part's second half, mean over j
 Usage::
 
     PYTHONPATH=$PWD .venv/bin/python bench/learners/frozen_gaps.py --data /path/to/kuka_lwr4 \\
-        [--short-warmup 0.25] [--variants] [--json PATH]
+        [--variants] [--json PATH]
 
 Writes ``bench/results/frozen_gaps.json``.
 """
@@ -41,10 +43,13 @@ import numpy as np
 from scipy import stats
 
 from semiparam_ros.core.config import load_config
+from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
+from semiparam_ros.core.learners.features import Standardizer
+from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.eval.protocol import split_bounds
 from semiparam_ros.eval.replay import load_samples
-from semiparam_ros.eval.served import learn_served
+from semiparam_ros.eval.served import NodeLearner, learn_served, serve
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from repeatability import align, protocol_rmse  # a sibling script
@@ -77,11 +82,45 @@ def shared_correlation() -> Iterator[None]:
         ConsistentSemiparametricModel.correlation_samples = original  # type: ignore[method-assign]
 
 
-def served_errors(config, logs, kinds=("P", "NP", "SP")) -> dict[str, dict[str, np.ndarray]]:
+def residual_standardizer(estimator: OnlineEstimator) -> Standardizer:
+    """The standardizer of the estimator's residual (NP's own, SP's residual stage's)."""
+    model = estimator.model
+    return model.standardizer if hasattr(model, "standardizer") else model.nonparametric.standardizer
+
+
+def learn_stream(estimator: OnlineEstimator, train) -> None:
+    """Learn a stream with the node's per-sample step, as ``learn_served`` does (refused samples skipped)."""
+    node = NodeLearner(estimator)
+    for stamp, x, y in zip(train.stamps_ns, train.X, train.Y, strict=True):
+        try:
+            node.learn_one(x, y, stamp_ns=int(stamp))
+        except RejectedSampleError:
+            continue
+
+
+def learn_warmup_learned(config, train, kind: str):
+    """The served model of an estimator whose residual learns every sample, the warm-up's included.
+
+    The standardizer is the one the node's warm-up ends with on this stream (fitted on the same first
+    samples), given to a second estimator before its first sample.
+    """
+    first = OnlineEstimator(config, kind=kind)
+    learn_stream(first, train)
+    fitted = residual_standardizer(first)
+    second = OnlineEstimator(config, kind=kind)
+    model = second.model if hasattr(second.model, "standardizer") else second.model.nonparametric
+    model.standardizer, model._initial_standardizer = fitted.copy(), fitted.copy()
+    learn_stream(second, train)
+    return serve(second)
+
+
+def served_errors(config, logs, kinds=("P", "NP", "SP"), *, warmup_learned: bool = False
+                  ) -> dict[str, dict[str, np.ndarray]]:
     """Test-log errors ``y − ŷ`` (N, n) of each served model, per pair ``"a->b"``."""
     out: dict[str, dict[str, np.ndarray]] = {}
     for kind in kinds:
-        models = {a: learn_served(config, logs[a], kind=kind) for a in {a for a, _ in PAIRS}}
+        learn = learn_warmup_learned if warmup_learned and kind != "P" else learn_served
+        models = {a: learn(config, logs[a], kind=kind) for a in {a for a, _ in PAIRS}}
         for a, b in PAIRS:
             test = logs[b]
             n = test.X.shape[1] // 3
@@ -94,13 +133,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=pathlib.Path, required=True, help="folder holding measurements_{1,2,3}")
     ap.add_argument("--config", type=pathlib.Path, default=ROOT / "config" / "kuka_lwr4.yaml")
-    ap.add_argument("--short-warmup", type=float, default=0.25, help="the short warm-up tried [s]")
     ap.add_argument("--variants", action="store_true", help="also the shared correlation length")
     ap.add_argument("--json", type=pathlib.Path, default=RESULTS)
     args = ap.parse_args()
     base = load_config(args.config)
     names = list(base["robot.joints"])
-    default_warmup = float(base["nonparametric.standardizer_warmup_s"])
     result: dict = {"warmup": {}, "per_part_1to2": {}, "sp_vs_p": {}}
 
     # log 1's torque at log 2's states: the repetition floor (repeatability.py), per part too
@@ -114,26 +151,22 @@ def main() -> int:
     floor = protocol_rmse(recall[keep])[0]
     result["repetition_floor_1to2"] = floor
 
-    runs = {"default": default_warmup, "short": args.short_warmup}
-    errors = {}
-    for label, warmup in runs.items():
-        config = base.with_overrides({"nonparametric.standardizer_warmup_s": warmup})
-        logs_w = {i: load_samples(args.data / f"measurements_{i}", config)[0] for i in (1, 2, 3)}
-        errors[label] = served_errors(config, logs_w)
-        rows = {pair: {k: protocol_rmse(e)[0] for k, e in by_kind.items()}
-                for pair, by_kind in errors[label].items()}
-        result["warmup"][label] = {"warmup_s": warmup, "regime": rows}
+    errors = {label: served_errors(base, logs, warmup_learned=learned)
+              for label, learned in (("default", False), ("warm-up learned", True))}
+    for label, errs in errors.items():
+        rows = {pair: {k: protocol_rmse(e)[0] for k, e in by_kind.items()} for pair, by_kind in errs.items()}
+        result["warmup"][label] = rows
         r12 = rows["1->2"]
-        print(f"warm-up {warmup:g} s: 1->2 P {r12['P']:.4f} NP {r12['NP']:.4f} SP {r12['SP']:.4f} "
+        print(f"{label}: 1->2 P {r12['P']:.4f} NP {r12['NP']:.4f} SP {r12['SP']:.4f} "
               f"(0.85 min(P, NP) = {0.85 * min(r12['P'], r12['NP']):.4f}; repetition floor {floor:.4f}); "
-              + "; ".join(f"{p} P {rows[p]['P']:.4f} SP {rows[p]['SP']:.4f}" for p in ("1->3", "2->3")),
-              flush=True)
+              + "; ".join(f"{p} P {rows[p]['P']:.4f} NP {rows[p]['NP']:.4f} SP {rows[p]['SP']:.4f}"
+                          for p in ("1->3", "2->3")), flush=True)
 
     # 1 -> 2 per part: where the frozen models lose to the repetition floor
     parts = {k: part_errors(e).mean(axis=1) for k, e in errors["default"]["1->2"].items()}
     parts["log 1's torque"] = part_errors(recall).mean(axis=1)
-    parts.update({f"{k} (warm-up {args.short_warmup:g} s)": part_errors(e).mean(axis=1)
-                  for k, e in errors["short"]["1->2"].items() if k != "P"})
+    parts.update({f"{k}, warm-up learned": part_errors(e).mean(axis=1)
+                  for k, e in errors["warm-up learned"]["1->2"].items() if k != "P"})
     result["per_part_1to2"] = {k: v.tolist() for k, v in parts.items()}
     print("1->2 per part (mean over joints) [N·m]:")
     for k, v in parts.items():
@@ -158,6 +191,7 @@ def main() -> int:
                   f"{max(joint, key=joint.__getitem__)} {max(joint.values()):+.5f}")
 
     compare(errors["default"], "default")
+    compare(errors["warm-up learned"], "warm-up learned")
     if args.variants:
         with shared_correlation():
             errs = served_errors(base, logs, kinds=("SP",))
