@@ -17,7 +17,7 @@ sequential parts of the test log, RMSE over each part's second half, mean over j
 2. **SP against P on new motion**, per part: the paired differences over the 10 parts of 1 → 3 and 2 → 3,
    their mean, a paired t statistic and its two-sided p, and per joint; with the residual's correlation
    length taken as one property of the motion (the median over outputs, ``--variants``) instead of per
-   output.
+   output; and each served residual value shrunk by its own σ (z = 1, 2, 3).
 
 Usage::
 
@@ -80,6 +80,29 @@ def shared_correlation() -> Iterator[None]:
         yield
     finally:
         ConsistentSemiparametricModel.correlation_samples = original  # type: ignore[method-assign]
+
+
+@contextlib.contextmanager
+def shrunk_residual(z: float) -> Iterator[None]:
+    """Each served residual value ``g r`` shrunk by its own σ: ``g r · max(0, 1 − z² g² c σ² v / (g r)²)``."""
+    original = ConsistentSemiparametricModel.predict_model_many
+
+    def shrunk(self: ConsistentSemiparametricModel, X, rigid=None):  # type: ignore[no-untyped-def]
+        pred = original(self, X, rigid)
+        npm = self.nonparametric
+        phi = np.ascontiguousarray(npm.rff.map_checked(npm.standardizer.apply_checked(np.asarray(X, float))))
+        v = npm.rls.predict_checked(phi, True)[1][:, None]
+        g = self.residual_weight(v[:, 0], served=True)
+        own = g * g * self.correlation_samples() * self.error_scales()[1] * v  # variance of g r's own error
+        r = pred.residual
+        keep = np.clip(1.0 - z * z * own / np.maximum(r * r, 1e-300), 0.0, 1.0)
+        return type(pred)(pred.parametric, r * keep, pred.parametric + r * keep, pred.variance)
+
+    ConsistentSemiparametricModel.predict_model_many = shrunk  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        ConsistentSemiparametricModel.predict_model_many = original  # type: ignore[method-assign]
 
 
 def residual_standardizer(estimator: OnlineEstimator) -> Standardizer:
@@ -200,6 +223,17 @@ def main() -> int:
         compare(errs, "shared correlation length")
         result["shared_correlation_1to2_sp"] = protocol_rmse(errs["1->2"]["SP"])[0]
         print(f"shared correlation length: 1->2 SP {result['shared_correlation_1to2_sp']:.4f}")
+        sp_models = {a: learn_served(base, logs[a], kind="SP") for a in (1, 2)}
+        for z in (1.0, 2.0, 3.0):
+            with shrunk_residual(z):
+                row = {}
+                for a, b in PAIRS:
+                    test = logs[b]
+                    y = sp_models[a].predict(test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:])[0]
+                    row[f"{a}->{b}"] = protocol_rmse(test.Y - y)[0]
+            result.setdefault("shrunk_residual_sp", {})[f"z={z:g}"] = row
+            print(f"served residual shrunk by its σ, z = {z:g}: " + "; ".join(
+                f"{pair} SP {v:.4f}" for pair, v in row.items()))
 
     result["meta"] = {"machine": platform.machine(), "python": platform.python_version(),
                       "cpus": os.cpu_count(), "time": time.strftime("%Y-%m-%d %H:%M:%S"),
