@@ -105,10 +105,10 @@ def shrunk_residual(z: float) -> Iterator[None]:
         ConsistentSemiparametricModel.predict_model_many = original  # type: ignore[method-assign]
 
 
-def residual_standardizer(estimator: OnlineEstimator) -> Standardizer:
-    """The standardizer of the estimator's residual (NP's own, SP's residual stage's)."""
+def residual_learner(estimator: OnlineEstimator):
+    """The learner holding the estimator's residual standardizer (NP itself, SP's residual stage)."""
     model = estimator.model
-    return model.standardizer if hasattr(model, "standardizer") else model.nonparametric.standardizer
+    return model if hasattr(model, "standardizer") else model.nonparametric
 
 
 def learn_stream(estimator: OnlineEstimator, train) -> None:
@@ -129,10 +129,10 @@ def learn_warmup_learned(config, train, kind: str):
     """
     first = OnlineEstimator(config, kind=kind)
     learn_stream(first, train)
-    fitted = residual_standardizer(first)
+    fitted: Standardizer = residual_learner(first).standardizer
     second = OnlineEstimator(config, kind=kind)
-    model = second.model if hasattr(second.model, "standardizer") else second.model.nonparametric
-    model.standardizer, model._initial_standardizer = fitted.copy(), fitted.copy()
+    residual = residual_learner(second)
+    residual.standardizer, residual._initial_standardizer = fitted.copy(), fitted.copy()
     learn_stream(second, train)
     return serve(second)
 
@@ -169,9 +169,9 @@ def main() -> int:
     shift, _ = align(logs[1].X[:, :n], logs[2].X[:, :n])
     ia = np.arange(logs[2].X.shape[0]) + shift
     keep = (ia >= 0) & (ia < logs[1].X.shape[0])
-    recall = np.zeros_like(logs[2].Y)
-    recall[keep] = logs[2].Y[keep] - logs[1].Y[ia[keep]]
-    floor = protocol_rmse(recall[keep])[0]
+    recall_error = np.zeros_like(logs[2].Y)
+    recall_error[keep] = logs[2].Y[keep] - logs[1].Y[ia[keep]]
+    floor = protocol_rmse(recall_error[keep])[0]
     result["repetition_floor_1to2"] = floor
 
     errors = {label: served_errors(base, logs, warmup_learned=learned)
@@ -187,7 +187,7 @@ def main() -> int:
 
     # 1 -> 2 per part: where the frozen models lose to the repetition floor
     parts = {k: part_errors(e).mean(axis=1) for k, e in errors["default"]["1->2"].items()}
-    parts["log 1's torque"] = part_errors(recall).mean(axis=1)
+    parts["log 1's torque"] = part_errors(recall_error).mean(axis=1)
     parts.update({f"{k}, warm-up learned": part_errors(e).mean(axis=1)
                   for k, e in errors["warm-up learned"]["1->2"].items() if k != "P"})
     result["per_part_1to2"] = {k: v.tolist() for k, v in parts.items()}
