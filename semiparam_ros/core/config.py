@@ -244,12 +244,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("nonparametric.seed", "integer", 0, "seed of the random features", min=0, max=2**31 - 1,
                   structural=True),
     ParameterSpec("nonparametric.standardizer_warmup", "integer", 0,
-                  "samples used to estimate the input standardization before the residual stage learns, "
-                  "overriding nonparametric.standardizer_warmup_s; 0 = use standardizer_warmup_s",
+                  "samples used to estimate the input standardization (held, and learned by the residual "
+                  "stage once it is ready), overriding nonparametric.standardizer_warmup_s; 0 = use "
+                  "standardizer_warmup_s",
                   min=0, max=10**7, structural=True, unless=0),
     ParameterSpec("nonparametric.standardizer_warmup_s", "double", 2.0,
                   "duration of the input standardization's warm-up [s], converted to samples at the measured "
-                  "sample rate (2 s = the former 200 samples at 100 Hz)", min=0.0, min_exclusive=True,
+                  "sample rate (2 s = the former 200 samples at 100 Hz); its samples are held and learned by "
+                  "the residual stage once the statistics are ready", min=0.0, min_exclusive=True,
                   max=1e5, structural=True, only_if=(("nonparametric.standardizer_warmup", 0),)),
     ParameterSpec("nonparametric.min_scale.position", "double", 0.05,
                   "floor of the standardization scale of joint positions [rad] (a warm-up at rest measures "

@@ -925,7 +925,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
             # Φ is shared with the rigid-body step (nobody writes to it)
             fast_step = RecursiveRLS.checked_step(Phi, (yv - model_only).reshape(-1, 1), owned=True)
         if phi is None:
-            npm.standardizer.partial_fit(xv)
+            npm.hold_warmup(xv, xv, yv.copy())  # learned by learn_held once the standardizer is ready
             par_model.rls.defer_step(par_step)
         else:
             # the residual learns y − Φθ_ref; its features' cross-products with the regressor's entries
@@ -971,6 +971,48 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         # after 1, 2, 4, … learned samples (π̂ moves most at first), then every REFERENCE_PERIOD
         if self._rigid is None and self._since_reference >= min(self._reference_samples, self._recent_n):
             self._rereference(self.parameters)
+        if phi is None:
+            self.learn_held()
+
+    def learn_held(self) -> None:
+        """Learn the warm-up's samples, in their order, once the residual's standardizer is ready.
+
+        The residual learns nothing while its input standardizer warms up (its features need the
+        statistics); the warm-up's samples (x, y) are held (at most the warm-up's length) and learned here
+        as the samples they were: targets ``y − Φθ_ref`` for the reference θ_ref = π̂ of now (the model's
+        rigid part from here on), one :meth:`RecursiveRLS.update_steps` call (O(N·D²) once, N the
+        warm-up's samples), their cross-products with the regressor entries, and the error statistics of
+        the residual's weight from their a-priori predictions. The rigid body and the fast correction
+        learned these samples when they came. Nothing happens while the warm-up runs or nothing is held.
+        """
+        npm, par_model = self.nonparametric, self.parametric
+        held = npm.take_held()
+        if held is None:
+            return
+        X, Y = held
+        if self._rigid is None:
+            self._rereference(self.parameters)  # nothing learned by the residual yet: no solve
+        Phis = np.array([par_model._phi_uncached(x) for x in X])  # (N, t, p)
+        rigid = Phis @ self._reference  # (N, t)
+        F = npm.rff.transform(npm.standardizer.transform(X))
+        beta = npm.rls.forgetting
+        raw = npm.rls.update_steps(F, Y - rigid, predict=True)
+        assert raw is not None  # asked for
+        t = self.n_outputs
+        s2, spread = np.empty(t), np.empty(t)
+        for m in range(X.shape[0]):
+            rows_phi, rows_entries, rows_beta, k = self._cross.staging()
+            stage_pending(rows_phi, rows_entries, rows_beta, k, F[m], Phis[m].reshape(-1), self._phi_entries,
+                          beta)
+            self._cross.staged()
+            self._scale_weight = beta * self._scale_weight + 1.0
+            self._recent_n += 1
+            a = max(1.0 / self._recent_n, 1.0 - self._recent_beta)
+            scale_step(self._scale_model, self._recent_rigid, self._corr, Y[m], rigid[m], raw[m], beta, a,
+                       1.0 - self._corr_beta, self._scale_weight, self.novelty_scale, s2, spread)
+        self._weight_cache = (s2, spread)
+        self._held = None
+        self._raw = None
 
     def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
         """Predict x a priori (all parts), then learn (x, y); the prediction when asked for."""
@@ -998,7 +1040,9 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         """Return the learners' and the tracker's state as arrays."""
         state = super().state_dict(prefix)
         state[f"{prefix}phi_entries"] = self._phi_entries.copy()
-        state[f"{prefix}entries_rhs"] = self._cross.with_pending()
+        # the staged rows are added now (the same sum, grouped as a loaded copy will have it): a model and
+        # its loaded checkpoint then add the rows that follow in the same blocks, bit for bit
+        state[f"{prefix}entries_rhs"] = self._cross.settled().copy()
         # θ_ref, the samples since it followed π̂, and whether use_rigid set it (not restored on load)
         state[f"{prefix}reference"] = np.concatenate([self._reference, [self._since_reference,
                                                                        float(self._rigid is not None)]])

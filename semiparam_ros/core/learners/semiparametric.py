@@ -130,6 +130,7 @@ class _Model:
         settings = self.period_settings
         if settings.standardizer_warmup_s is not None:
             self.set_standardizer_warmup(samples_in(settings.standardizer_warmup_s, sample_period_s))
+            self.learn_held()  # a shorter warm-up may have ended with samples held
         beta = None
         if settings.time_constant_s > 0.0:
             beta = forgetting_factor(settings.time_constant_s, sample_period_s)
@@ -140,6 +141,9 @@ class _Model:
 
     def set_standardizer_warmup(self, warmup: int) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def learn_held(self) -> None:
+        """Learn the warm-up samples held until the residual's standardizer is ready (none by default)."""
 
     def _take(self, context: PredictionContext) -> PredictionContext:
         """Check that ``context`` was made by this model in its current state.
@@ -606,7 +610,9 @@ class NonparametricModel(_Model):
         standardizer: A :class:`Standardizer` for x (copied). Default: none (identity) unless
             ``standardizer_warmup > 0``. An unfitted standardizer must have a warm-up.
         standardizer_warmup: If > 0 and no standardizer is given, estimate the statistics online from the
-            first N samples; the model predicts a zero residual and does not learn until then.
+            first N samples; the model predicts a zero residual until then, holds those N samples (bounded
+            by N) and learns them, in their order, as soon as the statistics are ready (one
+            :meth:`RecursiveRLS.update_steps` call of N rows: O(N·D²) once).
         standardizer_min_scale: Floor of the warm-up's scales (scalar or one value per input, units of x);
             see :class:`Standardizer`.
 
@@ -636,6 +642,53 @@ class NonparametricModel(_Model):
                                                standardizer_min_scale)
         self._initial_standardizer = self.standardizer.copy()
         self.n_samples_seen = 0
+        # (input, target) of the samples the warm-up fed to the standardizer, learned once it is ready
+        self._held_x: list[np.ndarray] = []
+        self._held_y: list[np.ndarray] = []
+
+    def hold_warmup(self, x_stats: np.ndarray, x_in: np.ndarray, target: np.ndarray) -> None:
+        """Feed one warm-up sample to the standardizer and hold its row until the statistics are ready.
+
+        Args:
+            x_stats: What the standardizer's statistics take (the input, or another vector of its size).
+            x_in: The input the row is learned with (validated, not written to afterwards).
+            target: Its target (t,), validated.
+        """
+        self.standardizer.partial_fit(x_stats)
+        self._held_x.append(x_in)
+        self._held_y.append(target)
+
+    @property
+    def held_rows(self) -> int:
+        """Warm-up samples held and not learned yet (0 once learned; at most the warm-up's length)."""
+        return len(self._held_x)
+
+    def take_held(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Return the held warm-up rows ``(X, Y)`` once the standardizer is ready, and forget them.
+
+        None while the warm-up runs or when nothing is held.
+        """
+        if not self._held_x or not self.standardizer.ready:
+            return None
+        X, Y = np.array(self._held_x), np.array(self._held_y)
+        self._held_x, self._held_y = [], []
+        return X, Y
+
+    def learn_held(self) -> None:
+        """Learn the held warm-up rows in their order, if the standardizer is ready (one compiled call).
+
+        The rows were validated when held; a row the learner refuses (a value above its bound) drops the
+        held block with the learner unchanged, as a refused sample would be.
+        """
+        held = self.take_held()
+        if held is None:
+            return
+        X, Y = held
+        F = self.rff.transform(self.standardizer.transform(X))
+        try:
+            self.rls.update_steps(F, Y)
+        except RejectedSampleError:
+            pass  # counted as learned by n_samples_seen already; the learner is unchanged
 
     def features_of(self, x: np.ndarray) -> np.ndarray:
         """φ(s(x)) for a validated 1-D x, as a (1, D) row (finite by construction: cos of finite input).
@@ -660,7 +713,8 @@ class NonparametricModel(_Model):
     def learn_input(self, xin: np.ndarray, target: np.ndarray, want_prediction: bool) -> np.ndarray:
         """Warm-up or update with validated inputs; returns the a-priori prediction if asked."""
         if not self.standardizer.ready:
-            self.standardizer.partial_fit(xin)
+            self.hold_warmup(xin, xin, target.copy())
+            self.learn_held()
             return np.zeros(self.n_outputs)
         phi = self.features_of(xin)
         if want_prediction:
@@ -691,7 +745,8 @@ class NonparametricModel(_Model):
         """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
         phi = self._take(context).phi
         if phi is None:
-            self.standardizer.partial_fit(context.x)
+            self.hold_warmup(context.x, context.x, yv.copy())
+            self.learn_held()
         else:
             self.rls.update_checked(phi, yv.reshape(1, -1))
         self.n_samples_seen += 1
@@ -707,7 +762,7 @@ class NonparametricModel(_Model):
         return Prediction(np.zeros(self.n_outputs), r, r.copy(), var)
 
     def _learn(self, x: Any, y: Any, want_prediction: bool) -> Prediction | None:
-        """Learn one sample (during the warm-up: only feed the standardizer); its a-priori prediction."""
+        """Learn one sample (warm-up: fed to the standardizer and held); its a-priori prediction."""
         xv = check_finite_array("x", x, (self.n_inputs,))
         yv = check_finite_array("y", y, (self.n_outputs,))
         r = self.learn_input(xv, yv, want_prediction)
@@ -738,6 +793,7 @@ class NonparametricModel(_Model):
         self.rls.reset()
         self.standardizer = self._initial_standardizer.copy()
         self.n_samples_seen = 0
+        self._held_x, self._held_y = [], []
 
     def state_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Return features, standardizer statistics and weights as arrays."""
@@ -747,6 +803,9 @@ class NonparametricModel(_Model):
         state.update(self.standardizer.state_dict(f"{prefix}standardizer."))
         state.update(self._initial_standardizer.state_dict(f"{prefix}standardizer_initial."))
         state.update(self.rls.state_dict(f"{prefix}rls."))
+        k = len(self._held_x)
+        state[f"{prefix}held_x"] = np.array(self._held_x) if k else np.zeros((0, self.n_inputs))
+        state[f"{prefix}held_y"] = np.array(self._held_y) if k else np.zeros((0, self.n_outputs))
         return state
 
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
@@ -768,8 +827,17 @@ class NonparametricModel(_Model):
                 or rls.n_features != rff.n_features or rls.n_outputs != self.n_outputs):
             raise CheckpointError(f"state does not fit a model with n_inputs={self.n_inputs}, "
                              f"n_outputs={self.n_outputs}")
+        # held warm-up rows (a checkpoint written before they were held has none: nothing to learn)
+        held_x = np.asarray(state.get(f"{prefix}held_x", np.zeros((0, self.n_inputs))), dtype=np.float64)
+        held_y = np.asarray(state.get(f"{prefix}held_y", np.zeros((0, self.n_outputs))), dtype=np.float64)
+        k = held_x.shape[0] if held_x.ndim == 2 else -1
+        if (held_x.shape != (k, self.n_inputs) or held_y.shape != (k, self.n_outputs)
+                or k > max(std.count_, 0)
+                or not (within(held_x, MAX_ABS_INPUT) and within(held_y, MAX_ABS_INPUT))):
+            raise CheckpointError("the held warm-up rows have the wrong size or invalid values")
         self.rff, self.standardizer, self.rls, self.n_samples_seen = rff, std, rls, n_seen
         self._initial_standardizer = std0
+        self._held_x, self._held_y = list(held_x), list(held_y)
 
 
 def rigid_body_part(model: object) -> ParametricModel | None:
@@ -842,6 +910,10 @@ class _TwoStageModel(_Model):
             ConfigurationError: If ``warmup`` < 1.
         """
         self.nonparametric.set_standardizer_warmup(warmup)
+
+    def learn_held(self) -> None:
+        """Learn the residual stage's held warm-up rows once its standardizer is ready (the cascade's)."""
+        self.nonparametric.learn_held()
 
     def reset(self) -> None:
         """Forget both learners (and restart the online standardizer warm-up)."""
@@ -1010,8 +1082,9 @@ class SemiparametricModel(_TwoStageModel):
             # warm-up (see _learn and the class docstring for the ŷ block's statistics)
             xv = context.x
             measured = self.yhat_statistics == "measured"
-            npm.standardizer.partial_fit(np.concatenate([xv, yv if measured else yp]))
+            npm.hold_warmup(np.concatenate([xv, yv if measured else yp]), np.concatenate([xv, yp]), yv - yp)
             par.rls.defer_step(par_step)
+            npm.learn_held()
         else:
             np_step = npm.rls.checked_step(phi, (yv - yp).reshape(1, -1), owned=True)
             par.rls.defer_step(par_step)
@@ -1028,7 +1101,8 @@ class SemiparametricModel(_TwoStageModel):
         npm = self.nonparametric
         if not npm.standardizer.ready and self.yhat_statistics == "measured":
             # warm-up: the ŷ block takes the statistics of the measured y (see the class docstring)
-            npm.standardizer.partial_fit(np.concatenate([xv, yv]))
+            npm.hold_warmup(np.concatenate([xv, yv]), np.concatenate([xv, yp]), yv - yp)
+            npm.learn_held()
             r = np.zeros(self.n_outputs)
         else:
             r = npm.learn_input(np.concatenate([xv, yp]), yv - yp, want_prediction)

@@ -217,6 +217,62 @@ def test_state_dict_round_trip_and_corrupt_tracker_state(tmp_path):
     assert other.n_samples_seen == 0
 
 
+def test_the_warm_up_samples_are_learned_once_the_standardizer_is_ready():
+    """With an online warm-up of 30 samples the residual predicts zero for 30 samples, then learns all of
+    them: after 200 samples its residual of the final π̂ (before its weight) is the closed-form ridge fit,
+    on the features of the warm-up's statistics, of y − Φπ̂ over all 200 samples, as without a warm-up.
+    λ = 0.1 systems of condition ≲ 1e3: 1e-9 relative is far above rounding."""
+    m = model(standardizer=None, standardizer_warmup=30)
+    X, Y = data(200, 11)
+    for i, (x, y) in enumerate(zip(X, Y, strict=True)):
+        pred = m.predict_learn_one(x, y)
+        if i < 30:
+            assert np.array_equal(pred.residual, np.zeros(2))
+        assert m.nonparametric.held_rows == (i + 1 if i < 29 else 0)
+    npm = m.nonparametric
+    assert npm.rls.n_samples_seen == 200
+    np.testing.assert_allclose(npm.standardizer.mean_, X[:30].mean(0), rtol=1e-12)
+    Z = npm.rff.transform(npm.standardizer.transform(X))
+    pi = m.parametric.parameters
+    targets = Y - np.array([regressor(x) @ pi for x in X])
+    W = np.linalg.solve(Z.T @ Z + 0.1 * np.eye(Z.shape[1]), Z.T @ targets)
+    for x in data(20, 12)[0]:
+        m.predict_model(x, rigid=pi)
+        z = npm.rff.transform(npm.standardizer.transform(x))
+        np.testing.assert_allclose(m._raw, z @ W, rtol=1e-9, atol=1e-12)
+
+
+def test_a_checkpoint_written_in_the_warm_up_keeps_its_held_samples(tmp_path):
+    """A model saved after 12 of its 30 warm-up samples and loaded into a fresh one learns as the model
+    that never stopped (same predictions to rounding); held rows of the wrong size or not finite are
+    refused with the model unchanged."""
+    X, Y = data(150, 13)
+    whole, first = model(standardizer=None, standardizer_warmup=30), model(standardizer=None,
+                                                                              standardizer_warmup=30)
+    for x, y in zip(X[:12], Y[:12], strict=True):
+        first.learn_one(x, y)
+    first.save(tmp_path / "m.npz")
+    resumed = model(standardizer=None, standardizer_warmup=30).load(tmp_path / "m.npz")
+    assert resumed.nonparametric.held_rows == 12
+    for x, y in zip(X, Y, strict=True):
+        whole.learn_one(x, y)
+    for x, y in zip(X[12:], Y[12:], strict=True):
+        resumed.learn_one(x, y)
+    for x in X[:10]:
+        np.testing.assert_allclose(resumed.predict_one(x).total, whole.predict_one(x).total, rtol=1e-10)
+    state = first.state_dict()
+    for key, bad in (("nonparametric.held_x", np.zeros((12, 5))),
+                     ("nonparametric.held_y", np.full((12, 2), np.nan)),
+                     ("nonparametric.held_x", np.zeros((31, 6)))):
+        broken = dict(state, **{key: bad})
+        if bad.shape[0] == 31:
+            broken["nonparametric.held_y"] = np.zeros((31, 2))
+        other = model(standardizer=None, standardizer_warmup=30)
+        with pytest.raises(CheckpointError, match="held warm-up rows"):
+            other.load_state_dict(broken)
+        assert other.n_samples_seen == 0 and other.nonparametric.held_rows == 0
+
+
 def test_tracker_carries_a_drifting_error_over_and_adds_nothing_to_white_noise():
     """A random walk without noise is best predicted by its last value (K = 1); white noise by nothing
     (K = 0): the tracker chooses so per output from its recent one-step errors. The noise variance of the
