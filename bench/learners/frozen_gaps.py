@@ -6,14 +6,14 @@ script measures why, every model served as a user gets it (:func:`~semiparam_ros
 the node's estimator, checkpoint, ``load_model``) and scored with the protocol of ``real_robots`` (10
 sequential parts of the test log, RMSE over each part's second half, mean over joints and parts):
 
-1. **The residual's warm-up.** The residual (NP, and SP's residual) learns nothing while its input
-   standardizer warms up (``nonparametric.standardizer_warmup_s``, 2 s by default): the first 2 s of log 1
-   are in the rigid-body part only. Log 2 repeats log 1, so on log 2's first part the frozen residuals
-   abstain or extrapolate. NP and SP are scored as served and with the warm-up learned: the same
-   estimator given, from its first sample, the standardizer its warm-up ends with (fitted on the same
-   first 2 s), so that the residual learns every sample — what learning the warm-up's samples once the
-   standardizer is ready would give (an experiment, not the package's behaviour). Beside them P and log
-   1's own torque at log 2's states (the repetition floor of ``repeatability.py``), and per part for 1 → 2.
+1. **The residual's warm-up.** The residual (NP, and SP's residual) cannot learn while its input
+   standardizer warms up (``nonparametric.standardizer_warmup_s``, 2 s by default); it holds those samples
+   and learns them once the statistics are ready. Log 2 repeats log 1, so the first 2 s of log 1 decide
+   log 2's first part. NP and SP are scored as served and, as a cross-check of the held rows, with the
+   standardizer its warm-up ends with given from the first sample (fitted on the same first 2 s), so that
+   the residual learns every sample as it comes: the two differ only in the reference the warm-up's rows
+   are learned against and in the error statistics' order. Beside them P and log 1's own torque at log 2's
+   states (the repetition floor of ``repeatability.py``), and per part for 1 → 2.
 2. **SP against P on new motion**, per part: the paired differences over the 10 parts of 1 → 3 and 2 → 3,
    their mean, a paired t statistic and its two-sided p, and per joint; with the residual's correlation
    length taken as one property of the motion (the median over outputs, ``--variants``) instead of per
@@ -121,8 +121,8 @@ def learn_stream(estimator: OnlineEstimator, train) -> None:
             continue
 
 
-def learn_warmup_learned(config, train, kind: str):
-    """The served model of an estimator whose residual learns every sample, the warm-up's included.
+def learn_standardizer_given(config, train, kind: str):
+    """The served model of an estimator whose residual learns every sample as it comes (a cross-check).
 
     The standardizer is the one the node's warm-up ends with on this stream (fitted on the same first
     samples), given to a second estimator before its first sample.
@@ -137,12 +137,12 @@ def learn_warmup_learned(config, train, kind: str):
     return serve(second)
 
 
-def served_errors(config, logs, kinds=("P", "NP", "SP"), *, warmup_learned: bool = False
+def served_errors(config, logs, kinds=("P", "NP", "SP"), *, standardizer_given: bool = False
                   ) -> dict[str, dict[str, np.ndarray]]:
     """Test-log errors ``y − ŷ`` (N, n) of each served model, per pair ``"a->b"``."""
     out: dict[str, dict[str, np.ndarray]] = {}
     for kind in kinds:
-        learn = learn_warmup_learned if warmup_learned and kind != "P" else learn_served
+        learn = learn_standardizer_given if standardizer_given and kind != "P" else learn_served
         models = {a: learn(config, logs[a], kind=kind) for a in {a for a, _ in PAIRS}}
         for a, b in PAIRS:
             test = logs[b]
@@ -174,8 +174,8 @@ def main() -> int:
     floor = protocol_rmse(recall_error[keep])[0]
     result["repetition_floor_1to2"] = floor
 
-    errors = {label: served_errors(base, logs, warmup_learned=learned)
-              for label, learned in (("default", False), ("warm-up learned", True))}
+    errors = {label: served_errors(base, logs, standardizer_given=given)
+              for label, given in (("default", False), ("standardizer from sample 1", True))}
     for label, errs in errors.items():
         rows = {pair: {k: protocol_rmse(e)[0] for k, e in by_kind.items()} for pair, by_kind in errs.items()}
         result["warmup"][label] = rows
@@ -188,8 +188,8 @@ def main() -> int:
     # 1 -> 2 per part: where the frozen models lose to the repetition floor
     parts = {k: part_errors(e).mean(axis=1) for k, e in errors["default"]["1->2"].items()}
     parts["log 1's torque"] = part_errors(recall_error).mean(axis=1)
-    parts.update({f"{k}, warm-up learned": part_errors(e).mean(axis=1)
-                  for k, e in errors["warm-up learned"]["1->2"].items() if k != "P"})
+    parts.update({f"{k}, standardizer from sample 1": part_errors(e).mean(axis=1)
+                  for k, e in errors["standardizer from sample 1"]["1->2"].items() if k != "P"})
     result["per_part_1to2"] = {k: v.tolist() for k, v in parts.items()}
     print("1->2 per part (mean over joints) [N·m]:")
     for k, v in parts.items():
@@ -214,7 +214,7 @@ def main() -> int:
                   f"{max(joint, key=joint.__getitem__)} {max(joint.values()):+.5f}")
 
     compare(errors["default"], "default")
-    compare(errors["warm-up learned"], "warm-up learned")
+    compare(errors["standardizer from sample 1"], "standardizer from sample 1")
     if args.variants:
         with shared_correlation():
             errs = served_errors(base, logs, kinds=("SP",))

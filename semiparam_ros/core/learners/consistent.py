@@ -992,7 +992,7 @@ class ConsistentSemiparametricModel(_TwoStageModel):
         X, Y = held
         if self._rigid is None:
             self._rereference(self.parameters)  # nothing learned by the residual yet: no solve
-        Phis = np.array([par_model._phi_uncached(x) for x in X])  # (N, t, p)
+        Phis = par_model.phi_rows(X)  # (N, t, p)
         rigid = Phis @ self._reference  # (N, t)
         F = npm.rff.transform(npm.standardizer.transform(X))
         beta = npm.rls.forgetting

@@ -80,7 +80,10 @@ class JointSemiparametricModel(_TwoStageModel):
         standardizer: Optional fitted :class:`Standardizer` for x.
         standardizer_warmup: Online warm-up length of the standardizer if none is given (0 = identity).
             During the warm-up the kernel term is zero and the samples are learned by the rigid-body term
-            alone (they enter (1) with ``φ = 0``).
+            alone (they enter (1) with ``φ = 0``); they are also held, and once the statistics are ready
+            the rigid-body term starts again from its prior and the held samples are learned jointly, in
+            their order, with their features (:meth:`learn_held`): the state is then that of (1) over
+            every sample.
         standardizer_min_scale: Floor of the warm-up's scales (scalar or one per input, units of x).
         prior: Prior mean π₀ of π (n_params,), default zero: (1) then penalizes ``λ_P‖π − π₀‖²``, solved as
             (1) in ``δ = π − π₀`` with targets ``y − Φπ₀`` (so bounded forgetting keeps π̂ around π₀, and
@@ -200,6 +203,7 @@ class JointSemiparametricModel(_TwoStageModel):
         t, p = self.n_outputs, self.n_params
         pi = self.parametric.rls.weights[:, 0]  # δ̂ = π̂ − π₀
         npm = self.nonparametric
+        measured = yv
         y0 = self.parametric.prior_output(Phi)
         if y0 is not None:
             yv = yv - y0  # (1) in δ: the targets are what the prior leaves over
@@ -207,7 +211,7 @@ class JointSemiparametricModel(_TwoStageModel):
             # warm-up: φ = 0 in (1), so the kernel learner's rotations would push the row [0 | y, Φ] out
             # unchanged; feed it to the π learner directly (with β < 1 the kernel learner's clock starts
             # after the warm-up: until then it holds only its prior, which is left undecayed)
-            npm.standardizer.partial_fit(xv)
+            npm.hold_warmup(xv, xv, measured.copy())  # learned jointly once the statistics are ready
             par = Phi @ pi
             self.parametric.rls.update_checked(Phi, yv.reshape(-1, 1))
             if y0 is not None:
@@ -229,7 +233,29 @@ class JointSemiparametricModel(_TwoStageModel):
         self.parametric.n_samples_seen += 1
         npm.n_samples_seen += 1
         self.n_samples_seen += 1
+        if phi is None:
+            self.learn_held()
         return pred
+
+    def learn_held(self) -> None:
+        """Learn the warm-up's samples jointly, in their order, once the standardizer is ready.
+
+        During the warm-up the rigid-body term alone learned them (``φ = 0`` in (1)); that learner, which
+        has learned nothing else (the warm-up starts with the model), returns to its prior and every held
+        sample is learned again with its features, so the state is that of (1) over all the samples, as if
+        the statistics had been known from the first one. One joint step per held sample (a one-off
+        O(N·t(1 + p)·D²)). Nothing happens while the warm-up runs or nothing is held.
+        """
+        npm, par = self.nonparametric, self.parametric
+        held = npm.take_held()
+        if held is None:
+            return
+        X, Y = held
+        counts = (par.n_samples_seen, npm.n_samples_seen, self.n_samples_seen)
+        par.rls.reset()
+        for x, y in zip(X, Y, strict=True):
+            self._learn_valid(x, y, par.phi_fresh(x), npm.features_of(x))
+        par.n_samples_seen, npm.n_samples_seen, self.n_samples_seen = counts
 
     @property
     def parameters(self) -> np.ndarray:

@@ -116,19 +116,25 @@ def test_predict_one_and_variance_equal_the_closed_form():
                                rtol=1e-8)
 
 
-def test_warm_up_learns_the_rigid_body_term_alone_then_the_joint_problem():
+@pytest.mark.parametrize("beta", [1.0, 0.97])
+def test_warm_up_learns_the_rigid_body_term_alone_then_the_joint_problem_over_every_sample(beta):
+    """During the warm-up the rigid-body term alone predicts and learns (a ParametricModel beside it); once
+    the statistics are ready every a-priori prediction is the closed-form joint ridge over *all* the
+    samples before, the warm-up's with their features (as if the statistics had been known from the
+    first sample), with the documented prior-keeping forgetting."""
     data = stream(30)
-    model = new_model(warmup=8)
+    model = new_model(beta, warmup=8)
     reg = make_regressor()
-    alone = ParametricModel(reg, P, T, lam=0.1)
-    for x, y in data[:8]:
+    alone = ParametricModel(reg, P, T, lam=0.1, forgetting=beta)
+    for n, (x, y) in enumerate(data[:8]):
         np.testing.assert_allclose(model.predict_learn_one(x, y).total, alone.predict_learn_one(x, y).total,
                                    rtol=1e-10, atol=1e-12)
+        assert model.nonparametric.held_rows == (n + 1 if n < 7 else 0)
     assert model.nonparametric.standardizer.ready
-    # from then on: the joint problem in which the warm-up samples have φ = 0
-    feats = [np.zeros(D)] * 8 + [features(model, x) for x, _ in data[8:]]
+    assert model.n_samples_seen == model.parametric.n_samples_seen == model.nonparametric.n_samples_seen == 8
+    feats = [features(model, x) for x, _ in data]
     for n in range(8, 30):
-        theta, _ = closed_form(data[:n], reg, feats[:n], 0.1, 0.05, 1.0)
+        theta, _ = closed_form(data[:n], reg, feats[:n], 0.1, 0.05, beta)
         x, y = data[n]
         np.testing.assert_allclose(model.predict_learn_one(x, y).total, joint_rows(reg(x), feats[n]) @ theta,
                                    rtol=1e-9, atol=1e-10)
