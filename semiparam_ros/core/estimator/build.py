@@ -280,6 +280,9 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
         raise ConfigurationError(f"model kind must be 'P', 'NP' or 'SP', got {kind!r}")
     model = _build_model(config, kind, regressor)
     model.period_settings = period_settings(config)
+    residual = model if isinstance(model, NonparametricModel) else getattr(model, "nonparametric", None)
+    if isinstance(residual, NonparametricModel):
+        residual.learn_warmup = bool(config["nonparametric.learn_warmup"])
     if sample_period_s is not None:
         model.on_period(sample_period_s)
     return model

@@ -629,6 +629,9 @@ class NonparametricModel(_Model):
     """
 
     _kind = "nonparametric"
+    #: Hold the warm-up's samples and learn them once the statistics are ready (False: the warm-up's
+    #: samples only feed the statistics, as before; no long step when the warm-up ends).
+    learn_warmup: bool = True
 
     def __init__(self, n_inputs: int, n_outputs: int, *, n_features: int = 500, sigma: float = 1.0,
                  lam: float = 1.0, forgetting: float = 1.0, seed: int = 0,
@@ -655,8 +658,9 @@ class NonparametricModel(_Model):
             target: Its target (t,), validated.
         """
         self.standardizer.partial_fit(x_stats)
-        self._held_x.append(x_in)
-        self._held_y.append(target)
+        if self.learn_warmup:
+            self._held_x.append(x_in)
+            self._held_y.append(target)
 
     @property
     def held_rows(self) -> int:

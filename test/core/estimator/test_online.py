@@ -242,6 +242,25 @@ def test_parametric_model_converges_through_pipeline_with_estimated_ddq(config, 
 
 
 # ----------------------------------------------------------------------------- 3. checkpoints
+@pytest.mark.parametrize("kind", ["NP", "SP"])
+def test_the_residual_learns_its_warm_up_unless_told_not_to(config, regressor, kind):
+    """``nonparametric.learn_warmup`` (default true): the residual's learner has absorbed every learned
+    sample, the standardizer warm-up's included; false: all but the warm-up's, and nothing is held."""
+    msgs = rich_stream().messages
+    seen = {}
+    for flag in (True, False):
+        cfg = config.with_overrides({"nonparametric.learn_warmup": flag})
+        est = OnlineEstimator(cfg, regressor=regressor, kind=kind)
+        feed(est, msgs)
+        npm = est.model if kind == "NP" else est.model.nonparametric
+        assert npm.learn_warmup is flag and npm.standardizer.ready and npm.held_rows == 0
+        warm = npm.standardizer.count_
+        assert 0 < warm < npm.n_samples_seen
+        seen[flag] = npm.rls.n_samples_seen
+        assert seen[flag] == npm.n_samples_seen - (0 if flag else warm)
+    assert seen[True] > seen[False]
+
+
 def test_save_load_gives_bit_identical_predictions(config, regressor, tmp_path):
     msgs = rich_stream().messages
     split = int(len(msgs) * 0.6)
