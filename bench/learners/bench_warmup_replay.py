@@ -22,6 +22,7 @@ import json
 import os
 import pathlib
 import platform
+import sys
 import tempfile
 import time
 
@@ -31,18 +32,13 @@ from threadpoolctl import threadpool_limits
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import Sample
-from semiparam_ros.eval.replay import load_samples
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from bench_consistent import samples_of  # a sibling script
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_warmup_replay.json"
 AFTER = 300  # steps timed after the warm-up ends
-
-
-def samples_of(config, bag) -> list[Sample]:
-    data, _ = load_samples(bag, config)
-    n = data.X.shape[1] // 3
-    return [Sample(int(s), x[:n], x[n:2 * n], x[2 * n:], y)
-            for s, x, y in zip(data.stamps_ns, data.X, data.Y, strict=True)]
 
 
 def run(config, samples: list[Sample], kind: str, rate: float) -> dict[str, float]:
