@@ -51,11 +51,11 @@ def run(bag: str, overrides: dict, *, contacts: list[tuple[float, float, np.ndar
             for start, duration, force in contacts:
                 if start <= t < start + duration:
                     msg = dataclasses.replace(msg, force=msg.force + force)
-            results = est.process_wrench(msg)
+            results = est.process(msg)
         else:
             if t0 is None and wrench_topic is None:
                 t0 = msg.stamp_ns
-            results = est.process_joint_state(msg)
+            results = est.process(msg)
         for r in results:
             stamps.append(r.sample.stamp_ns)
             ys.append(r.sample.y)

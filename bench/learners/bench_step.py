@@ -77,8 +77,7 @@ def samples_of(make_estimator: Any, config: Any, joint_state_type: type, n_messa
     out: list[Any] = []
     for msg in list(read_messages(BAG, joint_states_topic=topics.joint_states,
                                   wrench_topic=topics.wrench))[:n_messages]:
-        out += (est.pipeline.add_joint_state(msg) if isinstance(msg, JointStateData)
-                else est.pipeline.add_wrench(msg))
+        out += est.pipeline.add(msg)
     return out
 
 

@@ -3,7 +3,7 @@
 What a shared machine cannot spoil as easily as bench_node.py's wall-clock figures: the CPU time (thread
 time) per joint-state/wrench pair of
 
-* ``core``: ``OnlineEstimator.process_joint_state`` / ``process_wrench`` on already converted messages;
+* ``core``: ``OnlineEstimator.process`` on already converted messages;
 * ``node``: what the node's subscription callbacks do with the serialised messages the executor hands
   them — convert, queue, run the estimator, publish the outputs (one subscriber on
   ``~/predicted_wrench``, as in bench_node.py), record the statistics — without the executor itself.
@@ -77,8 +77,8 @@ def measure(features: int, seconds: float, repeats: int) -> dict[str, list[float
                         est = node.estimator
                         data = [(k, convert[k](deserialize_message(raw, types[k]))) for k, raw in messages]
                         t0 = time.thread_time()
-                        for kind, item in data:
-                            (est.process_joint_state if kind == "joint_states" else est.process_wrench)(item)
+                        for _, item in data:
+                            est.process(item)
                     else:
                         t0 = time.thread_time()
                         # this checkout's node takes input through node.inputs; older ones through _intake

@@ -90,7 +90,7 @@ def main() -> None:
         start_ns = 10**18  # any epoch: the estimator measures its own rate
 
         def feed(k: int, tk: float, q_m: np.ndarray, dq_m: np.ndarray, tau: np.ndarray) -> None:
-            live.estimator.process_joint_state(JointStateData(start_ns + round(tk * 1e9), joints, q_m, dq_m,
+            live.estimator.process(JointStateData(start_ns + round(tk * 1e9), joints, q_m, dq_m,
                                                               tau))
             if k % every == 0:
                 consistent = LearnedModel(live.estimator).consistent()  # what the worker would send

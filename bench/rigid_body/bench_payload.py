@@ -66,7 +66,7 @@ def run(robot: str, seed: int, pickup_s: float, after_s: float) -> dict:
         if not tared and stamp >= tare_ns:
             est.tare_payload()
             tared = True
-        est.process_joint_state(JointStateData(stamp, names, rec.q_measured[k], rec.dq_measured[k],
+        est.process(JointStateData(stamp, names, rec.q_measured[k], rec.dq_measured[k],
                                                rec.measured_torques[k]))
     elapsed = time.perf_counter() - start
     with tempfile.TemporaryDirectory() as tmp:

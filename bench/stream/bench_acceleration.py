@@ -146,13 +146,13 @@ def sp_errors(config, train_msgs, test_msgs) -> dict:
 
     est = OnlineEstimator(config, kind="SP")
     for m in train_msgs:
-        est.process_joint_state(m)
+        est.process(m)
     est.pipeline.reset()
     stamps, pred, meas = [], [], []
     newest = []
     t0 = time.perf_counter()
     for m in test_msgs:
-        for r in est.process_joint_state(m):
+        for r in est.process(m):
             stamps.append(r.sample.stamp_ns)
             newest.append(m.stamp_ns)
             pred.append(r.prediction.total)

@@ -66,7 +66,7 @@ def dropped(module: types.ModuleType, joints: tuple[str, ...], states: list[Join
     out = set()
     for k, msg in enumerate(states):
         before = pipe.drops["glitch"]
-        pipe.add_joint_state(msg)
+        pipe.add(msg)
         if pipe.drops["glitch"] > before:
             out.add(k - 1 if late else k)
     return out

@@ -1,7 +1,7 @@
 """Benchmark: per-message cost of the message-to-sample pipeline at 1 kHz, old vs new, in one run.
 
-One *pair* is ``SamplePipeline.add_joint_state`` of a 13-name JointState (the iCub right arm's 4
-configured joints scattered among 9 others) plus ``add_wrench`` of the wrench stamped 0.2 ms later —
+One *pair* is ``SamplePipeline.add`` of a 13-name JointState (the iCub right arm's 4
+configured joints scattered among 9 others) plus ``add`` of the wrench stamped 0.2 ms later —
 what the node does per millisecond at 1 kHz. Two stamp patterns:
 
 * ``uniform``  — exactly 1 ms apart (simulated bags);
@@ -111,15 +111,15 @@ def run_pipeline(module: types.ModuleType, pairs: list, warmup: int, block: int)
     pipe = module.SamplePipeline(CONFIGURED, frame_id=FRAME, sync_tolerance=0.0005)
     samples: list = []
     for js, w in pairs[:warmup]:
-        samples += pipe.add_joint_state(js)
-        samples += pipe.add_wrench(w)
+        samples += pipe.add(js)
+        samples += pipe.add(w)
     rest = pairs[warmup:]
-    add_js, add_w = pipe.add_joint_state, pipe.add_wrench
+    add = pipe.add
 
     def step(k: int) -> None:
         js, w = rest[k]
-        samples.extend(add_js(js))
-        samples.extend(add_w(w))
+        samples.extend(add(js))
+        samples.extend(add(w))
 
     timing = time_blocks(step, len(rest), block)
     timing["samples"] = len(samples)

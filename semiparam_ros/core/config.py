@@ -31,15 +31,18 @@ from typing import Any
 import yaml
 
 from semiparam_ros.atomic import atomic_open
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = [
     "PARAMETERS",
+    "RUNTIME_TARGETS",
     "EstimatorConfig",
     "ParameterSpec",
     "describe_parameters",
     "load_config",
     "parameter_spec",
+    "runtime_targets",
     "structural_values",
     "unknown_parameter_message",
     "validate_value",
@@ -61,7 +64,10 @@ class ParameterSpec:
         choices: Allowed values of a string parameter, or ``None``.
         min_exclusive: Whether ``min`` itself is excluded (e.g. a regularization λ > 0).
         length: Required length of an array parameter, or ``None``.
-        read_only: Whether the value can only be set at start-up (structure of the model).
+        runtime: What takes a change of the value while the node runs: ``"estimator"`` (the learner,
+            its gate and noise estimate: ``OnlineEstimator.apply_runtime_parameters``), ``"loop"`` (the
+            learning loop's overload policy), ``"checkpoints"`` (the checkpoint writer); empty = the value
+            is read at start-up only (:attr:`read_only`).
         structural: Whether the value is part of the learned model's structure: a checkpoint names it in
             its fingerprint and loads only into a model built with the same value
             (:func:`structural_values`).
@@ -81,12 +87,17 @@ class ParameterSpec:
     choices: tuple[str, ...] | None = None
     min_exclusive: bool = False
     length: int | None = None
-    read_only: bool = True
+    runtime: str = ""
     structural: bool = False
     kinds: tuple[str, ...] = ("P", "NP", "SP")
     unless: Any = None
     unless_as: str | None = None
     only_if: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def read_only(self) -> bool:
+        """Whether the value can only be set at start-up (no :attr:`runtime` target)."""
+        return not self.runtime
 
     def range_text(self) -> str:
         """Return the allowed range as text for error messages and parameter descriptors."""
@@ -127,7 +138,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "fixed URDF joint of the six-axis F/T sensor (output = wrench)", structural=True),
     ParameterSpec("robot.output", "string", "wrench",
                   "learned quantity: the F/T sensor wrench, or the joint torques from JointState.effort",
-                  choices=("wrench", "joint_torques"), structural=True),
+                  choices=tuple(k.value for k in OutputKind), structural=True),
     ParameterSpec("robot.frame_id", "string", "r_arm_ft_sensor",
                   "expected frame_id of the WrenchStamped input; empty accepts any"),
     ParameterSpec("robot.gravity", "double_array", [0.0, 0.0, -9.81],
@@ -325,27 +336,27 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "time constant of the running estimate of the noise scale s^2 per output [s]; the "
                   "published std is sqrt(s^2 (1 + z A^-1 z^T)); with the consistent SP, s^2 is of the "
                   "model's errors (its fast correction left out)", min=0.0, min_exclusive=True, max=1e9,
-                  read_only=False),
+                  runtime="estimator"),
     ParameterSpec("gate.enabled", "bool", True,
                   "contact-aware learning gate: a sample whose residual exceeds gate.threshold standard "
                   "deviations is predicted but not learned, unless the excursion outlasts "
                   "gate.max_contact_duration (false = learn every sample, the paper's behaviour)",
-                  read_only=False),
+                  runtime="estimator"),
     ParameterSpec("gate.threshold", "double", 5.0,
                   "residual beyond which a sample is not learned, in predictive standard deviations of "
-                  "any one output component", min=0.0, min_exclusive=True, max=1e6, read_only=False),
+                  "any one output component", min=0.0, min_exclusive=True, max=1e6, runtime="estimator"),
     ParameterSpec("gate.max_contact_duration", "double", 3.0,
                   "an excursion beyond the threshold that lasts longer than this is a new normal (a "
                   "payload) and is learned [s]; longer than the longest expected contact",
-                  min=0.0, max=1e6, read_only=False),
+                  min=0.0, max=1e6, runtime="estimator"),
     ParameterSpec("gate.warmup", "double", 10.0,
                   "time from the first sample during which every sample is learned and the noise "
-                  "estimate settles before the gate engages [s]", min=0.0, max=1e6, read_only=False),
+                  "estimate settles before the gate engages [s]", min=0.0, max=1e6, runtime="estimator"),
     ParameterSpec("gate.novelty", "double", 1.0,
                   "relative predictive variance z A^-1 z^T (dimensionless: the model's own uncertainty in "
                   "units of the noise variance) above which an outlier is motion the model has not seen, "
                   "learned, not a contact; 0 = every outlier is a contact", min=0.0, max=1e12,
-                  read_only=False),
+                  runtime="estimator"),
     # feed-forward at desired states (joint torques; service/feedforward.py)
     ParameterSpec("feedforward.joints", "string_array", [],
                   "joint order of ~/feedforward_commands and ~/feedforward (a JointGroupEffortController's "
@@ -360,19 +371,21 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "torque jitter that degrades closed-loop tracking, docs/feedforward.md)",
                   min=0.0, max=1e6),
     # run time
-    ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)", read_only=False),
+    ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)",
+                  runtime="estimator"),
     ParameterSpec("overload.max_delay", "double", 0.001,
                   "a sample that waited longer than this in the node's input queue [s] is predicted at once "
                   "(residual held from the last full prediction) and not learned, so predictions stay fresh "
                   "when learning cannot keep up; counted as learning_skipped; 0 = learn every sample, "
-                  "however late", min=0.0, max=1e6, read_only=False),
+                  "however late", min=0.0, max=1e6, runtime="loop"),
     ParameterSpec("queue_size", "integer", 1000,
                   "bounded input queue of the node; the oldest message is dropped and counted beyond it",
                   min=1, max=10**6),
     ParameterSpec("checkpoint.path", "string", "",
                   "checkpoint file (.npz); empty disables checkpoints; ~ is expanded"),
     ParameterSpec("checkpoint.period", "double", 60.0,
-                  "period of automatic checkpoints [s]; 0 disables them", min=0.0, max=1e7, read_only=False),
+                  "period of automatic checkpoints [s]; 0 disables them", min=0.0, max=1e7,
+                  runtime="checkpoints"),
     ParameterSpec("checkpoint.load_on_start", "bool", True, "warm start from an existing checkpoint"),
     ParameterSpec("diagnostics.period", "double", 1.0, "period of /diagnostics [s]", min=0.01, max=3600.0),
     ParameterSpec("diagnostics.rmse_window", "integer", 0,
@@ -480,6 +493,7 @@ def validate_value(name: str, value: Any) -> Any:
     if spec.type == "string":
         if not isinstance(value, str):
             raise ConfigurationError(f"parameter {name!r} must be a string, got {value!r}")
+        value = str(value)  # a string enum (an OutputKind) is kept as its plain value
         if spec.choices is not None and value not in spec.choices:
             raise ConfigurationError(f"parameter {name!r} = {value!r} is invalid: must be "
                                      f"{spec.range_text()}")
@@ -533,7 +547,7 @@ class EstimatorConfig:
         overlap = set(joints) & set(checked["robot.locked_joints"])
         if overlap:
             raise ConfigurationError(f"joints both learned and locked: {sorted(overlap)}")
-        if checked["robot.output"] == "wrench" and not checked["robot.ft_sensor"]:
+        if checked["robot.output"] == OutputKind.WRENCH and not checked["robot.ft_sensor"]:
             raise ConfigurationError("parameter 'robot.ft_sensor' must name the F/T sensor joint when "
                                      "robot.output is 'wrench'")
         window = checked["acceleration.window"]
@@ -615,15 +629,38 @@ class EstimatorConfig:
         return self[name]
 
     @property
+    def output_kind(self) -> OutputKind:
+        """What the estimator learns (``robot.output``): an F/T sensor's wrench or the joint torques."""
+        return OutputKind(self["robot.output"])
+
+    @property
+    def n_outputs(self) -> int:
+        """Width of the learned output: 6 for a wrench, one per joint of ``robot.joints`` for torques."""
+        return self.output_kind.n_outputs(len(self["robot.joints"]))
+
+    @property
     def locked(self) -> dict[str, float]:
         """Return the positions of the locked joints [rad] by name."""
         return dict(zip(self["robot.locked_joints"], self["robot.locked_positions"], strict=True))
 
     def urdf_path(self) -> Path:
-        """Return the URDF path that ``robot.urdf`` names (see :func:`core.dynamics.resolve_urdf`)."""
+        """Return the URDF path that ``robot.urdf`` names (``urdf.resolve_urdf``)."""
         from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 
         return resolve_urdf(self["robot.urdf"])
+
+
+#: What takes a run-time parameter's change (:attr:`ParameterSpec.runtime`).
+RUNTIME_TARGETS = ("estimator", "loop", "checkpoints")
+
+
+def runtime_targets(names: Iterable[str]) -> set[str]:
+    """Return the run-time targets of the named parameters (read-only ones have none).
+
+    >>> sorted(runtime_targets(["gate.threshold", "checkpoint.period", "robot.joints"]))
+    ['checkpoints', 'estimator']
+    """
+    return {spec.runtime for spec in map(parameter_spec, names) if spec.runtime}
 
 
 def structural_values(config: EstimatorConfig, kind: str) -> dict[str, Any]:

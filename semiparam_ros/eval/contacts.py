@@ -31,12 +31,13 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.stream.episodes import flag_samples, score_episodes
 from semiparam_ros.core.stream.messages import JointStateData, WrenchData
 from semiparam_ros.core.stream.rate import stream_period_s
@@ -158,14 +159,14 @@ def run_estimator(bag: str | Path, config: EstimatorConfig, *, start_stamp_ns: i
     topics = topics or Topics.from_config(config)
     est = OnlineEstimator(config)
     est.inline_projection = True  # the node's consistent rigid body, on its schedule in the bag's time
-    wrench = topics.wrench if config["robot.output"] == "wrench" else None
+    wrench = topics.wrench if config.output_kind == OutputKind.WRENCH else None
     stamps: list[int] = []
     ys: list[np.ndarray] = []
     preds: list[np.ndarray] = []
     stds: list[np.ndarray] = []
     learned: list[bool] = []
     for msg in read_messages(bag, joint_states_topic=topics.joint_states, wrench_topic=wrench):
-        results = est.process_wrench(msg) if isinstance(msg, WrenchData) else est.process_joint_state(msg)
+        results = est.process(msg)
         for r in results:
             stamps.append(r.sample.stamp_ns)
             ys.append(r.sample.y)
@@ -199,7 +200,7 @@ def external_truth(bag: str | Path, run: ContactRun, config: EstimatorConfig, st
     Returns:
         (n, t) [N, N·m] (NaN where a sample has no ground-truth message), or ``None`` without the topic.
     """
-    wrench = config["robot.output"] == "wrench"
+    wrench = config.output_kind == OutputKind.WRENCH
     topic = EXTERNAL_WRENCH_TOPIC if wrench else EXTERNAL_TORQUES_TOPIC
     if topic not in topic_info(bag):
         return None
@@ -207,11 +208,10 @@ def external_truth(bag: str | Path, run: ContactRun, config: EstimatorConfig, st
     joints = list(config["robot.joints"])
     if wrench:
         for m in read_messages(bag, joint_states_topic=None, wrench_topic=topic):
-            assert isinstance(m, WrenchData)  # only the wrench topic is read
-            truth[m.stamp_ns] = m.wrench
+            truth[m.stamp_ns] = cast(WrenchData, m).wrench  # only the wrench topic is read
     else:
         for m in read_messages(bag, joint_states_topic=topic, wrench_topic=None):
-            assert isinstance(m, JointStateData)  # only the JointState topic is read
+            m = cast(JointStateData, m)  # only the JointState topic is read
             index = {n: i for i, n in enumerate(m.names)}
             truth[m.stamp_ns] = np.array([m.effort[index[j]] for j in joints])
     stamps = np.round(run.time_s / _NS).astype(np.int64) + start_stamp_ns
@@ -460,7 +460,8 @@ class ContactReport:
         try:
             kind = doc["output"]
             comps = tuple(doc["components"])
-            output = OutputSpec.wrench() if kind == "wrench" else OutputSpec.joint_torques(comps)
+            output = (OutputSpec.wrench() if OutputKind(kind) == OutputKind.WRENCH
+                      else OutputSpec.joint_torques(comps))
             return cls(output=output, runs={k: GateStats.from_json(v) for k, v in doc["runs"].items()},
                        threshold=float(doc["threshold"]), strong_force=float(doc["strong_force"]),
                        window_s=float(doc["window_s"]),

@@ -20,11 +20,11 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.stream.rate import samples_in
 
 __all__ = [
     "GROUP_UNITS",
-    "OUTPUT_KINDS",
     "WRENCH_COMPONENTS",
     "Group",
     "OutputSpec",
@@ -36,10 +36,6 @@ __all__ = [
 
 #: Component names of a wrench ``[fx, fy, fz, tx, ty, tz]`` (N, N·m), in the order of the output vector.
 WRENCH_COMPONENTS: tuple[str, ...] = ("fx", "fy", "fz", "tx", "ty", "tz")
-
-#: The two output kinds of ``robot.output``.
-OUTPUT_KINDS: tuple[str, ...] = ("wrench", "joint_torques")
-
 
 @dataclass(frozen=True)
 class Group:
@@ -67,34 +63,37 @@ class OutputSpec:
     joints (its RMSE is the mean over joints of each joint's RMSE), and one component per joint.
 
     Attributes:
-        kind: ``"wrench"`` or ``"joint_torques"``.
+        kind: The output kind (a string such as ``robot.output``'s value is converted).
         components: Component names: the wrench axes or the joint names, in output order.
 
     Raises:
         ValueError: On an unknown kind, no component, or a wrench without exactly six components.
     """
 
-    kind: str
+    kind: OutputKind
     components: tuple[str, ...]
 
     def __post_init__(self) -> None:
-        if self.kind not in OUTPUT_KINDS:
-            raise ValueError(f"output kind must be one of {OUTPUT_KINDS}, got {self.kind!r}")
+        try:
+            object.__setattr__(self, "kind", OutputKind(self.kind))
+        except ValueError:
+            raise ValueError(f"output kind must be one of {[k.value for k in OutputKind]}, "
+                             f"got {self.kind!r}") from None
         if not self.components:
             raise ValueError("an output needs at least one component")
-        if self.kind == "wrench" and tuple(self.components) != WRENCH_COMPONENTS:
+        if self.kind == OutputKind.WRENCH and tuple(self.components) != WRENCH_COMPONENTS:
             raise ValueError(f"a wrench has the components {WRENCH_COMPONENTS}, got {self.components}")
         object.__setattr__(self, "components", tuple(self.components))
 
     @classmethod
     def wrench(cls) -> OutputSpec:
         """Return the F/T-sensor wrench output."""
-        return cls("wrench", WRENCH_COMPONENTS)
+        return cls(OutputKind.WRENCH, WRENCH_COMPONENTS)
 
     @classmethod
     def joint_torques(cls, joints: Sequence[str]) -> OutputSpec:
         """Return the joint-torque output of the given joints (N·m each)."""
-        return cls("joint_torques", tuple(joints))
+        return cls(OutputKind.JOINT_TORQUES, tuple(joints))
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> OutputSpec:
@@ -109,8 +108,8 @@ class OutputSpec:
         Raises:
             ValueError: If ``robot.output`` is not a known kind.
         """
-        kind = config["robot.output"]
-        return cls.wrench() if kind == "wrench" else cls.joint_torques(tuple(config["robot.joints"]))
+        kind = OutputKind(config["robot.output"])
+        return cls.wrench() if kind == OutputKind.WRENCH else cls.joint_torques(tuple(config["robot.joints"]))
 
     @property
     def n_outputs(self) -> int:
@@ -120,7 +119,7 @@ class OutputSpec:
     @property
     def groups(self) -> dict[str, Group]:
         """The component groups, by name, in report order."""
-        if self.kind == "wrench":
+        if self.kind == OutputKind.WRENCH:
             return {"force": Group("force", "N", (0, 1, 2), "force"),
                     "torque": Group("torque", "N·m", (3, 4, 5), "torque")}
         return {"torque": Group("torque", "N·m", tuple(range(self.n_outputs)), "joint torque")}

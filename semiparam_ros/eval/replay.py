@@ -22,6 +22,7 @@ import yaml
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import build_model, build_pipeline, build_regressor
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.stream.rate import measured_period_s
 from semiparam_ros.eval.diagnostics import FrozenParametricSP
 from semiparam_ros.eval.horizon import HorizonReport, evaluate_horizons
@@ -110,10 +111,7 @@ def load_samples(path: str | Path, config: EstimatorConfig, topics: Topics | Non
     topics = topics or Topics.from_config(config)
     pipeline = build_pipeline(config)
     kwargs: dict[str, Any] = {"joint_states_topic": topics.joint_states}
-    if config["robot.output"] == "wrench":
-        kwargs["wrench_topic"] = topics.wrench
-    else:
-        kwargs["wrench_topic"] = None
+    kwargs["wrench_topic"] = topics.wrench if config.output_kind == OutputKind.WRENCH else None
     samples: Iterable[Any] = iter_samples(path, pipeline, **kwargs)
     last_stamp = None
     if limit is not None:
@@ -121,7 +119,8 @@ def load_samples(path: str | Path, config: EstimatorConfig, topics: Topics | Non
         samples = list(itertools.islice(samples, max(int(limit), 0)))
         last_stamp = max((s.stamp_ns for s in samples), default=None)
     truth: dict[int, np.ndarray] | None = None
-    if config["robot.output"] == "wrench" and topics.ground_truth and topics.ground_truth in topic_info(path):
+    wrench = config.output_kind == OutputKind.WRENCH
+    if wrench and topics.ground_truth and topics.ground_truth in topic_info(path):
         # samples carry the wrench stamp: the noise-free wrench of the same stamp is the exact target
         truth = {}
         for m in read_messages(path, joint_states_topic=None, wrench_topic=topics.ground_truth):

@@ -37,6 +37,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.stream.messages import (
     JointStateData,
     Sample,
@@ -456,7 +457,7 @@ def iter_samples(
         BagError: As :func:`read_messages`.
     """
     if wrench_topic is _AUTO:
-        wrench_topic = None if pipeline.output == "joint_torques" else _DEFAULT_WRENCH_TOPIC
+        wrench_topic = None if pipeline.output == OutputKind.JOINT_TORQUES else _DEFAULT_WRENCH_TOPIC
     messages = read_messages(path, joint_states_topic=joint_states_topic, wrench_topic=wrench_topic)
     return _iter_samples(messages, pipeline)
 
@@ -465,10 +466,7 @@ def _iter_samples(
     messages: Iterator[JointStateData | WrenchData], pipeline: SamplePipeline
 ) -> Iterator[Sample]:
     for msg in messages:
-        if isinstance(msg, JointStateData):
-            yield from pipeline.add_joint_state(msg)
-        else:
-            yield from pipeline.add_wrench(msg)
+        yield from pipeline.add(msg)
 
 
 def iter_raw(path: str | Path, topics: Iterable[str]) -> Iterator[tuple[str, str, int, bytes]]:

@@ -27,6 +27,7 @@ import numpy as np
 
 from semiparam_ros.atomic import atomic_savefig
 from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.eval.contacts import ContactReport, ContactRun, GroundTruthEpisodes, external_truth
 from semiparam_ros.eval.options import Variant
 from semiparam_ros.report.paper import AdaptationReport, ProtocolReport
@@ -56,7 +57,7 @@ def _label(kind: str) -> str:
 
 def _ylabel(report: ProtocolReport | AdaptationReport, group: str) -> str:
     g = report.output.groups[group]
-    mean = " (mean over joints)" if report.output.kind == "joint_torques" else ""
+    mean = " (mean over joints)" if report.output.kind == OutputKind.JOINT_TORQUES else ""
     return f"{g.label} RMSE{mean} [{g.unit}]"
 
 
@@ -110,7 +111,7 @@ def plot_protocol(report: ProtocolReport, path: str | Path, *, truth: bool = Fal
     axes[0, 0].legend(loc="upper right")
     window = report.protocol.get("window_s", float("nan"))
     axes[-1, 0].set_xlabel("time from split start [s] (log scale)")
-    target = "wrench" if report.output.kind == "wrench" else "joint torques"
+    target = report.output.kind.label
     fig.suptitle(title or (f"windowed RMSE ({window:.3g} s window), mean ± std over {report.splits} splits"
                            + (f" — vs noise-free {target}" if truth else "")), fontsize=10)
     fig.tight_layout()

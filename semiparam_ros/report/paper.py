@@ -10,7 +10,7 @@ comparisons (:class:`~semiparam_ros.eval.compare.Comparison`). Nothing downstrea
 JSON (:meth:`ProtocolReport.to_json`; :meth:`ProtocolReport.from_json` reads it back) keeps these fields
 (stable across releases)::
 
-    {"output": "wrench" | "joint_torques", "components": [...],
+    {"output": kind, "components": [...],   # kind: a robot.output value (OutputKind)
      "models": {"P": {"force_rmse": f, "torque_rmse": t, "force_rmse_first_3s": f0,
                       "torque_rmse_first_3s": t0, "force_rmse_std": ..., "force_rmse_splits": [...], ...,
                       "components": {"fx": {"rmse": ..., "rmse_first": ..., "nmse": ...}, ...},
@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.atomic import atomic_write_text
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.eval.compare import DEFAULT_PAIRS, Comparison, compare_pair
 from semiparam_ros.eval.metrics import OutputSpec, group_rmse
 from semiparam_ros.eval.options import DEFAULT_FIRST_S
@@ -394,7 +395,7 @@ def _model_json(m: ModelStats, first_s: float, output: OutputSpec) -> dict[str, 
         out["components"] = {
             k: {"rmse": c.rmse, "rmse_first": c.rmse_first, "nmse": c.nmse} for k, c in m.components.items()
         }
-        if output.kind == "joint_torques":
+        if output.kind == OutputKind.JOINT_TORQUES:
             out["rmse_mean"] = m.rmse_mean
             out["nmse_mean"] = m.nmse_mean
     if m.ground_truth is not None:

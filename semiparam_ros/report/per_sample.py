@@ -109,7 +109,7 @@ def per_sample_figure(result: ProtocolResult, path: str | Path, *, title: str = 
     time_s = (stamps - stamps[0]) * 1e-9
     fig, axes = plt.subplots(t, 1, figsize=(10, 1.6 * t + 1), sharex=True, squeeze=False)
     measured = result.targets.reshape(-1, t)
-    unit = "N·m" if result.output.kind == "joint_torques" else "N, N·m"
+    unit = result.output.kind.unit
     for k, comp in enumerate(comps):
         ax = axes[k, 0]
         ax.plot(time_s, measured[:, k], color="0.3", lw=0.8, label="measured")

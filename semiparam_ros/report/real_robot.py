@@ -36,6 +36,7 @@ import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.baselines import (
     Persistence,
@@ -292,7 +293,7 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
     Raises:
         ConfigurationError: If the output is not joint torques or a friction joint is not configured.
     """
-    if config["robot.output"] != "joint_torques":
+    if config.output_kind != OutputKind.JOINT_TORQUES:
         raise ConfigurationError("compare_on_logs needs robot.output: joint_torques")
     joints = list(config["robot.joints"])
     unknown = [j for j in friction_joints if j not in joints]

@@ -15,6 +15,7 @@ from typing import Any
 
 from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.config import EstimatorConfig, load_config
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.eval.contacts import contact_report, run_contacts
 from semiparam_ros.eval.horizon import horizon_figure, horizon_markdown
 from semiparam_ros.eval.options import DEFAULT_WINDOW_S, ProtocolOptions
@@ -91,7 +92,7 @@ def evaluation_text(report: Any) -> str:
             + ", ".join(f"{g} {v:.3g} {report.output.groups[g].unit}" for g, v in report.noise.items())
             + "\n"
         )
-    per = "joint" if report.output.kind == "joint_torques" else "axis"
+    per = "joint" if report.output.kind == OutputKind.JOINT_TORQUES else "axis"
     text += f"\nPer {per}, at regime:\n\n" + components_table(report)
     if report.checks:
         text += "\n" + checks_table(report.checks, report.first_s)

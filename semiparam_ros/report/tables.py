@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.eval.compare import Comparison, format_p
 from semiparam_ros.eval.contacts import ContactReport
 from semiparam_ros.eval.metrics import GROUP_UNITS
@@ -38,7 +39,7 @@ def fmt(value: float | None, std: float | None = None) -> str:
 
 def _label(report: ProtocolReport, group: str) -> tuple[str, str]:
     g = report.output.groups[group]
-    extra = " (mean over joints)" if report.output.kind == "joint_torques" else ""
+    extra = " (mean over joints)" if report.output.kind == OutputKind.JOINT_TORQUES else ""
     return f"{g.label} RMSE{extra}", g.unit
 
 
@@ -91,7 +92,7 @@ def components_table(report: ProtocolReport, truth: bool = False) -> str:
         *(f"{n} RMSE [{u}]" for n, u in zip(names, units, strict=True)),
         *(f"{n} nMSE" for n in names),
     ]
-    joints = report.output.kind == "joint_torques"
+    joints = report.output.kind == OutputKind.JOINT_TORQUES
     if joints:
         header += ["mean RMSE [N·m]", "mean nMSE"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]

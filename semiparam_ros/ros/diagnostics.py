@@ -74,8 +74,11 @@ from collections.abc import Mapping
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from semiparam_ros.core.estimator.build import rmse_window_samples
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.kinds import InputKind, OutputKind
 from semiparam_ros.core.stream.gate import Verdict
-from semiparam_ros.service.learning_loop import LearningLoop
+from semiparam_ros.service.learning_loop import LearningLoop, Stepped
 
 __all__ = ["NodeStatistics", "diagnostic_array"]
 
@@ -130,13 +133,17 @@ class NodeStatistics:
     """Thread-safe counters and windows of the estimator node.
 
     Args:
-        output: ``"wrench"`` (6 outputs: force N, torque N·m) or ``"joint_torques"`` (n outputs, N·m).
+        output: The output kind: a wrench (6 outputs: force N, torque N·m) or joint torques (n, N·m).
         n_outputs: Number of outputs.
         rmse_window: Samples in the running RMSE window.
+        rmse_window_final: Whether that window stays, or is set again once the sample rate is known
+            (:meth:`add_step`).
     """
 
-    def __init__(self, output: str, n_outputs: int, rmse_window: int) -> None:
+    def __init__(self, output: OutputKind, n_outputs: int, rmse_window: int, *,
+                 rmse_window_final: bool = True) -> None:
         self._lock = threading.Lock()
+        self._rmse_window_final = rmse_window_final
         self.output = output
         self._rmse_total = _RingRMSE(rmse_window, n_outputs)
         self._rmse_param = _RingRMSE(rmse_window, n_outputs)
@@ -177,10 +184,10 @@ class NodeStatistics:
         self._processed = 0
 
     # ---------------------------------------------------------------- updates (hot path, cheap)
-    def count_input(self, kind: str) -> None:
-        """Count one received input message (``"joint_states"`` or ``"wrench"``)."""
+    def count_input(self, kind: InputKind) -> None:
+        """Count one received input message of a stream."""
         with self._lock:
-            if kind == "joint_states":
+            if kind == InputKind.JOINT_STATES:
                 self._n_js += 1
                 self.joint_states_received += 1
             else:
@@ -225,6 +232,26 @@ class NodeStatistics:
             self._rmse_total.add(y, total)
             self._rmse_param.add(y, parametric)
 
+    def add_step(self, stepped: Stepped, estimator: OnlineEstimator, t_recv: float) -> None:
+        """Record what one input produced: the pipeline's new drops and every published sample.
+
+        The first time the estimator knows its sample period, the RMSE window (until then in samples
+        of the configured default) becomes ``diagnostics.rmse_window``'s length at that rate.
+
+        Args:
+            stepped: What the learning loop returned for the input.
+            estimator: The estimator that stepped it (its rate and configuration).
+            t_recv: When the input was received (``time.perf_counter()`` [s]).
+        """
+        self.count_pipeline_drops(stepped.new_drops)
+        if not self._rmse_window_final and estimator.sample_period_s is not None:
+            self.set_rmse_window(rmse_window_samples(estimator.config, estimator.sample_period_s))
+            self._rmse_window_final = True
+        for result in stepped.results:
+            pred = result.prediction
+            self.add_sample(result.latency_s, time.perf_counter() - t_recv, result.sample.y, pred.total,
+                            pred.parametric)
+
     def add_learning_cpu(self, seconds: float, n_messages: int = 1) -> None:
         """Add the CPU time spent running the estimator on ``n_messages`` queued messages [s]."""
         with self._lock:
@@ -268,7 +295,7 @@ class NodeStatistics:
                 checkpoint_errors=self.checkpoint_errors,
                 checkpoint_failed=self.last_checkpoint_failed,
             )
-            if self.output == "wrench":
+            if self.output == OutputKind.WRENCH:
                 snap["rmse_force_N"] = self._rmse_total.rmse(slice(0, 3))
                 snap["rmse_torque_Nm"] = self._rmse_total.rmse(slice(3, 6))
                 snap["rmse_parametric_force_N"] = self._rmse_param.rmse(slice(0, 3))

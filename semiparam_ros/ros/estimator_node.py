@@ -9,89 +9,60 @@ estimator offline replay uses too, so a bag gives the same numbers either way),
 and :class:`~semiparam_ros.service.checkpoint_writer.CheckpointWriter` (the checkpoint thread). This module
 converts messages, hands them on, and publishes what comes back.
 
-One executor thread runs everything that touches the estimator. A subscription callback converts its
-message (taken serialised), queues it, takes what else already waits on both subscriptions, and runs the
-loop at once (predict, publish, then learn): at most ``_BATCH`` inputs per turn, a catch-up timer for a
-backlog, an idle timer for the deferred update. Bad input is dropped and counted by reason in
-``/diagnostics``; any other exception in a callback is a programming error: logged FATAL, it propagates
-out of ``spin`` and ends the process.
+The parts are assembled by :func:`~semiparam_ros.service.assembly.assemble`. One executor thread runs
+everything that touches the estimator. A subscription callback converts its message (taken serialised),
+queues it, takes what else already waits on both subscriptions, and drains the loop at once
+(:meth:`~semiparam_ros.service.learning_loop.LearningLoop.drain`: predict, publish, then learn): at most
+``_BATCH`` inputs per turn, a catch-up timer for a backlog, an idle timer for the deferred update. Bad
+input is dropped and counted by reason in ``/diagnostics``; any other exception in a callback is a
+programming error: logged FATAL, it propagates out of ``spin`` and ends the process.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
-from trajectory_msgs.msg import JointTrajectory
 
-from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator.build import build_regressor, rmse_window_samples
+from semiparam_ros.core.config import EstimatorConfig, runtime_targets
+from semiparam_ros.core.estimator.build import rmse_window_samples
 from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.core.kinds import InputKind, OutputKind
 from semiparam_ros.core.rigid_body.urdf import TOPIC_SCHEME
-from semiparam_ros.core.stream.messages import WrenchData
-from semiparam_ros.errors import (
-    CheckpointError,
-    ConfigurationError,
-    DescriptionTimeoutError,
-    RejectedSampleError,
-    StartupError,
-)
-from semiparam_ros.ros import conversions as cv
+from semiparam_ros.errors import DescriptionTimeoutError, StartupError
+from semiparam_ros.ros.callbacks import quiet_at_shutdown
 from semiparam_ros.ros.description import wait_for_description
 from semiparam_ros.ros.diagnostics import NodeStatistics, diagnostic_array, estimator_statistics
-from semiparam_ros.ros.inputs import GONE, INPUT_QOS, InputStreams, ThrottledWarnings, take
+from semiparam_ros.ros.feedforward_endpoints import FeedForwardEndpoints
+from semiparam_ros.ros.inputs import INPUT_QOS, InputStreams, ThrottledWarnings
 from semiparam_ros.ros.outputs import PARAMETERS_QOS, Outputs
 from semiparam_ros.ros.parameter_files import parameter_files, unmatched_files_message
 from semiparam_ros.ros.parameters import ParameterError, declare_parameters, make_parameter_validator
 from semiparam_ros.ros.save_service import SaveService
-from semiparam_ros.service.checkpoint_writer import CheckpointWriter, warm_start
-from semiparam_ros.service.feedforward import DesiredState, FeedForward
-from semiparam_ros.service.learning_loop import Input, LearningLoop, warm_up_kernels
+from semiparam_ros.service.assembly import assemble, checkpoint_path
+from semiparam_ros.service.checkpoint_writer import CheckpointWriter
+from semiparam_ros.service.learning_loop import Input, Stepped
 from semiparam_ros.service.model_service import ModelService
 
 __all__ = ["INPUT_QOS", "PARAMETERS_QOS", "EstimatorNode", "StartupError"]
 
-#: Desired states: only the latest matters; best effort accepts reliable and best-effort publishers.
-_DESIRED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
-                          durability=DurabilityPolicy.VOLATILE)
-#: Trajectories to fill with efforts: each one counts (reliable, a few queued).
-_TRAJECTORY_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                             reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 _LOG_THROTTLE_S = 5.0
 _BATCH = 50  # queued messages processed per turn of the executor (≈ 10–20 ms of learning at most)
 _SHUTDOWN_BUDGET_S = 10.0  # time allowed to learn the queue at shutdown (1000 messages take ≈ 0.2 s)
 _CATCH_UP_PERIOD_S = 1e-4  # the backlog timer fires at every executor turn while armed
 _SAVE_TIMEOUT_S = 5.0  # ~/save waits this long for the checkpoint thread, then replies failure
 
-_Callback = TypeVar("_Callback", bound=Callable[..., Any])
 _NO_URDF = ("robot.urdf is not set: give your robot's URDF (a file path, package://…, "
             "example-robot-data://… or topic:/robot_description) in a parameter file keyed '/**:', as "
             "config/template.yaml (the paper's iCub: config/icub_right_arm.yaml)")
-
-
-def _quiet_at_shutdown(method: _Callback) -> _Callback:
-    """Let a callback the shutdown interrupted (the context invalidated under a publish) end quietly."""
-
-    @functools.wraps(method)
-    def guarded(self: EstimatorNode, *args: Any) -> Any:
-        try:
-            return method(self, *args)
-        except Exception:
-            if self.context.ok():
-                raise
-            return None
-
-    return guarded  # type: ignore[return-value]
 
 
 class EstimatorNode(Node):
@@ -142,50 +113,34 @@ class EstimatorNode(Node):
     def _build(self, urdf_xml: str | None = None) -> None:
         """Build the loop, its services, entities and threads (a lifecycle node: on configure)."""
         cfg = self.config
-        self._output, self._joints, self._frame_id = cfg["robot.output"], tuple(cfg["robot.joints"]), cfg[
-            "robot.frame_id"]
-        self._ckpt_path = Path(cfg["checkpoint.path"]).expanduser() if cfg["checkpoint.path"] else None
+        output, self._joints = cfg.output_kind, tuple(cfg["robot.joints"])
+        self._frame_id = cfg["robot.frame_id"]
+        self._ckpt_path = checkpoint_path(cfg)
         spec = str(cfg["robot.urdf"])
         try:
             if urdf_xml is None and spec.startswith(TOPIC_SCHEME):
                 urdf_xml = wait_for_description(self, spec[len(TOPIC_SCHEME):],
                                                 float(cfg["robot.description_timeout"]))
-            regressor = build_regressor(cfg, urdf_xml, source=f"published on {spec}")
-            est = OnlineEstimator(cfg, regressor=regressor)
         except DescriptionTimeoutError as err:
             raise StartupError(str(err)) from err
-        except (ConfigurationError, OSError) as err:
-            raise StartupError(f"cannot build the estimator: {err}") from err
-        warm_up_kernels(cfg, est)
-        try:
-            for note in warm_start(est, self._ckpt_path, load=bool(cfg["checkpoint.load_on_start"])):
-                self.get_logger().info(note)
-        except CheckpointError as err:
-            raise StartupError(str(err)) from err
-        est.learning_enabled = bool(cfg["learning_enabled"])
-        self.loop = LearningLoop(est, queue_size=cfg["queue_size"], max_delay_s=cfg["overload.max_delay"])
-        try:
-            self._service = ModelService(self.loop, cfg)
-        except ConfigurationError as err:
-            raise StartupError(f"invalid parameter: {err}") from err
-        self._last_wrench_frame = self._frame_id
+        parts = assemble(cfg, urdf_xml, source=f"published on {spec}", checkpoint=self._ckpt_path)
+        for note in parts.notes:
+            self.get_logger().info(note)
+        self.loop, self._service = parts.loop, parts.model
+        est = self.loop.estimator
         self._published_version = -1
-        self._stats = NodeStatistics(self._output, 6 if self._output == "wrench" else len(self._joints),
-                                     rmse_window_samples(cfg))  # in samples until the rate is measured
-        self._rmse_window_final = bool(cfg["diagnostics.rmse_window"])
+        self._stats = NodeStatistics(output, cfg.n_outputs, rmse_window_samples(cfg),
+                                     rmse_window_final=bool(cfg["diagnostics.rmse_window"]))
         self._warn = ThrottledWarnings(self.get_logger(), _LOG_THROTTLE_S)
         projection = self._service.projection
-        self.outputs = Outputs(self, () if self._output == "wrench" else self._joints,
+        self.outputs = Outputs(self, () if output == OutputKind.WRENCH else self._joints,
                                n_links=0 if projection is None else est.regressor.n_bodies)
-        kinds = ("joint_states", "wrench")
-        self.inputs = InputStreams(self, {k: cfg[f"topics.{k}"] for k in kinds},
-                                   {k: functools.partial(self._on_input, k) for k in kinds},
+        self.inputs = InputStreams(self, {k: cfg[k.topic_parameter] for k in InputKind},
+                                   {k: functools.partial(self._on_input, k) for k in InputKind},
                                    loop=self.loop, stats=self._stats, warn=self._warn,
                                    n_joints=len(self._joints))
-        self._desired_sub = None if self._output == "wrench" else self.create_subscription(
-            JointTrajectory, "~/desired_state", self._on_desired_state, _DESIRED_QOS)
-        if self._output != "wrench":
-            self.create_subscription(JointTrajectory, "~/trajectory", self._on_trajectory, _TRAJECTORY_QOS)
+        self.feedforward = None if self._service.feedforward is None else FeedForwardEndpoints(
+            self, self._service, self.outputs, self._warn, lambda: self._active)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(Trigger, "~/payload/tare", self._on_payload_tare)
         self.add_on_set_parameters_callback(make_parameter_validator(lambda: self.config))
@@ -194,7 +149,7 @@ class EstimatorNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._diag_period, self._last_diag = float(cfg["diagnostics.period"]), -math.inf
         self.create_timer(self._diag_period, self._on_diagnostics_timer, clock=steady)
-        if self._service.projection is not None:
+        if projection is not None:
             self.create_service(Trigger, "~/export_urdf", self._on_export_urdf)
             submit = self._service.submit_projection
             submit()
@@ -213,35 +168,34 @@ class EstimatorNode(Node):
         self._checkpoints.start()
         self._save = SaveService(self, self._on_save, join_timeout_s=2 * _SAVE_TIMEOUT_S)
         self._publish_parameters(force=True)
-        inputs = [self.resolve_topic_name(cfg[k]) for k in ("topics.joint_states", "topics.wrench")]
+        inputs = [self.resolve_topic_name(cfg[k.topic_parameter]) for k in InputKind]
         self.get_logger().info(
-            f"estimating {self._output} of joints {list(self._joints)}: {est.regressor.n_base} base "
+            f"estimating {output} of joints {list(self._joints)}: {est.regressor.n_base} base "
             f"parameters, D = {cfg['nonparametric.n_features']} random features; learning "
             f"{'enabled' if est.learning_enabled else 'disabled'}; inputs {', '.join(inputs)}")
 
     # ================================================================== inputs (executor thread)
-    @_quiet_at_shutdown
-    def _on_input(self, kind: str, msg: bytes) -> None:
+    @quiet_at_shutdown
+    def _on_input(self, kind: InputKind, msg: bytes) -> None:
         if self._active:  # an inactive lifecycle node takes no input
             self.inputs.intake(kind, msg)
             self.inputs.drain(kind)
             self._process_queued()
 
     # ================================================================== learning (executor thread)
-    @_quiet_at_shutdown
+    @quiet_at_shutdown
     def _process_queued(self) -> None:
         """Run the loop on queued input: at most a batch, so inputs, services and timers get turns."""
-        queue = self.loop.queue
-        if queue:
+        if self.loop.queue:
             cpu = time.thread_time()  # a system call (≈ 1 µs): once per batch, not per message
-            n = min(len(queue), _BATCH)
-            for _ in range(n):
-                if self._desired_sub is not None:
-                    self._serve_waiting_desired_state()  # a controller waits: it goes before learning
-                kind, data, t_recv = queue.popleft()
-                self._process(kind, data, t_recv, skip_learning=self.loop.late(t_recv))
+            serve = None if self.feedforward is None else self.feedforward.serve_waiting
+            try:  # a controller waiting goes first (serve), then one input at a time
+                n = self.loop.drain(_BATCH, before_each=serve, on_step=self._publish_step)
+            except Exception as err:  # bad input never gets here (dropped and counted): this is a bug
+                self.get_logger().fatal(f"programming error in the estimator: {err!r}")
+                raise
             self._stats.add_learning_cpu(time.thread_time() - cpu, n)
-        if queue:
+        if self.loop.queue:
             if self._catch_up.is_canceled():
                 self._catch_up.reset()
         else:
@@ -250,7 +204,7 @@ class EstimatorNode(Node):
             if self.loop.max_delay_s > 0.0 and self._idle.is_canceled():
                 self._idle.reset()
 
-    @_quiet_at_shutdown
+    @quiet_at_shutdown
     def _on_idle(self) -> None:
         """Apply the learners' deferred update while no input waits (one executor turn after learning)."""
         self._idle.cancel()
@@ -258,29 +212,16 @@ class EstimatorNode(Node):
         if self.loop.apply_pending():
             self._stats.add_learning_cpu(time.thread_time() - cpu, 0)
 
-    def _process(self, kind: str, data: Input, t_recv: float, *, publish: bool = True,
-                 skip_learning: bool = False) -> None:
-        try:
-            stepped = self.loop.step(data, skip_learning=skip_learning)
-        except Exception as err:  # bad input never gets here (dropped and counted): this is a bug
-            self.get_logger().fatal(f"programming error in the estimator on a {kind} message: {err!r}")
-            raise
+    def _publish_step(self, data: Input, stepped: Stepped, t_recv: float) -> None:
+        """Count and publish what one input produced (bad input was dropped and counted by the loop)."""
         est = self.loop.estimator
-        if not self._frame_id and isinstance(data, WrenchData):
-            self._last_wrench_frame = data.frame_id
+        gravity = self._service.gravity if self._service is not None else None
+        frame = self._frame_id or est.pipeline.last_frame_id
+        for result in stepped.results:
+            self.outputs.publish_sample(result, frame, gravity)  # a failure: a bug too
+        self._stats.add_step(stepped, est, t_recv)
         if stepped.new_drops:
-            self._stats.count_pipeline_drops(stepped.new_drops)
             self._warn("pipeline drops", lambda: f"dropped input messages: {est.drops}")
-        if not self._rmse_window_final and est.sample_period_s is not None:
-            self._stats.set_rmse_window(rmse_window_samples(est.config, est.sample_period_s))
-            self._rmse_window_final = True
-        if publish:
-            gravity = self._service.gravity if self._service is not None else None
-            for result in stepped.results:
-                self.outputs.publish_sample(result, self._last_wrench_frame, gravity)  # a failure: a bug too
-                pred = result.prediction
-                self._stats.add_sample(result.latency_s, time.perf_counter() - t_recv, result.sample.y,
-                                       pred.total, pred.parametric)
 
     # ================================================================== services, parameters, timers
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -308,24 +249,18 @@ class EstimatorNode(Node):
         return response
 
     def _on_parameters_set(self, params: list[Parameter]) -> None:
+        """Hand changed run-time parameters to what takes them (the table's ``runtime`` targets)."""
         known = {p.name: p.value for p in params if p.name in self.config.values}
         if not known:
             return
         self.config = self.config.with_overrides(known)
-        est = self.loop.estimator
-        with self.loop.lock:
-            if "learning_enabled" in known:
-                est.learning_enabled = bool(known["learning_enabled"])
-            if any(name.startswith(("gate.", "uncertainty.")) for name in known):
-                est.apply_runtime_parameters(self.config)
-        if "learning_enabled" in known:
-            self.get_logger().info(f"learning {'enabled' if known['learning_enabled'] else 'disabled'}")
-        if "checkpoint.period" in known and self._checkpoints is not None:
-            self._checkpoints.period_s = float(known["checkpoint.period"])
-        if "overload.max_delay" in known:
-            self.loop.max_delay_s = float(known["overload.max_delay"])
+        targets = runtime_targets(known)
+        self.loop.apply_runtime_parameters(self.config, targets)
+        if "checkpoints" in targets and self._checkpoints is not None:
+            self._checkpoints.apply_runtime_parameters(self.config)
+        self.get_logger().info("parameters set: " + ", ".join(f"{k} = {v!r}" for k, v in known.items()))
 
-    @_quiet_at_shutdown
+    @quiet_at_shutdown
     def _on_diagnostics_timer(self) -> None:
         # a timer that fell behind fires again at once: that would close a period of a few µs with no
         # samples (NaN latencies, a spurious "no input" WARN), so a short period goes on into the next
@@ -372,68 +307,12 @@ class EstimatorNode(Node):
                                     throttle_duration_sec=_LOG_THROTTLE_S)
 
     # ================================================================== feed-forward (executor thread)
-    @_quiet_at_shutdown
+    @quiet_at_shutdown
     def _refresh_feedforward(self) -> None:
         """Serve a fresh copy of the model; publish the link inertias of a new consistent solution."""
         estimate = self._service.refresh()  # type: ignore[union-attr]
         if estimate is not None:
             self.outputs.publish_links(estimate, self.get_clock().now().nanoseconds)
-
-    def _serve_waiting_desired_state(self) -> None:
-        """Answer a desired state already waiting in DDS before the next queued sample is learned."""
-        taken = take(self._desired_sub)
-        if taken is not None and taken is not GONE:
-            self._on_desired_state(taken)
-
-    def _desired(self, msg: JointTrajectory, counts: dict[str, int], what: str
-                 ) -> tuple[ModelService, FeedForward, DesiredState] | None:
-        """Convert a controller's trajectory (None while inactive, or counted and warned when refused)."""
-        service = self._service
-        assert service is not None and service.feedforward is not None  # joint-torque mode only
-        ff = service.feedforward
-        if not self._active:
-            return None
-        try:
-            return service, ff, cv.desired_state_from_msg(msg)
-        except RejectedSampleError as err:
-            counts["drops.non_finite"] += 1
-            ff.last_error = text = str(err)
-            self._warn(what, lambda: f"{what} dropped: {text}")
-            return None
-
-    @_quiet_at_shutdown
-    def _on_desired_state(self, msg: JointTrajectory) -> None:
-        """Answer a desired state at once with the model's torques (see core.feedforward)."""
-        assert self._service is not None and self._service.feedforward is not None  # joint-torque mode only
-        converted = self._desired(msg, self._service.feedforward.counts, "desired state")
-        if converted is None:
-            return
-        service, ff, desired = converted
-        command = service.answer(desired, self.get_clock().now().nanoseconds)
-        if command is None:
-            return self._warn("desired state", lambda: f"desired state dropped: {ff.last_error}")
-        self.outputs.publish_feedforward(command, ff.joints)
-        if desired.stamp_ns > 0:  # stamped by the controller: its age when answered
-            service.record_age(1e-6 * (self.get_clock().now().nanoseconds - desired.stamp_ns))
-        if command.reason is not None:
-            self._warn(f"feedforward {command.reason}", lambda: ff.fallback_message(command.reason))
-
-    @_quiet_at_shutdown
-    def _on_trajectory(self, msg: JointTrajectory) -> None:
-        """Publish the trajectory with every point's effort from the served model (core.feedforward)."""
-        assert self._service is not None and self._service.feedforward is not None  # joint-torque mode only
-        converted = self._desired(msg, self._service.feedforward.trajectory_counts, "trajectory")
-        if converted is None:
-            return
-        service, ff, desired = converted
-        filled = service.trajectory(desired)
-        if filled is None:
-            return self._warn("trajectory", lambda: f"trajectory dropped: {ff.last_error}")
-        self.outputs.trajectory.publish(cv.fill_trajectory_effort(msg, filled.effort))
-        if filled.fallback.any():
-            n, m = int(filled.fallback.sum()), len(filled.fallback)
-            self._warn("trajectory fallback", lambda: f"{n} of {m} trajectory points got the rigid-body part "
-                                                      "(model not ready or σ above feedforward.max_std)")
 
     # ================================================================== shutdown
     def _stop_threads(self, *, save: bool) -> None:
@@ -476,20 +355,3 @@ class EstimatorNode(Node):
     def estimator(self) -> OnlineEstimator:
         """The estimator (driven by the executor thread: hold no reference across samples)."""
         return self.loop.estimator
-
-    def wait_idle(self, timeout: float = 5.0, poll: Callable[[], None] | None = None) -> bool:
-        """Wait until the input queue is empty (for in-process tests); returns whether it emptied."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if not self.loop.queue:
-                return True
-            if poll is not None:
-                poll()
-            time.sleep(0.005)
-        return False
-
-
-if __name__ == "__main__":  # the command line moved to ros/run (`ros2 run semiparam_ros estimator` unchanged)
-    print("semiparam_ros.ros.estimator_node is a module now: run `python -m semiparam_ros.ros.run` (or "
-          "`ros2 run semiparam_ros estimator`) with the same arguments", file=sys.stderr)
-    sys.exit(2)

@@ -20,12 +20,16 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
+from semiparam_ros.core.kinds import InputKind
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.ros import conversions as cv
 from semiparam_ros.ros.diagnostics import NodeStatistics
 from semiparam_ros.service.learning_loop import LearningLoop
 
 __all__ = ["GONE", "INPUT_QOS", "MAX_DRAIN", "InputStreams", "ThrottledWarnings", "take"]
+
+#: The ROS message type of each input stream.
+_MESSAGE_TYPES: dict[InputKind, Any] = {InputKind.JOINT_STATES: JointState, InputKind.WRENCH: WrenchStamped}
 
 #: Sensor-data QoS of the inputs (best effort, volatile), with a deeper history than the default 5.
 INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -79,7 +83,7 @@ class InputStreams:
 
     Args:
         node: The node subscribing.
-        topics: Topic per input kind (``joint_states``, ``wrench``).
+        topics: Topic per input kind.
         callbacks: The subscription callback per kind (the node's: it decides when to run the loop).
         loop: The learning loop the converted inputs are queued in.
         stats: Counts inputs and drops.
@@ -87,13 +91,14 @@ class InputStreams:
         n_joints: Joints of the robot (a JointState listing far more names is refused undecoded).
     """
 
-    def __init__(self, node: Node, topics: dict[str, str], callbacks: dict[str, Callable[[bytes], None]], *,
+    def __init__(self, node: Node, topics: dict[InputKind, str],
+                 callbacks: dict[InputKind, Callable[[bytes], None]], *,
                  loop: LearningLoop, stats: NodeStatistics, warn: ThrottledWarnings, n_joints: int) -> None:
         self._node, self._loop, self._stats, self._warn = node, loop, stats, warn
         self._max_names = max(_MIN_NAME_BOUND, 16 * n_joints)
         overrides = QoSOverridingOptions.with_default_policies()
-        self.subscriptions: dict[str, Any] = {}
-        for kind, msg_type in (("joint_states", JointState), ("wrench", WrenchStamped)):
+        self.subscriptions: dict[InputKind, Any] = {}
+        for kind, msg_type in _MESSAGE_TYPES.items():
             topic = topics[kind]
             events = SubscriptionEventCallbacks(incompatible_qos=self._incompatible_qos_logger(topic),
                                                 message_lost=self.lost_counter(topic),
@@ -101,19 +106,19 @@ class InputStreams:
             self.subscriptions[kind] = node.create_subscription(
                 msg_type, topic, callbacks[kind], INPUT_QOS, qos_overriding_options=overrides,
                 event_callbacks=events, raw=True)
-        js, wr = (("joint_states", self.subscriptions["joint_states"]),
-                  ("wrench", self.subscriptions["wrench"]))
-        self._order = {"joint_states": (wr, js), "wrench": (js, wr)}
+        js, wr = ((k, self.subscriptions[k]) for k in (InputKind.JOINT_STATES, InputKind.WRENCH))
+        self._order = {InputKind.JOINT_STATES: (wr, js), InputKind.WRENCH: (js, wr)}
 
-    def intake(self, kind: str, msg: bytes | Any) -> None:
+    def intake(self, kind: InputKind, msg: bytes | Any) -> None:
         """Convert one input (serialised, as the subscriptions deliver it, or a message object); queue it."""
         self._stats.count_input(kind)
         try:
             if isinstance(msg, bytes):
-                data = (cv.joint_state_from_cdr(msg, self._max_names) if kind == "joint_states"
+                data = (cv.joint_state_from_cdr(msg, self._max_names) if kind == InputKind.JOINT_STATES
                         else cv.wrench_from_cdr(msg))
             else:
-                data = cv.joint_state_from_msg(msg) if kind == "joint_states" else cv.wrench_from_msg(msg)
+                data = (cv.joint_state_from_msg(msg) if kind == InputKind.JOINT_STATES
+                        else cv.wrench_from_msg(msg))
         except RejectedSampleError as err:  # a message the conversion refuses: a counted drop
             self._stats.count_drop("conversion_error")
             text = str(err)
@@ -124,7 +129,7 @@ class InputStreams:
             self._warn("queue_full",
                        "input queue full: dropping the oldest message (learning cannot keep up)")
 
-    def drain(self, kind: str) -> None:
+    def drain(self, kind: InputKind) -> None:
         """Take the messages already waiting on both subscriptions without another executor wait.
 
         The executor takes one message per subscription per wait, and building its wait set costs far more

@@ -31,6 +31,7 @@ from semiparam_ros.core.checkpoint import atomic_save_npz
 from semiparam_ros.errors import CheckpointError
 
 if TYPE_CHECKING:
+    from semiparam_ros.core.config import EstimatorConfig
     from semiparam_ros.core.estimator.online import OnlineEstimator
 
 __all__ = ["CheckpointWriter", "Snapshot", "warm_start"]
@@ -81,6 +82,10 @@ class CheckpointWriter:
     def period_s(self, value: float) -> None:
         self._period_s = float(value)
         self._event.set()
+
+    def apply_runtime_parameters(self, config: EstimatorConfig) -> None:
+        """Take the run-time parameters of the ``checkpoints`` target (``checkpoint.period`` [s])."""
+        self.period_s = float(config["checkpoint.period"])
 
     def start(self) -> None:
         """Start the writer thread (a daemon: it never keeps the process alive)."""

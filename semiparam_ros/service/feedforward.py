@@ -23,7 +23,8 @@ Example:
     >>> from semiparam_ros.core.config import EstimatorConfig
     >>> from semiparam_ros.core.estimator.online import OnlineEstimator
     >>> from semiparam_ros.service.serving import LearnedModel
-    >>> est = OnlineEstimator(EstimatorConfig.defaults().with_overrides({"robot.output": "joint_torques"}))
+    >>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": OutputKind.JOINT_TORQUES})
+    >>> est = OnlineEstimator(cfg)
     >>> ff = FeedForward(LearnedModel(est))
     >>> names = ff.joints[::-1]  # any order: the names say which value is which
     >>> cmd = ff.compute(DesiredState(0, names, (TrajectoryPoint(0, np.zeros(4)),)), now_ns=0)
@@ -43,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.validation import MAX_ABS_INPUT
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 from semiparam_ros.service.serving import LearnedModel
@@ -195,7 +197,7 @@ class FeedForward:
 
     def __init__(self, model: LearnedModel, *, joints: Sequence[str] | None = None,
                  max_std: float = 0.0) -> None:
-        if model.output != "joint_torques":
+        if model.output != OutputKind.JOINT_TORQUES:
             raise ConfigurationError("feed-forward needs robot.output: joint_torques (a wrench model "
                                      "predicts a sensor reading, not actuator torques)")
         self.model = model
@@ -227,6 +229,10 @@ class FeedForward:
         why = ("the model is not ready (residual warm-up)" if reason == "not_ready"
                else f"its std exceeds feedforward.max_std = {self.max_std:g} N·m")
         return "feed-forward falls back to the rigid-body part: " + why
+
+    def reject(self, message: str, *, trajectory: bool) -> None:
+        """Count a controller message that could not be converted (``drops.non_finite``) and say why."""
+        (self._trajectory_drop if trajectory else self._drop)("non_finite", message)
 
     def _drop(self, reason: str, message: str) -> None:
         self.counts[f"drops.{reason}"] += 1
@@ -352,7 +358,7 @@ class FeedForward:
         >>> from semiparam_ros.core.config import EstimatorConfig
         >>> from semiparam_ros.core.estimator.online import OnlineEstimator
         >>> from semiparam_ros.service.serving import LearnedModel
-        >>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": "joint_torques"})
+        >>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": OutputKind.JOINT_TORQUES})
         >>> est = OnlineEstimator(cfg)
         >>> ff = FeedForward(LearnedModel(est))
         >>> points = tuple(TrajectoryPoint(k * 10**8, np.full(4, 0.1 * k), np.zeros(4)) for k in range(3))

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
-from semiparam_ros.core.stream.messages import JointStateData
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.io.bags import absolute_topic, read_messages, recovery_notes, topic_info
 
 __all__ = ["LearnProgress", "LearnReport", "learn_bags"]
@@ -109,8 +109,8 @@ def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
     if not bags:
         raise ValueError("learn needs at least one bag")
     js_topic = absolute_topic(joint_states_topic or config["topics.joint_states"])
-    wr_topic = (absolute_topic(wrench_topic or config["topics.wrench"]) if config["robot.output"] == "wrench"
-                else None)
+    wr_topic = (absolute_topic(wrench_topic or config["topics.wrench"])
+                if config.output_kind == OutputKind.WRENCH else None)
     est = OnlineEstimator(config)
     est.learning_enabled = True
     est.inline_projection = True  # the node's projection schedule, in the bags' time
@@ -132,8 +132,7 @@ def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
             total = sum(info[t].count for t in topics if t in info)
             for msg in read_messages(bag, joint_states_topic=js_topic, wrench_topic=wr_topic):
                 n_msgs += 1
-                results = (est.process_joint_state(msg) if isinstance(msg, JointStateData)
-                           else est.process_wrench(msg))
+                results = est.process(msg)
                 if results:
                     report.samples += len(results)
                     stamp = results[-1].sample.stamp_ns

@@ -13,7 +13,7 @@ waits for is then one triangular solve or one update, never both.
 
 >>> from semiparam_ros.core.config import EstimatorConfig
 >>> loop = LearningLoop(OnlineEstimator(EstimatorConfig.defaults()), queue_size=2, max_delay_s=0.0)
->>> [loop.enqueue("wrench", None, t) for t in (0.0, 1.0, 2.0)]  # the third one drops the oldest
+>>> [loop.enqueue(InputKind.WRENCH, None, t) for t in (0.0, 1.0, 2.0)]  # the third one drops the oldest
 [False, False, True]
 >>> [t for _, _, t in loop.queue]
 [1.0, 2.0]
@@ -24,18 +24,22 @@ from __future__ import annotations
 import collections
 import threading
 import time
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator, StepResult
-from semiparam_ros.core.stream.messages import JointStateData, WrenchData
+from semiparam_ros.core.kinds import InputKind, OutputKind
+from semiparam_ros.core.stream.messages import InputMessage, JointStateData, WrenchData
 
 __all__ = ["Input", "LearningLoop", "Stepped", "warm_up_kernels"]
 
 #: A converted input message.
-Input = JointStateData | WrenchData
+Input = InputMessage
+#: What :meth:`LearningLoop.drain` hands on after each step: the input, what it produced, its arrival time.
+OnStep = Callable[[Input, "Stepped", float], None]
 
 _FUSED_COST_RATE = 0.05  # exponential-mean weight of the measured cost of a fused step (≈ 20 steps)
 
@@ -63,20 +67,21 @@ class LearningLoop:
     Attributes:
         lock: Held by every call that touches the estimator; other threads copy state under it.
         queue: The waiting inputs, ``(kind, data, t_recv)`` with ``t_recv`` a ``time.perf_counter()`` [s].
+        max_delay_s: ``overload.max_delay`` [s] (a run-time parameter: :meth:`apply_runtime_parameters`).
         version: Bumped whenever the learned state changes (a learned sample, a reset).
     """
 
     def __init__(self, estimator: OnlineEstimator, *, queue_size: int, max_delay_s: float) -> None:
         self.estimator = estimator
         self.lock = threading.Lock()
-        self.queue: collections.deque[tuple[str, Any, float]] = collections.deque()
+        self.queue: collections.deque[tuple[InputKind, Any, float]] = collections.deque()
         self.queue_size = int(queue_size)
         self.max_delay_s = float(max_delay_s)
         self.version = 0
         self._fused_cost_s = 0.0  # measured cost of a step that also applies a deferred update [s]
         self._drop_total = 0
 
-    def enqueue(self, kind: str, item: Input, t_recv: float | None = None) -> bool:
+    def enqueue(self, kind: InputKind, item: Input, t_recv: float | None = None) -> bool:
         """Queue an input received at ``t_recv`` (now when None); returns whether the oldest was dropped."""
         dropped = len(self.queue) >= self.queue_size
         if dropped:
@@ -106,10 +111,7 @@ class LearningLoop:
         est = self.estimator
         with self.lock:
             fused = not skip_learning and est.has_pending  # this step applies the previous update too
-            if isinstance(data, WrenchData):
-                results = est.process_wrench(data, skip_learning=skip_learning)
-            else:
-                results = est.process_joint_state(data, skip_learning=skip_learning)
+            results = est.process(data, skip_learning=skip_learning)
             for r in results:
                 if r.learned:
                     self.version += 1
@@ -121,6 +123,44 @@ class LearningLoop:
                     self._fused_cost_s += _FUSED_COST_RATE * (r.latency_s - self._fused_cost_s)
         new_drops, self._drop_total = drop_total - self._drop_total, drop_total
         return Stepped(results, new_drops)
+
+    def drain(self, max_inputs: int, *, before_each: Callable[[], None] | None = None,
+              on_step: OnStep | None = None, deadline: float | None = None) -> int:
+        """Step the queued inputs in arrival order: at most ``max_inputs``, and until ``deadline``.
+
+        The one place inputs leave the queue. Each input is learned unless it is :meth:`late` (overload
+        policy); the node publishes what ``on_step`` receives, shutdown learns the rest without publishing.
+
+        Args:
+            max_inputs: Inputs stepped at most (a batch, so that the caller's other work gets turns).
+            before_each: Called before each input (the node answers a waiting controller first).
+            on_step: Called after each input with ``(input, stepped, t_recv)``.
+            deadline: A ``time.monotonic()`` [s] after which no further input is started.
+
+        Returns:
+            The number of inputs stepped.
+
+        Raises:
+            Exception: Only a programming error (see :meth:`step`).
+        """
+        n = 0
+        while self.queue and n < max_inputs and (deadline is None or time.monotonic() < deadline):
+            if before_each is not None:
+                before_each()
+            _, data, t_recv = self.queue.popleft()
+            stepped = self.step(data, skip_learning=self.late(t_recv))
+            if on_step is not None:
+                on_step(data, stepped, t_recv)
+            n += 1
+        return n
+
+    def apply_runtime_parameters(self, config: EstimatorConfig, targets: set[str]) -> None:
+        """Take the run-time parameters of ``targets`` (``estimator``, ``loop``) from ``config``."""
+        if "loop" in targets:
+            self.max_delay_s = float(config["overload.max_delay"])
+        if "estimator" in targets:
+            with self.lock:
+                self.estimator.apply_runtime_parameters(config)
 
     def apply_pending(self) -> bool:
         """Apply the learners' deferred update if no input waits; returns whether it ran."""
@@ -139,13 +179,11 @@ class LearningLoop:
 
     def learn_remaining(self, budget_s: float) -> int:
         """Learn the queued inputs without publishing, within ``budget_s`` [s]; returns how many ran."""
-        deadline = time.monotonic() + budget_s
-        n = 0
-        while self.queue and time.monotonic() < deadline:
-            _, data, _ = self.queue.popleft()
-            self.step(data)
-            n += 1
-        return n
+        max_delay, self.max_delay_s = self.max_delay_s, 0.0  # nothing is late any more: learn it all
+        try:
+            return self.drain(len(self.queue), deadline=time.monotonic() + budget_s)
+        finally:
+            self.max_delay_s = max_delay
 
     def snapshot(self) -> tuple[dict[str, np.ndarray], int, int]:
         """Copy the checkpoint state under the lock: ``(state, version, samples learned)``."""
@@ -176,15 +214,15 @@ def warm_up_kernels(config: EstimatorConfig, estimator: OnlineEstimator, *, max_
                               regressor=estimator.regressor)
     joints = tuple(config["robot.joints"])
     n = len(joints)
-    wrench = config["robot.output"] == "wrench"
+    wrench = config.output_kind == OutputKind.WRENCH
     frame_id = config["robot.frame_id"] or "warm_up"  # the frame the pipeline expects, or any
     stepped = 0
     for k in range(max_samples):
         stamp = 1_000_000_000 + k * 1_000_000
-        stepped += len(scratch.process_joint_state(
+        stepped += len(scratch.process(
             JointStateData(stamp, joints, np.full(n, 1e-3 * k), np.full(n, 1.0), np.zeros(n))))
         if wrench:
-            stepped += len(scratch.process_wrench(
+            stepped += len(scratch.process(
                 WrenchData(stamp, frame_id, np.zeros(3), np.zeros(3))))
         if stepped >= 3:
             break

@@ -10,7 +10,7 @@ learning thread).
 
 >>> from semiparam_ros.core.config import EstimatorConfig
 >>> from semiparam_ros.service.learning_loop import LearningLoop
->>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": "joint_torques",
+>>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": OutputKind.JOINT_TORQUES,
 ...                                                  "parametric.consistent": False})
 >>> loop = LearningLoop(OnlineEstimator(cfg), queue_size=10, max_delay_s=0.0)
 >>> service = ModelService(loop, cfg)
@@ -29,6 +29,7 @@ import numpy as np
 
 from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, export_urdf
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate
 from semiparam_ros.errors import RejectedSampleError
@@ -37,6 +38,7 @@ from semiparam_ros.service.projection import ProjectionWorker
 from semiparam_ros.service.serving import LearnedModel
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
     from pathlib import Path
 
     from semiparam_ros.service.learning_loop import LearningLoop
@@ -66,7 +68,7 @@ class ModelService:
         self.serving = LearnedModel(est, solve=False)
         self.feedforward: FeedForward | None = None
         self.projection: ProjectionWorker | None = None
-        if config["robot.output"] == "joint_torques":
+        if config.output_kind == OutputKind.JOINT_TORQUES:
             self.feedforward = FeedForward(self.serving, joints=config["feedforward.joints"] or None,
                                            max_std=config["feedforward.max_std"])
             if config["parametric.consistent"]:
@@ -155,6 +157,26 @@ class ModelService:
             self._links_published = key[1]
             return worker.latest
         return None
+
+    def take_desired(self, convert: Callable[[], DesiredState], *, trajectory: bool) -> DesiredState | None:
+        """Convert a controller's message; a refused one is counted and None returned.
+
+        Args:
+            convert: Builds the desired state from the message (raises
+                :class:`~semiparam_ros.errors.RejectedSampleError` on non-finite or malformed content).
+            trajectory: Whether it is a trajectory to fill (counted in ``trajectory_counts``) or a
+                per-cycle desired state (counted in ``counts``).
+
+        Returns:
+            The desired state, or None (see ``feedforward.last_error``).
+        """
+        ff = self.feedforward
+        assert ff is not None, "the feed-forward is served in joint-torque mode only"
+        try:
+            return convert()
+        except RejectedSampleError as err:
+            ff.reject(str(err), trajectory=trajectory)
+            return None
 
     def answer(self, desired: DesiredState, now_ns: int) -> FeedForwardCommand | None:
         """Return the feed-forward command at ``desired`` (None: dropped, see ``feedforward.last_error``)."""

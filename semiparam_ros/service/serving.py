@@ -251,7 +251,7 @@ class LearnedModel:
 
     @property
     def output(self) -> str:
-        """``"joint_torques"`` or ``"wrench"``."""
+        """``OutputKind.JOINT_TORQUES`` or ``OutputKind.WRENCH``."""
         return str(self.estimator.regressor.output)
 
     @property

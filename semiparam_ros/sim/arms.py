@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.core.fourier import FourierTrajectory
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, is_physically_consistent
 from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 from semiparam_ros.sim.contacts import (
@@ -474,7 +475,7 @@ class ArmRecording:
 def arm_regressor(robot: str) -> RigidBodyRegressor:
     """Return the joint-torque regressor of a preset robot (others locked at 0; cached, not thread-safe)."""
     spec = ARM_ROBOTS[robot]
-    return regressor_of(str(resolve_urdf(spec.urdf)), tuple(spec.joints), output="joint_torques")
+    return regressor_of(str(resolve_urdf(spec.urdf)), tuple(spec.joints), output=OutputKind.JOINT_TORQUES)
 
 
 def _kinematics(robot: str) -> ArmKinematics:

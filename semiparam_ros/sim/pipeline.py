@@ -155,8 +155,8 @@ class MeasurementModel(Protocol):
     The F/T sensor's wrench (:class:`~semiparam_ros.sim.scenario.FTSensorMeasurement`) or the joint
     torques (:class:`~semiparam_ros.sim.arms.JointTorqueMeasurement`).
 
-    ``output`` is ``"wrench"`` or ``"joint_torques"``; :meth:`measure` turns the rigid-body output along
-    the trajectory into the reading, drawing its noise from ``rng`` only.
+    ``output`` is an :class:`~semiparam_ros.core.kinds.OutputKind`; :meth:`measure` turns the rigid-body
+    output along the trajectory into the reading, drawing its noise from ``rng`` only.
     """
 
     output: str

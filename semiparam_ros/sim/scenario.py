@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.urdf import icub_urdf_path
 from semiparam_ros.sim.contacts import (
@@ -344,7 +345,7 @@ def _kinematics(torso_yaw: float) -> ArmKinematics:
 
 
 def _regressor(torso_yaw: float) -> RigidBodyRegressor:
-    return regressor_of(str(icub_urdf_path()), ARM_JOINTS, output="wrench", ft_sensor=SENSOR_FRAME,
+    return regressor_of(str(icub_urdf_path()), ARM_JOINTS, output=OutputKind.WRENCH, ft_sensor=SENSOR_FRAME,
                         locked=(("torso_yaw", torso_yaw),))
 
 

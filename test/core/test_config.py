@@ -136,9 +136,9 @@ def test_build_pipeline_applies_acceleration_and_limit_parameters():
         return JointStateData(stamp, joints, [0.1] * 4, [velocity, 0.0, 0.0, 0.0])
 
     def feed(p):
-        p.add_joint_state(js(10**9, 100.0))  # at the default bound: accepted
-        p.add_joint_state(js(10**9 + 10**7, 100.5))
-        p.add_wrench(WrenchData(10**9, frame, [0.0, 0.0, 1.5e4], [0.0, 0.0, 0.0]))
+        p.add(js(10**9, 100.0))  # at the default bound: accepted
+        p.add(js(10**9 + 10**7, 100.5))
+        p.add(WrenchData(10**9, frame, [0.0, 0.0, 1.5e4], [0.0, 0.0, 0.0]))
         return p.drops[pl.DROP_IMPLAUSIBLE_VALUE]
 
     assert feed(build_pipeline(config)) == 2
@@ -150,7 +150,7 @@ def test_build_pipeline_applies_acceleration_and_limit_parameters():
     # max_gap_s: a 0.2 s dropout restarts the estimator (warm-up drops) unless it is 0
     def restarts(p):
         for k in range(30):
-            p.add_joint_state(js(10**9 + k * 10**7 + (2 * 10**8 if k >= 15 else 0), 0.0))
+            p.add(js(10**9 + k * 10**7 + (2 * 10**8 if k >= 15 else 0), 0.0))
         return p.estimator.mean_dt_s
 
     assert restarts(build_pipeline(config)) == pytest.approx(0.01)  # the dropout is not averaged in

@@ -69,9 +69,9 @@ def _run(bag: str, overrides: tuple, contact: bool) -> Run:
             start, duration, force = CONTACT
             if contact and start <= (msg.stamp_ns - t0) * 1e-9 < start + duration:
                 msg = dataclasses.replace(msg, force=msg.force + force)
-            results = est.process_wrench(msg)
+            results = est.process(msg)
         else:
-            results = est.process_joint_state(msg)
+            results = est.process(msg)
         rows += results
     stamps = np.array([r.sample.stamp_ns for r in rows])
     return Run(t=(stamps - t0) * 1e-9, stamps=stamps, y=np.array([r.sample.y for r in rows]),
@@ -106,7 +106,7 @@ def test_gate_off_is_the_papers_predict_then_learn_bit_for_bit():
     pipeline, model = build_pipeline(config), build_model(config, "SP")
     totals = []
     for msg in read_messages(BAGS / "icub_payload"):
-        samples = pipeline.add_wrench(msg) if isinstance(msg, WrenchData) else pipeline.add_joint_state(msg)
+        samples = pipeline.add(msg)
         assert isinstance(msg, JointStateData | WrenchData)
         totals += [model.predict_learn_one(s.x, s.y).total for s in samples]
     np.testing.assert_array_equal(r.total, np.array(totals))

@@ -322,7 +322,6 @@ def offline_replay(bag: Path, n_messages: int, overrides: dict[str, Any] | None 
     """Feed the first ``n_messages`` of the bag's /joint_states and /wrench (log-time order) to the core."""
     from semiparam_ros.core.config import load_config
     from semiparam_ros.core.estimator.online import OnlineEstimator
-    from semiparam_ros.core.stream.messages import JointStateData
     from semiparam_ros.io.bags import read_messages
 
     est = OnlineEstimator(load_config(CONFIG).with_overrides(overrides or {}))
@@ -331,7 +330,7 @@ def offline_replay(bag: Path, n_messages: int, overrides: dict[str, Any] | None 
     for i, msg in enumerate(source):
         if i >= n_messages:
             break
-        results = est.process_joint_state(msg) if isinstance(msg, JointStateData) else est.process_wrench(msg)
+        results = est.process(msg)
         for r in results:
             out.predictions[r.sample.stamp_ns] = r.prediction
             out.measured[r.sample.stamp_ns] = np.asarray(r.sample.y)

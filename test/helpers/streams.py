@@ -153,10 +153,7 @@ def rich_stream() -> Stream:
 def feed(est: OnlineEstimator, messages) -> list[StepResult]:
     out: list[StepResult] = []
     for msg in messages:
-        if isinstance(msg, JointStateData):
-            out.extend(est.process_joint_state(msg))
-        else:
-            out.extend(est.process_wrench(msg))
+        out.extend(est.process(msg))
     return out
 
 

@@ -233,7 +233,7 @@ def test_iter_samples_uses_the_pipeline(tmp_path):
     q = SamplePipeline(JOINTS, frame_id=FRAME)
     ref = []
     for _, m, _ in messages:
-        ref += q.add_joint_state(m) if isinstance(m, JointStateData) else q.add_wrench(m)
+        ref += q.add(m)
     assert len(samples) == len(ref) == 29  # 30 wrenches, the first one in the estimator's warm-up
     for a, b in zip(samples, ref, strict=True):
         assert a.stamp_ns == b.stamp_ns

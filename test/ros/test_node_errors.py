@@ -3,8 +3,6 @@ is logged at FATAL level, propagates out of the callback (and so out of ``spin``
 
 from __future__ import annotations
 
-import time
-
 import pytest
 from helpers.ros import in_process_node, source_bag
 
@@ -32,7 +30,8 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
     est = node.estimator
     for _ in range(400):  # learn a little, through the node's own processing path
         msg = next(messages)
-        node._process(_kind(msg), msg, time.perf_counter())
+        node.loop.enqueue(_kind(msg), msg)
+        node._process_queued()
     assert est.n_samples_learned > 0
     drops_before, learned_before = est.drops, est.n_samples_learned
     stats_before = node._stats.snapshot()
@@ -70,7 +69,8 @@ def test_programming_error_propagates_and_is_not_a_drop(node, tmp_path, monkeypa
     n_rejected = 0
     for _ in range(100):
         msg = next(messages)
-        node._process(_kind(msg), msg, time.perf_counter())  # never raises
+        node.loop.enqueue(_kind(msg), msg)
+        node._process_queued()  # never raises
         n_rejected = est.drops["rejected_sample"]
     assert n_rejected > 0 and est.n_samples_learned == learned_before
 

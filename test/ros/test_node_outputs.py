@@ -50,7 +50,7 @@ def _offline_std(bag, overrides, messages) -> dict[int, np.ndarray]:
     est = OnlineEstimator(load_config(CONFIG).with_overrides(overrides))
     out = {}
     for msg in messages:
-        results = est.process_joint_state(msg) if isinstance(msg, JointStateData) else est.process_wrench(msg)
+        results = est.process(msg)
         out.update({r.sample.stamp_ns: r.std for r in results})
     return out
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import pytest
 from helpers.ros import in_process_node, source_bag
@@ -26,7 +25,8 @@ def test_rmse_window_and_warmup_in_seconds_follow_the_measured_rate(tmp_path, mo
             t0 = msg.stamp_ns if t0 is None else t0
             msg = dataclasses.replace(msg, stamp_ns=t0 + 2 * (msg.stamp_ns - t0))
             kind = "joint_states" if isinstance(msg, JointStateData) else "wrench"
-            node._process(kind, msg, time.perf_counter())
+            node.loop.enqueue(kind, msg)
+            node._process_queued()
             if est.n_samples_learned >= 12:
                 break
         period = est.sample_period_s

@@ -131,7 +131,7 @@ def test_oversized_joint_states_are_refused_cheaply_and_the_name_cache_is_bounde
     pipeline = build_pipeline(load_config(CONFIG))
     for k in range(40):
         names = tuple(f"k{k}_{i:06d}" for i in range(20_000)) + tuple(JOINTS)
-        pipeline.add_joint_state(JointStateData(10**9 + k * 10**7, names, np.zeros(len(names)),
+        pipeline.add(JointStateData(10**9 + k * 10**7, names, np.zeros(len(names)),
                                                 np.zeros(len(names)), np.zeros(len(names))))
     assert pipeline._name_cache_bytes <= 1 << 20
     assert sum(sum(len(s) for s in key) for key in pipeline._name_cache) <= 1 << 20

@@ -29,7 +29,7 @@ def learned():
     est = OnlineEstimator(config)
     rec = simulate_arm(ArmScenarioConfig(name="ff", robot="panda", duration=10.0, rate=200.0, seed=1))
     for i in range(len(rec.stamps)):
-        est.process_joint_state(JointStateData(int(rec.stamps[i]), rec.joint_names, rec.q_measured[i],
+        est.process(JointStateData(int(rec.stamps[i]), rec.joint_names, rec.q_measured[i],
                                                rec.dq_measured[i], rec.measured_torques[i]))
     return est, rec
 

@@ -183,7 +183,7 @@ def test_noise_state_and_snapshot(panda):
     joints = tuple(rec.joint_names)
     live.estimator.gate_enabled = False  # the shifted torques would be a contact to the (restored) gate
     for i in range(0, 400):  # more learning on the live estimator (stamps after the checkpoint's)
-        live.estimator.process_joint_state(JointStateData(
+        live.estimator.process(JointStateData(
             int(rec.stamps[-1]) + (i + 1) * 5_000_000, joints, rec.q_measured[i], rec.dq_measured[i],
             rec.measured_torques[i] + 0.5))
     np.testing.assert_array_equal(frozen.predict(q, dq, ddq)[0], before)
@@ -194,7 +194,7 @@ def test_learn_equals_driving_the_estimator_message_by_message(panda):
     """``learn`` is the node's data path: the same parameters bit for bit as feeding the messages."""
     est = OnlineEstimator(panda["config"])
     for msg in read_messages(panda["bag"], joint_states_topic="/joint_states", wrench_topic=None):
-        est.process_joint_state(msg)
+        est.process(msg)
     np.testing.assert_array_equal(est.parameters, panda["est"].parameters)
     assert est.n_samples_learned == panda["report"].learned
     report = panda["report"]

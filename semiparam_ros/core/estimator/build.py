@@ -15,6 +15,7 @@ from typing import Literal
 import numpy as np
 
 from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.learners.contract import PeriodSettings
 from semiparam_ros.core.learners.joint import JointSemiparametricModel
@@ -59,7 +60,7 @@ def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None,
         FileNotFoundError: If ``robot.urdf`` names no file (and no ``urdf_xml`` is given).
         ConfigurationError: If the URDF, joints or sensor are invalid.
     """
-    output = config["robot.output"]
+    output = config.output_kind
     if urdf_xml is None:
         path = config.urdf_path()
         if not path.is_file():
@@ -67,15 +68,15 @@ def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None,
         urdf_xml, source = path.read_text(encoding="utf-8"), str(path)
     spec = RegressorSpec(
         tuple(config["robot.joints"]),
-        ft_sensor=config["robot.ft_sensor"] if output == "wrench" else None,
+        ft_sensor=config["robot.ft_sensor"] if output == OutputKind.WRENCH else None,
         locked=config.locked,
         gravity=tuple(config["robot.gravity"]),
         output=output,
-        sensor_offset=bool(config["parametric.sensor_offset"]) and output == "wrench",
-        friction=bool(config["parametric.friction"]) and output == "joint_torques",
+        sensor_offset=bool(config["parametric.sensor_offset"]) and output == OutputKind.WRENCH,
+        friction=bool(config["parametric.friction"]) and output == OutputKind.JOINT_TORQUES,
         coulomb_velocity=config["parametric.coulomb_velocity"],
-        joint_offsets=bool(config["parametric.offsets"]) and output == "joint_torques",
-        armature=bool(config["parametric.armature"]) and output == "joint_torques",
+        joint_offsets=bool(config["parametric.offsets"]) and output == OutputKind.JOINT_TORQUES,
+        armature=bool(config["parametric.armature"]) and output == OutputKind.JOINT_TORQUES,
     )
     return RigidBodyRegressor(urdf_xml, spec, source=source)
 
@@ -200,7 +201,7 @@ def standardizer_min_scale(config: EstimatorConfig, *, with_outputs: bool) -> np
     floors = [np.full(n, config[f"nonparametric.min_scale.{name}"])
               for name in ("position", "velocity", "acceleration")]
     if with_outputs:
-        if config["robot.output"] == "wrench":
+        if config.output_kind == OutputKind.WRENCH:
             floors += [np.full(3, config["nonparametric.min_scale.force"]),
                        np.full(3, config["nonparametric.min_scale.torque"])]
         else:
@@ -309,7 +310,7 @@ def _build_model(config: EstimatorConfig, kind: ModelKind,
     n_inputs = 3 * n_joints
     warmup = standardizer_warmup_samples(config, None)
     if kind == "NP":
-        n_outputs = 6 if config["robot.output"] == "wrench" else n_joints
+        n_outputs = config.n_outputs
         return NonparametricModel(
             n_inputs,
             n_outputs,

@@ -28,6 +28,7 @@ from semiparam_ros.core.estimator.build import (
     gate_config,
 )
 from semiparam_ros.core.estimator.state import check_magnitudes, meta_arrays, read_meta, read_period
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.learners._step_kernels import joined_within
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.learners.contract import Prediction
@@ -37,7 +38,7 @@ from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, consistent_parameters
 from semiparam_ros.core.rigid_body.payload import PayloadLearner
 from semiparam_ros.core.stream.gate import ContactGate, Verdict
-from semiparam_ros.core.stream.messages import JointStateData, Sample, WrenchData
+from semiparam_ros.core.stream.messages import InputMessage, Sample
 from semiparam_ros.core.stream.rate import RateMeter
 from semiparam_ros.core.validation import MAX_ABS_INPUT
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
@@ -101,7 +102,7 @@ class OnlineEstimator:
         >>> est = OnlineEstimator(EstimatorConfig.defaults())  # iCub right arm, F/T sensor wrench
         >>> est.regressor.n_base
         17
-        >>> est.process_joint_state(JointStateData(10**9, ("r_elbow",), [0.1]))  # joints missing
+        >>> est.process(JointStateData(10**9, ("r_elbow",), [0.1]))  # joints missing
         []
         >>> est.n_dropped
         1
@@ -138,23 +139,20 @@ class OnlineEstimator:
         self._projected_learned = 0  # n_samples_learned at the last solution
 
     # ------------------------------------------------------------------ streaming
-    def process_joint_state(self, msg: JointStateData, *, skip_learning: bool = False) -> list[StepResult]:
-        """Feed a joint state; return the results of the samples it completed (often none or one).
+    def process(self, msg: InputMessage, *, skip_learning: bool = False) -> list[StepResult]:
+        """Feed one input message; return the results of the samples it completed (often none or one).
 
-        Never raises on bad data: the pipeline drops and counts bad messages, and a sample the learner
-        rejects (:class:`~semiparam_ros.errors.RejectedSampleError`) is counted under ``rejected_sample``
-        in :attr:`drops` (the learned state is unchanged). Any other exception is a programming error: it
-        propagates and no drop is counted.
+        The one entry for messages (a :class:`JointStateData` or a :class:`WrenchData`, as the node,
+        ``learn`` and replay read them). Never raises on bad data: the pipeline drops and counts bad
+        messages, and a sample the learner rejects (:class:`~semiparam_ros.errors.RejectedSampleError`) is
+        counted under ``rejected_sample`` in :attr:`drops` (the learned state is unchanged). Any other
+        exception is a programming error: it propagates and no drop is counted.
 
         Args:
-            msg: The joint state.
+            msg: The message.
             skip_learning: Predict the completed samples cheaply without learning them (see :meth:`step`).
         """
-        return self._step_all(self.pipeline.add_joint_state(msg), skip_learning)
-
-    def process_wrench(self, msg: WrenchData, *, skip_learning: bool = False) -> list[StepResult]:
-        """Feed an F/T reading; return the results of the samples it completed (never raises on bad data)."""
-        return self._step_all(self.pipeline.add_wrench(msg), skip_learning)
+        return self._step_all(self.pipeline.add(msg), skip_learning)
 
     def _step_all(self, samples: list[Sample], skip_learning: bool = False) -> list[StepResult]:
         # The pipeline drops NaN/inf and values beyond limits.*, but those bounds can be switched off (0)
@@ -339,7 +337,8 @@ class OnlineEstimator:
         The node's rule: ``parametric.consistent`` on, joint torques, and a model that predicts with one
         rigid body: the consistent SP (the default) or the rigid-body model P.
         """
-        return (bool(self.config["parametric.consistent"]) and self.config["robot.output"] == "joint_torques"
+        return (bool(self.config["parametric.consistent"])
+                and self.config.output_kind == OutputKind.JOINT_TORQUES
                 and isinstance(self.model, _TAKES_RIGID))
 
     def _project_if_due(self, stamp_ns: int) -> None:
@@ -394,10 +393,11 @@ class OnlineEstimator:
         return True
 
     def apply_runtime_parameters(self, config: EstimatorConfig) -> None:
-        """Take the run-time gate and noise parameters (``gate.*``, ``uncertainty.*``) of a configuration.
+        """Take the run-time parameters: ``learning_enabled``, ``gate.*``, ``uncertainty.*``.
 
         Args:
-            config: A validated configuration (only its run-time gate/uncertainty entries are read).
+            config: A validated configuration (only its run-time entries of the ``estimator`` target are
+                read: :attr:`~semiparam_ros.core.config.ParameterSpec.runtime`).
 
         Raises:
             ValueError: On an invalid gate parameter (nothing is changed then).
@@ -406,6 +406,7 @@ class OnlineEstimator:
         self.noise.set_time_constant(config["uncertainty.noise_time_constant"])
         self.gate.config = gate
         self.gate_enabled = bool(config["gate.enabled"])
+        self.learning_enabled = bool(config["learning_enabled"])
 
     def _measure_rate(self, stamp_ns: int) -> None:
         """Feed the rate meter; once the period is known, announce it to the learner (once).

@@ -3,13 +3,13 @@
 Inverse dynamics is linear in the inertial parameters, ``y = Φ(q, q̇, q̈) π``. This module builds ``Φ``
 for a fixed-base robot described by a URDF, for two kinds of measurement ``y``:
 
-* ``output="wrench"``: the reading of a six-axis force/torque sensor mounted on a *fixed* URDF joint.
+* ``output=OutputKind.WRENCH``: the reading of a six-axis force/torque sensor mounted on a *fixed* URDF joint.
   The reading is the wrench that the **distal** subtree (the links beyond the sensor) exerts on the
   proximal link, expressed in the sensor frame (the child frame of the sensor joint), force first then
   torque: ``[fx, fy, fz, tx, ty, tz]`` in N and N·m (iDynTree's ``child_to_parent`` convention; at rest
   the force is the distal weight and points along gravity).
-* ``output="joint_torques"``: the torques (N·m, or N for prismatic joints) of the moving joints, in the
-  caller's joint order.
+* ``output=OutputKind.JOINT_TORQUES``: the torques (N·m, or N for prismatic joints) of the moving joints,
+  in the caller's joint order.
 
 Pinocchio merges fixed joints into their parent body, which would lump the links beyond the sensor with
 the link before it. The sensor joint is therefore turned into a 6-DoF (free-flyer) joint that is always
@@ -27,8 +27,8 @@ joint's frame.
 Only some combinations of the parameters are identifiable from ``y``: the base parameters, found
 numerically by a rank-revealing QR factorisation of the regressor stacked at many random states.
 
-Joint friction, offsets and armature (``output="joint_torques"``). Real joint-torque measurements carry
-what the rigid-body model lacks; each option appends one column per joint (non-zero only in that joint's
+Joint friction, offsets and armature (``output=OutputKind.JOINT_TORQUES``). Real joint-torque measurements
+carry what the rigid-body model lacks; each option appends one column per joint (non-zero only in that joint's
 row ``i``), in blocks after the inertial columns, named ``<joint>.<kind>``:
 
 * ``friction``: viscous ``f_v,i · q̇_i`` (``<joint>.viscous``, N·m·s/rad) and Coulomb
@@ -55,6 +55,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.rigid_body.urdf import (
     EXAMPLE_ROBOT_DATA_SCHEME,
     EXTRA_COLUMN_KINDS,
@@ -232,7 +233,7 @@ class RigidBodyRegressor:
 
     Attributes:
         joint_names: The moving joints, in the caller's order (the order of q, q̇, q̈).
-        output: ``"wrench"`` or ``"joint_torques"``.
+        output: ``OutputKind.WRENCH`` or ``OutputKind.JOINT_TORQUES``.
         sensor_frame: Name of the F/T sensor joint (its frame is the sensor frame: the child frame of the
             fixed joint, which coincides with the child link's frame), or None.
         body_names: Name (child link of the joint) of each body whose 10 parameters are in ``π``.
@@ -311,7 +312,7 @@ class RigidBodyRegressor:
         self._any_continuous = bool(self._continuous.any())
 
         # Output rows and body columns of Pinocchio's joint-torque regressor.
-        if output == "wrench":
+        if output == OutputKind.WRENCH:
             sid = model.getJointId(ft_sensor)
             v0 = model.joints[sid].idx_v
             self._rows: slice | np.ndarray = slice(v0, v0 + 6)
@@ -564,7 +565,7 @@ class RigidBodyRegressor:
 
         Returns:
             (n_outputs,) or (k, n_outputs): ``[fx, fy, fz, tx, ty, tz]`` in N, N·m for a wrench, torques in
-            N·m for ``output="joint_torques"``.
+            N·m for ``output=OutputKind.JOINT_TORQUES``.
 
         Raises:
             RejectedSampleError: On bad state vectors.
@@ -754,7 +755,7 @@ class RigidBodyRegressor:
             >>> from semiparam_ros.core.config import EstimatorConfig
             >>> from semiparam_ros.core.estimator.build import build_regressor
             >>> reg = build_regressor(EstimatorConfig.defaults().with_overrides(
-            ...     {"robot.output": "joint_torques"}))
+            ...     {"robot.output": OutputKind.JOINT_TORQUES}))
             >>> X = np.random.default_rng(0).uniform(-1.0, 1.0, (5, 3 * reg.n_joints))
             >>> many = reg.base_regressor_of_inputs(X)
             >>> many.shape == (5, reg.n_outputs, reg.n_base)

@@ -40,7 +40,7 @@ Example:
     >>> urdf = example_robot_data_path("robots/ur_description/urdf/ur5_robot.urdf")
     >>> reg = RigidBodyRegressor.from_urdf(urdf,
     ...     ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
-    ...      "wrist_3_joint"], output="joint_torques", friction=True, joint_offsets=True)
+    ...      "wrist_3_joint"], output=OutputKind.JOINT_TORQUES, friction=True, joint_offsets=True)
     >>> limits = ExcitationLimits.from_regressor(reg, margin=0.1)
     >>> exc = design_excitation(reg, limits, duration=10.0, n_harmonics=3, iterations=2, n_grid=40)
     >>> bool(exc.condition_number > 1.0), exc.trajectory.n_joints

@@ -292,7 +292,7 @@ class PayloadLearner:
         >>> from semiparam_ros.core.rigid_body.dynamics import point_mass_parameters, resolve_urdf
         >>> urdf_path = resolve_urdf("example-robot-data://robots/panda_description/urdf/panda.urdf")
         >>> joints = [f"panda_joint{i}" for i in range(1, 8)]
-        >>> reg = RigidBodyRegressor.from_urdf(urdf_path, joints, output="joint_torques")
+        >>> reg = RigidBodyRegressor.from_urdf(urdf_path, joints, output=OutputKind.JOINT_TORQUES)
         >>> urdf = reg.urdf_parameters()
         >>> learner = PayloadLearner(reg, reg.to_base(urdf))
         >>> body = reg.body_index(reg.distal_body_name)

@@ -6,14 +6,14 @@ joints, the sensor, the locked joints, the extra columns), checked once; :func:`
 URDF text against it and splits the model at the F/T sensor (see
 :mod:`semiparam_ros.core.rigid_body.dynamics`). Nothing here needs Pinocchio.
 
->>> spec = RegressorSpec(("j1",), output="joint_torques", friction=True)
+>>> spec = RegressorSpec(("j1",), output=OutputKind.JOINT_TORQUES, friction=True)
 >>> spec.extra_kinds
 ('viscous', 'coulomb')
 >>> urdf = ('<robot name="r"><link name="a"/><link name="b"/><joint name="j1" type="revolute">'
 ...         '<parent link="a"/><child link="b"/><axis xyz="0 0 1"/></joint></robot>')
 >>> prepare_urdf(urdf, spec).child_link
 {'j1': 'b'}
->>> RegressorSpec(("j1", "j1"), output="joint_torques")
+>>> RegressorSpec(("j1", "j1"), output=OutputKind.JOINT_TORQUES)
 Traceback (most recent call last):
 ...
 semiparam_ros.errors.ConfigurationError: joints lists ['j1'] more than once
@@ -33,13 +33,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = [
     "EXAMPLE_ROBOT_DATA_SCHEME",
     "EXTRA_COLUMN_KINDS",
     "MOVING_TYPES",
-    "OUTPUTS",
     "PACKAGE_SCHEME",
     "TOPIC_SCHEME",
     "PreparedUrdf",
@@ -53,8 +53,6 @@ __all__ = [
 
 #: Joint types that move (the others are fixed, or floating at the sensor).
 MOVING_TYPES = ("revolute", "continuous", "prismatic")
-#: What a regressor can predict.
-OUTPUTS = ("wrench", "joint_torques")
 #: Suffixes of the per-joint extra columns, in their block order.
 EXTRA_COLUMN_KINDS: tuple[str, ...] = ("viscous", "coulomb", "offset", "armature")
 _ERD_PREFIX = pathlib.Path("cmeel.prefix", "share", "example-robot-data")
@@ -74,18 +72,19 @@ class RegressorSpec:
     Attributes:
         joints: The moving joints (revolute, continuous or prismatic), in the order of q, q̇, q̈.
         ft_sensor: Name of the fixed joint that holds the F/T sensor (iCub right arm:
-            ``"r_arm_ft_sensor"``). Required for ``output="wrench"``; with ``"joint_torques"`` it only
-            splits the bodies at the sensor.
+            ``"r_arm_ft_sensor"``). Required for ``output=OutputKind.WRENCH``; with joint torques it
+            only splits the bodies at the sensor.
         locked: Position (rad or m) of joints that are not moving; every joint that is neither in
             ``joints`` nor the sensor is locked, at 0 unless given here.
         gravity: Gravity (3,) in m/s², in the URDF root (base) frame.
-        output: ``"wrench"`` (6 outputs: the sensor reading) or ``"joint_torques"`` (one per joint).
+        output: :class:`~semiparam_ros.core.kinds.OutputKind` (or its value): the wrench (6 outputs: the
+            sensor reading) or the joint torques (one per joint).
         sensor_offset: Append ``n_outputs`` identity columns: constant offsets of the measurement
             (F/T sensors drift). Their URDF value is 0.
-        friction: Append per-joint viscous and Coulomb friction columns (``output="joint_torques"``).
+        friction: Append per-joint viscous and Coulomb friction columns (``output=OutputKind.JOINT_TORQUES``).
         coulomb_velocity: Velocity scale v_s of the Coulomb term ``tanh(q̇ / v_s)`` (rad/s, > 0).
-        joint_offsets: Append a constant torque offset per joint (``output="joint_torques"``).
-        armature: Append a motor-armature column ``q̈_i`` per joint (``output="joint_torques"``).
+        joint_offsets: Append a constant torque offset per joint (``output=OutputKind.JOINT_TORQUES``).
+        armature: Append a motor-armature column ``q̈_i`` per joint (``output=OutputKind.JOINT_TORQUES``).
         base_seed: Seed of the random states used to find the base parameters.
         base_samples: Number of random states used to find the base parameters (default
             ``max(64, 3·n_params)``).
@@ -99,7 +98,7 @@ class RegressorSpec:
     ft_sensor: str | None = None
     locked: Mapping[str, float] | None = None
     gravity: Sequence[float] | np.ndarray = (0.0, 0.0, -9.81)
-    output: str = "wrench"
+    output: OutputKind = OutputKind.WRENCH
     sensor_offset: bool = False
     friction: bool = False
     coulomb_velocity: float = 0.05
@@ -110,12 +109,11 @@ class RegressorSpec:
     extra_kinds: tuple[str, ...] = field(init=False, default=())
 
     def __post_init__(self) -> None:
-        if self.output not in OUTPUTS:
-            raise ConfigurationError(f"output must be one of {OUTPUTS}, got {self.output!r}")
+        object.__setattr__(self, "output", OutputKind.parse(self.output))
         flags = (self.friction, self.friction, self.joint_offsets, self.armature)
         extras = tuple(kind for kind, on in zip(EXTRA_COLUMN_KINDS, flags, strict=True) if on)
-        if extras and self.output != "joint_torques":
-            raise ConfigurationError("friction, joint_offsets and armature need output='joint_torques' "
+        if extras and self.output != OutputKind.JOINT_TORQUES:
+            raise ConfigurationError("friction, joint_offsets and armature need joint-torque output "
                                      "(a wrench has sensor_offset instead)")
         cv = self.coulomb_velocity
         vs = float(cv) if not isinstance(cv, bool) else math.nan
@@ -207,8 +205,8 @@ def prepare_urdf(urdf_xml: str, spec: RegressorSpec, source: str | None = None) 
             )
 
     if ft_sensor is None:
-        if output == "wrench":
-            raise ConfigurationError("output='wrench' needs ft_sensor (the name of the fixed sensor "
+        if output == OutputKind.WRENCH:
+            raise ConfigurationError("output=OutputKind.WRENCH needs ft_sensor (the name of the fixed sensor "
                                      "joint)")
     else:
         if not isinstance(ft_sensor, str) or ft_sensor not in urdf_joints:

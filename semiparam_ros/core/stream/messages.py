@@ -22,6 +22,7 @@ import numpy as np
 from semiparam_ros.errors import RejectedSampleError
 
 __all__ = [
+    "InputMessage",
     "JointStateData",
     "Sample",
     "WrenchData",
@@ -132,13 +133,17 @@ class WrenchData:
         return np.concatenate([self.force, self.torque])
 
 
+#: An input message of either stream (what ``SamplePipeline.add`` and ``OnlineEstimator.process`` take).
+InputMessage = JointStateData | WrenchData
+
+
 @dataclass(frozen=True)
 class Sample:
     """One learning sample: the input state of the configured joints and the measured output.
 
     Attributes:
-        stamp_ns: Stamp the sample refers to (the wrench stamp for ``output="wrench"``, the joint
-            state stamp for ``output="joint_torques"``), in nanoseconds.
+        stamp_ns: Stamp the sample refers to (the wrench stamp for ``output=OutputKind.WRENCH``, the joint
+            state stamp for ``output=OutputKind.JOINT_TORQUES``), in nanoseconds.
         q: Joint positions in the configured order (rad), shape ``(n,)``.
         dq: Joint velocities (rad/s), shape ``(n,)``.
         ddq: Estimated joint accelerations (rad/s²), shape ``(n,)``.

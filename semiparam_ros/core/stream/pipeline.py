@@ -24,12 +24,12 @@ and returns the :class:`~semiparam_ros.core.stream.messages.Sample` objects they
    :mod:`semiparam_ros.core.stream.acceleration`, which decides each joint-state stamp once: q̈ (rad/s²) or
    none (warm-up). With the default Savitzky–Golay estimator the decision comes ``window // 2`` joint
    states later and refers to the older stamp, so joint states are buffered until decided.
-3. **Pairing** (``output="wrench"``). A wrench waits (bounded) until its pairing is final — every
+3. **Pairing** (``output=OutputKind.WRENCH``). A wrench waits (bounded) until its pairing is final — every
    joint state within ``sync_tolerance`` of its stamp decided, or a decided one so close that no later
    joint state can be closer — then pairs with the nearest one that has q̈ (the earlier on a tie). The
    sample carries the **wrench** stamp, q and q̇ of that joint state as received, and its q̈. The
    learning rate is thus the wrench rate (e.g. joint states at 100 Hz, wrench at 10 Hz → 10 samples/s).
-   With ``output="joint_torques"`` every decided joint state gives a sample whose output is
+   With ``output=OutputKind.JOINT_TORQUES`` every decided joint state gives a sample whose output is
    ``JointState.effort`` (N·m) of the configured joints; wrenches are ignored (counted).
 
 Cost: O(1) per message (bounded buffers, an O(window) acceleration estimate); measured by
@@ -54,9 +54,10 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
+from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.stream.acceleration import AccelerationConfig, AccelerationEstimator, make_estimator
 from semiparam_ros.core.stream.glitch import ACCEPT_SUSPECT, SUSPECT, GlitchCheck
-from semiparam_ros.core.stream.messages import JointStateData, Sample, WrenchData
+from semiparam_ros.core.stream.messages import InputMessage, JointStateData, Sample, WrenchData
 from semiparam_ros.core.validation import check_range
 from semiparam_ros.errors import ConfigurationError
 
@@ -80,11 +81,9 @@ __all__ = [
     "DROP_WRENCH_REPEATED_STAMP",
     "DROP_WRENCH_ZERO_STAMP",
     "DROP_WRONG_FRAME_ID",
-    "OUTPUTS",
     "SamplePipeline",
 ]
 
-OUTPUTS = ("wrench", "joint_torques")
 
 # -- drop reasons (stable names: they appear in diagnostics and in evaluation reports) ---------------
 DROP_JOINT_STATE_ZERO_STAMP = "joint_state_zero_stamp"
@@ -120,7 +119,7 @@ DROP_UNPAIRED_WRENCH = "unpaired_wrench"
 """Accepted wrench with no accepted joint state within ``sync_tolerance``."""
 DROP_ACCELERATION_WARMUP = "acceleration_warmup"
 """Sample lost because the matching joint state(s) got no q̈ (estimator warm-up after a start, restart
-or gap): counts wrenches for ``output="wrench"``, joint states for ``output="joint_torques"``."""
+or gap): counts wrenches for a wrench output, joint states for joint torques."""
 DROP_BUFFER_OVERFLOW = "buffer_overflow"
 """Pending wrench discarded because ``max_buffer`` wrenches were waiting (joint states stopped)."""
 DROP_WRENCH_IGNORED = "wrench_ignored"
@@ -190,7 +189,8 @@ class SamplePipeline:
 
     Args:
         joints: Configured joint names; samples use this order (``x = [q, q̇, q̈]``).
-        output: ``"wrench"`` (pair with WrenchStamped) or ``"joint_torques"`` (JointState.effort).
+        output: An :class:`~semiparam_ros.core.kinds.OutputKind` (or its value): the wrench (paired with
+            WrenchStamped) or the joint torques (JointState.effort).
         frame_id: Required wrench frame id; ``None`` or ``""`` accepts any.
         sync_tolerance: Largest |wrench stamp − joint-state stamp| for a pair (s, ≥ 0).
         acceleration: q̈ estimator settings (default ``AccelerationConfig()``: Savitzky–Golay, window 9,
@@ -217,12 +217,12 @@ class SamplePipeline:
 
     Example:
         >>> from semiparam_ros.core.stream.messages import JointStateData
-        >>> pipe = SamplePipeline(["elbow"], output="joint_torques")
+        >>> pipe = SamplePipeline(["elbow"], output=OutputKind.JOINT_TORQUES)
         >>> samples = []
         >>> for k in range(20):  # 100 Hz, q = t²/2 rad: q̇ = t rad/s, q̈ = 1 rad/s²
         ...     t = 0.01 * k
         ...     msg = JointStateData(10**9 + 10**7 * k, ("elbow",), [0.5 * t * t], [t], [2.0])
-        ...     samples += pipe.add_joint_state(msg)
+        ...     samples += pipe.add(msg)
         >>> len(samples), pipe.drops["acceleration_warmup"]  # the rest wait for the centred window
         (12, 4)
         >>> samples[0].ddq, samples[0].y
@@ -253,8 +253,7 @@ class SamplePipeline:
             raise ConfigurationError("joints must name at least one joint")
         if len(set(joints)) != len(joints):
             raise ConfigurationError(f"joints must be unique, got {joints}")
-        if output not in OUTPUTS:
-            raise ConfigurationError(f"output must be one of {OUTPUTS}, got {output!r}")
+        output = OutputKind.parse(output)
         check_range("sync_tolerance (s)", sync_tolerance, 0.0)
         check_range("buffer_s (s)", buffer_s, 0.0, lo_inclusive=False)
         if int(max_buffer) < 1:
@@ -267,6 +266,8 @@ class SamplePipeline:
         self.joints: tuple[str, ...] = joints
         self.output = output
         self.frame_id = frame_id or None
+        #: Frame of the newest wrench taken (the one its samples are expressed in; "" before any).
+        self.last_frame_id = ""
         self.sync_tolerance = float(sync_tolerance)
         self.acceleration = acceleration or AccelerationConfig()
         self.buffer_s = float(buffer_s)
@@ -275,7 +276,7 @@ class SamplePipeline:
         self._max_q = _bound("max_abs_position", max_abs_position)
         self._max_dq = _bound("max_abs_velocity", max_abs_velocity)
         self._max_out = _bound("max_abs_output", max_abs_output)
-        self._torques = output == "joint_torques"
+        self._torques = output == OutputKind.JOINT_TORQUES
         check_range("glitch_time_constant (s)", glitch_time_constant, 0.0, lo_inclusive=False)
         self._glitch = None if not glitch_ratio else GlitchCheck(len(joints), ratio=glitch_ratio,
                                                                  time_constant_s=glitch_time_constant)
@@ -379,7 +380,24 @@ class SamplePipeline:
             self._name_cache_bytes += size
         return result
 
-    def add_joint_state(self, msg: JointStateData) -> list[Sample]:
+    def add(self, msg: InputMessage) -> list[Sample]:
+        """Take one input message; return the samples it completed (possibly several, usually none or one).
+
+        The one entry for messages: a joint state (q in rad, q̇ in rad/s, effort in N·m; joints in any
+        order) or a wrench (force in N, torque in N·m, in the sensor frame). Bad messages are dropped and
+        counted in :attr:`drops`, never raised.
+
+        Args:
+            msg: A :class:`JointStateData` or a :class:`WrenchData`.
+
+        Returns:
+            The samples completed by this message.
+        """
+        if isinstance(msg, WrenchData):
+            return self._add_wrench(msg)
+        return self._add_joint_state(msg)
+
+    def _add_joint_state(self, msg: JointStateData) -> list[Sample]:
         """Take one joint state (q in rad, q̇ in rad/s, effort in N·m).
 
         Args:
@@ -477,7 +495,7 @@ class SamplePipeline:
         """Drop decided joint states older than ``buffer_s`` (or beyond ``max_buffer``)."""
         entries = self._entries
         horizon = newest - self._buffer_ns
-        if self.output == "joint_torques":
+        if self.output == OutputKind.JOINT_TORQUES:
             horizon = newest  # decided entries are never needed again
         while (
             entries and entries[0].decided and (entries[0].stamp < horizon or len(entries) > self.max_buffer)
@@ -485,7 +503,7 @@ class SamplePipeline:
             entries.popleft()
 
     # -- wrenches --------------------------------------------------------------------------------
-    def add_wrench(self, msg: WrenchData) -> list[Sample]:
+    def _add_wrench(self, msg: WrenchData) -> list[Sample]:
         """Take one wrench (force in N, torque in N·m, in the sensor frame).
 
         Args:
@@ -494,7 +512,7 @@ class SamplePipeline:
         Returns:
             The samples completed by this message (none while its joint states are pending).
         """
-        if self.output == "joint_torques":
+        if self.output == OutputKind.JOINT_TORQUES:
             return self._drop(DROP_WRENCH_IGNORED)
         stamp = msg.stamp_ns
         if stamp <= 0:
@@ -521,6 +539,7 @@ class SamplePipeline:
         if len(self._wrenches) >= self.max_buffer:
             self._wrenches.popleft()
             self.drops[DROP_BUFFER_OVERFLOW] += 1
+        self.last_frame_id = msg.frame_id
         self._wrenches.append(msg)
         return self._resolve_wrenches()
 

@@ -68,10 +68,7 @@ def pipeline_samples(config: EstimatorConfig, messages) -> list[Sample]:
     pipeline = build_pipeline(config)
     samples: list[Sample] = []
     for msg in messages:
-        if isinstance(msg, JointStateData):
-            samples.extend(pipeline.add_joint_state(msg))
-        else:
-            samples.extend(pipeline.add_wrench(msg))
+        samples.extend(pipeline.add(msg))
     return samples
 
 
@@ -595,17 +592,16 @@ def test_bad_messages_are_counted_and_do_not_change_learned_state(config, regres
     injected = 0
     for i, msg in enumerate(msgs):
         if isinstance(msg, JointStateData):
-            results.extend(est.process_joint_state(msg))
+            results.extend(est.process(msg))
             last_js = msg
         else:
-            results.extend(est.process_wrench(msg))
+            results.extend(est.process(msg))
             last_w = msg
         if i % 97 == 50 and last_js is not None and last_w is not None:
             for bad, reason in _bad_messages(last_js, last_w):
                 before = snapshot(est)
                 drops_before = est.drops
-                process = est.process_joint_state if isinstance(bad, JointStateData) else est.process_wrench
-                assert process(bad) == []
+                assert est.process(bad) == []
                 assert_same_state(snapshot(est), before)
                 diff = {k: v - drops_before[k] for k, v in est.drops.items() if v != drops_before[k]}
                 assert diff == {reason: 1}, (reason, diff)

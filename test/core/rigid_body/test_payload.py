@@ -69,7 +69,7 @@ def panda_pickup():
             est.tare_payload()
         if detected_before_pickup is None and stamp >= tare_ns + round(0.19e9):
             detected_before_pickup = est.payload.detected
-        est.process_joint_state(JointStateData(stamp, rec.joint_names, rec.q_measured[k], rec.dq_measured[k],
+        est.process(JointStateData(stamp, rec.joint_names, rec.q_measured[k], rec.dq_measured[k],
                                                rec.measured_torques[k]))
     return est, truth, detected_before_pickup
 
@@ -177,7 +177,7 @@ def panda_carrying():
                                     np.zeros((10, 10)), body=reg.distal_body_name, n_samples=0, reference="t")
     est = OnlineEstimator(load_config(REPO / "config" / "panda.yaml"))
     for k in range(rec.stamps.shape[0]):
-        est.process_joint_state(JointStateData(int(rec.stamps[k]), rec.joint_names, rec.q_measured[k],
+        est.process(JointStateData(int(rec.stamps[k]), rec.joint_names, rec.q_measured[k],
                                                rec.dq_measured[k], rec.measured_torques[k]))
     return est, truth
 

@@ -242,7 +242,7 @@ def test_shipped_parameter_files_validate_and_run(path):
     results = []
     for i in range(len(t)):
         msg = JointStateData(T0_NS + i * 1_000_000, joints, q[i], dq[i], np.full(len(joints), 0.5))
-        results += est.process_joint_state(msg)
+        results += est.process(msg)
     window = est.pipeline.estimator.window
     assert window == 81  # 0.08 s at 1 kHz
     assert len(results) == len(t) - window // 2 - (window // 2)  # every decided sample but the warm-up

@@ -346,7 +346,7 @@ def test_pipeline_emits_each_joint_torque_sample_with_its_own_joint_state():
     n_samples = 0
     for k, s in enumerate(stamps.tolist()):
         msg = JointStateData(s, joints, np.zeros(n), dq[k], np.full(n, 0.5))
-        out = pipe.add_joint_state(msg)
+        out = pipe.add(msg)
         ((ref_stamp, expected),) = twin.update(s, dq[k])
         assert ref_stamp == s
         if expected is None:

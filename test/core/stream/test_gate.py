@@ -145,7 +145,7 @@ def test_gate_and_noise_state_survive_a_checkpoint(tmp_path):
     rng = np.random.default_rng(0)
     for k in range(300):  # 3 s at 100 Hz of smooth motion, torques a smooth function of the state
         q = 0.3 * np.sin(0.5 * k * 0.01 + np.arange(4))
-        est.process_joint_state(JointStateData(T0 + k * DT, joints, q, np.cos(q), np.sin(q) + 0.01 *
+        est.process(JointStateData(T0 + k * DT, joints, q, np.cos(q), np.sin(q) + 0.01 *
                                                rng.standard_normal(4)))
     assert est.gate.counts[Verdict.INLIER] > 0
     est.save(tmp_path / "c.npz")

@@ -140,7 +140,7 @@ def test_decisions_equal_the_reference_and_clean_streams_lose_nothing(hz):
     got = np.zeros(n, bool)
     for k, msg in enumerate(states):
         before = pipe.drops["glitch"]
-        pipe.add_joint_state(msg)
+        pipe.add(msg)
         got[k - 1] = pipe.drops["glitch"] > before  # a suspect is decided (and counted) by the next state
     X = np.array([np.r_[m.position, m.velocity] for m in states])
     expected = reference_glitches(np.array([m.stamp_ns for m in states]), X, RATIO, TAU)
@@ -155,7 +155,7 @@ def test_decisions_equal_the_reference_and_clean_streams_lose_nothing(hz):
     for stream in (clean, _joint_states(hz, 20.0, seed=2, noise=0.0)):
         pipe = SamplePipeline(JOINTS, output="joint_torques", glitch_ratio=RATIO, glitch_time_constant=TAU)
         for msg in stream:
-            pipe.add_joint_state(msg)
+            pipe.add(msg)
         assert pipe.drops["glitch"] == 0
 
 
@@ -179,8 +179,7 @@ def test_a_velocity_glitch_does_not_reach_the_outputs(ratio):
     est = OnlineEstimator(config)
     errors: dict[int, float] = {}
     for msg in messages:
-        results = (est.process_joint_state(msg) if isinstance(msg, JointStateData)
-                   else est.process_wrench(msg))
+        results = est.process(msg)
         for r in results:
             errors[r.sample.stamp_ns] = float(np.abs(r.external).max())
     glitch_stamp = messages[k].stamp_ns
@@ -208,7 +207,7 @@ def _glitch_drops(joints: tuple[str, ...], states: list[JointStateData]) -> tupl
     where = set()
     for k, msg in enumerate(states):
         before = pipe.drops["glitch"]
-        pipe.add_joint_state(msg)
+        pipe.add(msg)
         if pipe.drops["glitch"] > before:
             where.add(k - 1)  # decided by the next state
     return pipe.drops["glitch"], where

@@ -95,10 +95,7 @@ def clean_events(
 def feed(pipeline, events):
     samples = []
     for _, msg in events:
-        if isinstance(msg, JointStateData):
-            samples.extend(pipeline.add_joint_state(msg))
-        else:
-            samples.extend(pipeline.add_wrench(msg))
+        samples.extend(pipeline.add(msg))
     return samples
 
 
@@ -248,7 +245,7 @@ def test_finite_difference_pipeline_is_immediate_and_states_its_lag():
     events = clean_events(duration_s=2.0, wrench_offset_ms=0, wrench_latency_ms=1)
     samples = []
     for _, msg in events:
-        out = p.add_joint_state(msg) if isinstance(msg, JointStateData) else p.add_wrench(msg)
+        out = p.add(msg)
         if isinstance(msg, WrenchData) and secs(msg.stamp_ns) > 0.1:
             assert len(out) == 1  # emitted as soon as the wrench arrives
         samples += out
@@ -426,18 +423,18 @@ def test_joint_torque_output_uses_effort_of_configured_joints():
     msgs = [joint_state(T0 + (k + 1) * 10 * MS, rng) for k in range(50)]
     samples = []
     for m in msgs:
-        samples += p.add_joint_state(m)
-    assert p.add_wrench(wrench(T0 + 5 * MS)) == []
+        samples += p.add(m)
+    assert p.add(wrench(T0 + 5 * MS)) == []
     # NaN effort of a configured joint drops the message; of an extra joint it does not
     bad = msgs[-1]
     names = list(bad.names)
     eff = bad.effort.copy()
     eff[names.index("r_elbow")] = np.nan
-    assert p.add_joint_state(JointStateData(bad.stamp_ns + 1, names, bad.position, bad.velocity, eff)) == []
+    assert p.add(JointStateData(bad.stamp_ns + 1, names, bad.position, bad.velocity, eff)) == []
     eff = bad.effort.copy()
     eff[names.index("torso_yaw")] = np.nan
-    p.add_joint_state(JointStateData(bad.stamp_ns + 2, names, bad.position, bad.velocity, eff))
-    p.add_joint_state(JointStateData(bad.stamp_ns + 3, names, bad.position, bad.velocity, eff[:-1]))
+    p.add(JointStateData(bad.stamp_ns + 2, names, bad.position, bad.velocity, eff))
+    p.add(JointStateData(bad.stamp_ns + 3, names, bad.position, bad.velocity, eff[:-1]))
     assert nonzero(p.drops) == {
         pl.DROP_ACCELERATION_WARMUP: 4,
         pl.DROP_WRENCH_IGNORED: 1,
@@ -481,10 +478,10 @@ def test_memory_is_bounded():
     p = SamplePipeline(JOINTS, max_buffer=64, buffer_s=0.2)
     rng = np.random.default_rng(0)
     for k in range(500):  # wrenches only: they wait, the oldest are discarded
-        p.add_wrench(wrench(T0 + (k + 1) * MS))
+        p.add(wrench(T0 + (k + 1) * MS))
     assert p.n_pending_wrenches == 64 and p.drops[pl.DROP_BUFFER_OVERFLOW] == 500 - 64
     for k in range(2000):  # 1 kHz joint states for 2 s: at most buffer_s worth are kept
-        p.add_joint_state(joint_state(T0 + 10**9 + k * MS, rng, shuffle=False))
+        p.add(joint_state(T0 + 10**9 + k * MS, rng, shuffle=False))
         assert len(p._entries) <= 202
     assert p.n_pending_wrenches == 0
 
@@ -540,16 +537,16 @@ def test_implausible_values_are_dropped_by_reason_and_bounds_are_configurable():
                  pl.DROP_NONFINITE_JOINT_STATE),
             ]
             for bad, reason in cases:
-                assert p.add_joint_state(bad) == []
+                assert p.add(bad) == []
                 expected[reason] = expected.get(reason, 0) + 1
         if isinstance(msg, WrenchData) and k % 3 == 0:
             y = wrench_of(secs(msg.stamp_ns))
             bad_force = WrenchData(msg.stamp_ns + MS, FRAME, [0.0, -50.1, 0.0], y[3:])
             bad_torque = WrenchData(msg.stamp_ns + MS, FRAME, y[:3], [0.0, 0.0, 1e12])
             for bad in (bad_force, bad_torque):
-                assert p.add_wrench(bad) == []
+                assert p.add(bad) == []
                 expected[pl.DROP_IMPLAUSIBLE_VALUE] = expected.get(pl.DROP_IMPLAUSIBLE_VALUE, 0) + 1
-        got.extend(p.add_joint_state(msg) if isinstance(msg, JointStateData) else p.add_wrench(msg))
+        got.extend(p.add(msg))
     assert_same_samples(got, ref_samples)  # values at the bound or below pass, state untouched
     for reason, count in expected.items():
         assert p.drops[reason] == count > 0
@@ -560,21 +557,21 @@ def test_implausible_values_are_dropped_by_reason_and_bounds_are_configurable():
     huge_extra = js_with(msg, "velocity", EXTRA[0], 1e12)
     for output in ("wrench", "joint_torques"):
         q = SamplePipeline(JOINTS, output=output, **limits)
-        q.add_joint_state(huge_extra)
+        q.add(huge_extra)
         assert q.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 0
     torque_pipe = SamplePipeline(JOINTS, output="joint_torques", **limits)
-    assert torque_pipe.add_joint_state(js_with(msg, "effort", "r_elbow", 60.0)) == []
+    assert torque_pipe.add(js_with(msg, "effort", "r_elbow", 60.0)) == []
     assert torque_pipe.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 1
-    assert SamplePipeline(JOINTS, **limits).add_joint_state(js_with(msg, "effort", "r_elbow", 60.0)) == []
+    assert SamplePipeline(JOINTS, **limits).add(js_with(msg, "effort", "r_elbow", 60.0)) == []
 
     # None lifts a bound (inf and NaN are still non-finite)
     free = SamplePipeline(JOINTS, frame_id=FRAME, max_abs_position=None, max_abs_velocity=None,
                           max_abs_output=None)
-    free.add_joint_state(js_with(msg, "velocity", "r_elbow", 1e300))  # stamp + 1 ms
-    free.add_wrench(WrenchData(msg.stamp_ns, FRAME, [1e300, 0, 0], [0, 0, 0]))
+    free.add(js_with(msg, "velocity", "r_elbow", 1e300))  # stamp + 1 ms
+    free.add(WrenchData(msg.stamp_ns, FRAME, [1e300, 0, 0], [0, 0, 0]))
     assert sum(free.drops.values()) == 0
-    free.add_joint_state(js_with(js_with(msg, "velocity", "r_elbow", np.inf), "position", "r_elbow", 0.0))
-    free.add_wrench(WrenchData(msg.stamp_ns + MS, FRAME, [np.inf, 0, 0], [0, 0, 0]))
+    free.add(js_with(js_with(msg, "velocity", "r_elbow", np.inf), "position", "r_elbow", 0.0))
+    free.add(WrenchData(msg.stamp_ns + MS, FRAME, [np.inf, 0, 0], [0, 0, 0]))
     assert free.drops[pl.DROP_NONFINITE_JOINT_STATE] == 1
     assert free.drops[pl.DROP_NONFINITE_WRENCH] == 1
     assert free.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 0
@@ -586,9 +583,9 @@ def test_default_bounds_pass_every_plausible_robot_value():
     names = JOINTS
     stamps = T0 + np.arange(1, 4) * 10 * MS
     for k, stamp in enumerate(stamps):
-        p.add_joint_state(JointStateData(int(stamp), names, [99.0, -6.3, 0.0, 3.0], [-99.9, 10.0, 0.0, k]))
-    p.add_wrench(WrenchData(int(stamps[1]), FRAME, [9999.0, -1e4, 0.0], [1e4, 0.0, -5.0]))
+        p.add(JointStateData(int(stamp), names, [99.0, -6.3, 0.0, 3.0], [-99.9, 10.0, 0.0, k]))
+    p.add(WrenchData(int(stamps[1]), FRAME, [9999.0, -1e4, 0.0], [1e4, 0.0, -5.0]))
     assert p.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 0
-    p.add_joint_state(JointStateData(int(stamps[-1]) + MS, names, np.zeros(4), [0.0, 0.0, 100.001, 0.0]))
-    p.add_wrench(WrenchData(int(stamps[1]) + MS, FRAME, [0.0, 0.0, 0.0], [0.0, -10000.5, 0.0]))
+    p.add(JointStateData(int(stamps[-1]) + MS, names, np.zeros(4), [0.0, 0.0, 100.001, 0.0]))
+    p.add(WrenchData(int(stamps[1]) + MS, FRAME, [0.0, 0.0, 0.0], [0.0, -10000.5, 0.0]))
     assert p.drops[pl.DROP_IMPLAUSIBLE_VALUE] == 2

@@ -1,0 +1,88 @@
+"""The node's parts assembled from a configuration: regressor, estimator, warm start, loop, model service.
+
+Plain Python (no rclpy): :class:`~semiparam_ros.ros.estimator_node.EstimatorNode` calls :func:`assemble`
+once it has the URDF (from a file, or from a topic it waited on) and wires ROS entities to what comes back.
+Everything that can go wrong here is a start-up error that names its fix.
+
+>>> from semiparam_ros.core.config import EstimatorConfig
+>>> cfg = EstimatorConfig.defaults().with_overrides({"nonparametric.n_features": 8})
+>>> parts = assemble(cfg, checkpoint=None)
+>>> parts.notes
+['cold start: checkpoint.path is empty (no checkpoints)']
+>>> parts.loop.estimator.learning_enabled, parts.model.feedforward is None  # an F/T sensor: no feed-forward
+(True, True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.estimator.build import build_regressor
+from semiparam_ros.core.estimator.online import OnlineEstimator
+from semiparam_ros.errors import CheckpointError, ConfigurationError, StartupError
+from semiparam_ros.service.checkpoint_writer import warm_start
+from semiparam_ros.service.learning_loop import LearningLoop, warm_up_kernels
+from semiparam_ros.service.model_service import ModelService
+
+__all__ = ["Assembly", "assemble", "checkpoint_path"]
+
+
+@dataclass
+class Assembly:
+    """What :func:`assemble` built.
+
+    Attributes:
+        loop: The learning loop around the (warm-started) estimator.
+        model: What is served beside the per-sample predictions (feed-forward, gravity, payload, URDF).
+        notes: What the warm start did, one line each (for the log).
+    """
+
+    loop: LearningLoop
+    model: ModelService
+    notes: list[str]
+
+
+def checkpoint_path(config: EstimatorConfig) -> Path | None:
+    """Return the checkpoint file ``checkpoint.path`` names (``~`` expanded), or None when it is empty."""
+    text = str(config["checkpoint.path"])
+    return Path(text).expanduser() if text else None
+
+
+def assemble(config: EstimatorConfig, urdf_xml: str | None = None, *, source: str = "the URDF given",
+             checkpoint: Path | None) -> Assembly:
+    """Build the estimator of ``config``, warm start it and put the loop and the model service around it.
+
+    The compiled kernels are run once on a throw-away copy (:func:`warm_up_kernels`), so the first real
+    sample does not pay for compilation.
+
+    Args:
+        config: The validated configuration.
+        urdf_xml: The URDF text when it did not come from ``robot.urdf`` (a topic); None reads that.
+        source: Where ``urdf_xml`` came from (for error messages).
+        checkpoint: The checkpoint to warm start from (``checkpoint.load_on_start``), or None.
+
+    Returns:
+        The assembled parts.
+
+    Raises:
+        StartupError: The URDF cannot be read or does not fit the joints, a parameter is invalid, or the
+            checkpoint cannot be loaded (the message says how to proceed).
+    """
+    try:
+        estimator = OnlineEstimator(config, regressor=build_regressor(config, urdf_xml, source=source))
+    except (ConfigurationError, OSError) as err:
+        raise StartupError(f"cannot build the estimator: {err}") from err
+    warm_up_kernels(config, estimator)
+    try:
+        notes = warm_start(estimator, checkpoint, load=bool(config["checkpoint.load_on_start"]))
+    except CheckpointError as err:
+        raise StartupError(str(err)) from err
+    estimator.learning_enabled = bool(config["learning_enabled"])
+    loop = LearningLoop(estimator, queue_size=config["queue_size"], max_delay_s=config["overload.max_delay"])
+    try:
+        model = ModelService(loop, config)
+    except ConfigurationError as err:
+        raise StartupError(f"invalid parameter: {err}") from err
+    return Assembly(loop, model, notes)
