@@ -60,8 +60,8 @@ from sklearn.linear_model import Ridge
 from threadpoolctl import threadpool_limits
 
 from semiparam_ros.core.learners.features import Standardizer
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
 from semiparam_ros.core.learners.rrls import RecursiveRLS
-from semiparam_ros.core.learners.semiparametric import NonparametricModel
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "test"))
 from helpers.reference_rrls import ReferenceQRRLS

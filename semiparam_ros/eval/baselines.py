@@ -14,7 +14,7 @@ Each is an online model of the protocol's interface (``predict_one``, ``predict_
   ``π̂ = argmin Σ_m ‖y_m − Φ_m π‖²``. The stacked regressor is reduced block by block to its triangular
   factor (``[R | d]`` with ``RᵀR = ΦᵀΦ``, ``Rᵀd = ΦᵀY``: a tall-skinny QR in O(n·t·b²) time and O(b²)
   memory, never the normal equations), and :func:`least_squares_model` turns the fit into a
-  :class:`~semiparam_ros.core.learners.semiparametric.ParametricModel` that starts from exactly that state.
+  :class:`~semiparam_ros.core.learners.parametric.ParametricModel` that starts from exactly that state.
   Frozen, it is the offline identification; updated online (test-then-train), each new sample extends the
   least squares problem: after k test samples its parameters are the ordinary least-squares solution on the
   training log plus those k samples (the recursive RLS of :mod:`semiparam_ros.core.learners.rrls` with β = 1).
@@ -34,8 +34,8 @@ from scipy.linalg import solve_triangular
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import build_regressor, column_scale, regressor_function
 from semiparam_ros.core.learners.contract import Prediction
+from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.core.learners.rrls import RecursiveRLS
-from semiparam_ros.core.learners.semiparametric import ParametricModel
 from semiparam_ros.core.validation import check_finite_array, check_positive_int
 from semiparam_ros.errors import ConfigurationError
 
@@ -258,7 +258,7 @@ def batch_least_squares(regressor: Regressor, X: np.ndarray, Y: np.ndarray, *,
 def least_squares_model(regressor: Regressor, fit: LeastSquaresFit) -> ParametricModel:
     """Build a rigid-body learner whose state is the batch fit: ordinary recursive least squares from there.
 
-    The returned :class:`~semiparam_ros.core.learners.semiparametric.ParametricModel` (zero prior, β = 1)
+    The returned :class:`~semiparam_ros.core.learners.parametric.ParametricModel` (zero prior, β = 1)
     predicts ``Φ(x) π̂`` and, updated with new samples, stays the exact least-squares solution over the fit's
     log plus those samples (its factor is the fit's, extended by Givens rotations; no ridge: λ only sets the
     factor of a reset, never used here).

@@ -13,8 +13,9 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.estimator.build import traits_of
+from semiparam_ros.core.learners.cascade import SemiparametricModel
 from semiparam_ros.core.learners.contract import Prediction
-from semiparam_ros.core.learners.semiparametric import SemiparametricModel
 
 __all__ = ["FrozenParametricSP"]
 
@@ -22,7 +23,7 @@ __all__ = ["FrozenParametricSP"]
 class FrozenParametricSP:
     """A semiparametric learner whose rigid-body stage learns only its first ``learn_parametric_for`` samples.
 
-    Wraps a :class:`~semiparam_ros.core.learners.semiparametric.SemiparametricModel`. Before the limit it
+    Wraps a :class:`~semiparam_ros.core.learners.cascade.SemiparametricModel`. Before the limit it
     behaves exactly like the wrapped model (``predict_learn_one`` of both stages). Afterwards the rigid-body
     stage only predicts ``ŷ = Φ(x) π̂`` and the residual stage predicts and learns ``y − ŷ`` from ``[x, ŷ]``
     as in the wrapped model.
@@ -36,8 +37,8 @@ class FrozenParametricSP:
     """
 
     def __init__(self, model: SemiparametricModel, learn_parametric_for: int) -> None:
-        if not isinstance(model, SemiparametricModel):
-            raise ValueError("FrozenParametricSP wraps a SemiparametricModel")
+        if traits_of(model).combination != "cascade":
+            raise ValueError("FrozenParametricSP wraps a SemiparametricModel (the cascade)")
         if learn_parametric_for < 0:
             raise ValueError(f"learn_parametric_for must be >= 0, got {learn_parametric_for}")
         self.model = model
@@ -64,6 +65,14 @@ class FrozenParametricSP:
             out = Prediction(yp, residual, yp + residual)
         self.n_samples_seen += 1
         return out
+
+    def predict_one(self, x: Any) -> Prediction:
+        """Predict both stages at x (the rigid-body stage as it is now, frozen or not)."""
+        return self.model.predict_one(x)
+
+    def learn_one(self, x: Any, y: Any) -> None:
+        """Learn (x, y) as :meth:`predict_learn_one` does, dropping the prediction."""
+        self.predict_learn_one(x, y)
 
     def copy(self) -> FrozenParametricSP:
         """Independent deep copy (same freezing point and sample count)."""

@@ -30,7 +30,7 @@ __all__ = [
 #: (:class:`~semiparam_ros.core.learners.joint.JointSemiparametricModel`): the SP model built with
 #: ``semiparametric.combination = joint`` whatever the configuration says.
 JOINT_SP = "SPJ"
-#: The paper's cascade (:class:`~semiparam_ros.core.learners.semiparametric.SemiparametricModel`): the SP
+#: The paper's cascade (:class:`~semiparam_ros.core.learners.cascade.SemiparametricModel`): the SP
 #: model built with ``semiparametric.combination = cascade`` whatever the configuration says.
 CASCADE_SP = "SPC"
 

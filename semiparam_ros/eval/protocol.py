@@ -6,11 +6,12 @@ semiparametric (SP) models at zero; train each on the whole training log (XY cir
 then update one sample at a time; report mean and standard deviation over the parts of the
 component-averaged RMSE of forces and torques over a sliding window.
 
-This module works on plain arrays (:class:`SampleArrays`) and on any object with the online-model
-interface of :mod:`semiparam_ros.core.learners.semiparametric` (``predict_learn_one(x, y)`` returning a
-prediction with a ``total`` attribute or an array, and ``copy()``), so it is tested against hand-written loops
-on toy models and used unchanged on bags by :mod:`semiparam_ros.eval.replay`. What the outputs are (a wrench
-or joint torques, hence the groups and units) is given by an :class:`~semiparam_ros.eval.metrics.OutputSpec`.
+This module works on plain arrays (:class:`SampleArrays`) and on any
+:class:`~semiparam_ros.core.learners.contract.OnlineModel` (``predict_learn_one(x, y)`` returning a
+prediction with a ``total`` attribute or an array, and ``copy()``), so it is tested against hand-written
+loops on toy models and used unchanged on bags by :mod:`semiparam_ros.eval.replay`. What the outputs
+are (a wrench or joint torques, hence the groups and units) is given by an
+:class:`~semiparam_ros.eval.metrics.OutputSpec`.
 
 A second protocol, :func:`run_adaptation`, follows one stream through an abrupt change (a payload picked
 up at a known time) and measures how fast each model's error returns to its pre-change level.
@@ -27,10 +28,11 @@ import sys
 import time
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.learners.contract import OnlineModel
 from semiparam_ros.core.stream.rate import stream_period_s
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.metrics import OutputSpec, component_rmse, group_rmse, window_samples, windowed_rmse
@@ -38,7 +40,6 @@ from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_
 
 __all__ = [
     "AdaptationResult",
-    "OnlineModel",
     "ProtocolResult",
     "Recovery",
     "SampleArrays",
@@ -55,18 +56,6 @@ __all__ = [
 ]
 
 _NS = 1e-9
-
-
-class OnlineModel(Protocol):
-    """What the protocol needs from a learner (P, NP and SP models of ``core.semiparametric``)."""
-
-    def predict_learn_one(self, x: np.ndarray, y: np.ndarray) -> Any:
-        """A-priori prediction at ``x`` (array or object with ``.total``), then learn ``(x, y)``."""
-        ...
-
-    def copy(self) -> OnlineModel:
-        """Independent deep copy."""
-        ...
 
 
 Progress = Callable[[int], None]

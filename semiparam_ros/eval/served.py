@@ -187,6 +187,10 @@ def node_learner(config: EstimatorConfig, name: str) -> NodeLearner | None:
     return NodeLearner(OnlineEstimator(config, kind=kind))  # type: ignore[arg-type]  # checked by build
 
 
+_FIRST_STAMP_NS = 1_000_000_000  # the stamp of a first sample given without one [ns]
+_NOMINAL_STEP_NS = 1_000_000  # the step between samples given without stamps [ns]
+
+
 class NodeLearner:
     """The node's per-sample step as an evaluation's online learner: what the node would have published.
 
@@ -214,7 +218,9 @@ class NodeLearner:
         self._restart = False  # the next sample begins another recording
         self._n = len(estimator.config["robot.joints"])
 
-    def _sample(self, x: Any, y: Any, stamp_ns: int) -> Sample:
+    def _sample(self, x: Any, y: Any, stamp_ns: int | None) -> Sample:
+        if stamp_ns is None:  # no stamp given: one nominal period after the previous sample
+            stamp_ns = _FIRST_STAMP_NS if self._last_ns is None else self._last_ns + _NOMINAL_STEP_NS
         if self._restart or (self._last_ns is not None and stamp_ns <= self._last_ns):
             self.estimator.start_recording()
             self._restart = False
@@ -223,15 +229,18 @@ class NodeLearner:
         n = self._n
         return Sample(int(stamp_ns), xv[:n], xv[n:2 * n], xv[2 * n:], np.asarray(y, dtype=np.float64))
 
-    def predict_learn_one(self, x: Any, y: Any, *, stamp_ns: int) -> Prediction:
+    def predict_learn_one(self, x: Any, y: Any, *, stamp_ns: int | None = None) -> Prediction:
         """Predict the sample a priori, then learn it as the node does (unless the gate refuses it).
+
+        ``stamp_ns`` is the sample's stamp [ns]; None: 1 ms after the previous sample (the protocol and
+        the horizon table always pass the samples' own stamps).
 
         Raises:
             RejectedSampleError: A sample the learner refuses (nothing changed).
         """
         return self.estimator.step(self._sample(x, y, stamp_ns)).prediction
 
-    def learn_one(self, x: Any, y: Any, *, stamp_ns: int) -> None:
+    def learn_one(self, x: Any, y: Any, *, stamp_ns: int | None = None) -> None:
         """Learn the sample as the node does (the a-priori prediction is made and dropped)."""
         self.estimator.step(self._sample(x, y, stamp_ns))
 

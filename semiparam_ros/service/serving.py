@@ -41,18 +41,18 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from semiparam_ros.core.checkpoint import load_npz
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator.build import Model, build_regressor
+from semiparam_ros.core.estimator.build import Model, build_regressor, rigid_body_part, traits_of
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.estimator.state import learner_kind, read_config
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.learners.contract import Prediction
-from semiparam_ros.core.learners.semiparametric import ParametricModel, rigid_body_part
+from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.core.learners.uncertainty import predict_with_variance
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, ExcitationReport
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate
@@ -278,7 +278,7 @@ class LearnedModel:
         model = self._model()
         npm = getattr(model, "nonparametric", None)
         if npm is None:
-            return model.n_samples_seen > 0 if isinstance(model, ParametricModel) else False
+            return model.n_samples_seen > 0 if traits_of(model).kind == "P" else False
         return bool(npm.standardizer.ready)
 
     @property
@@ -310,25 +310,26 @@ class LearnedModel:
     def _model_rows(self, X: np.ndarray, consistent: bool | None = None) -> Prediction:
         """Return the model (no fast correction) at each row of X with its relative variance, all (N, t)."""
         model = self._model()
+        traits = traits_of(model)
         rigid = None
         if consistent is None:  # the configuration's choice, where it can be had without solving here
             consistent = (bool(self.config["parametric.consistent"])
-                          and (self._attached is not None or self._solve)
-                          and isinstance(model, ConsistentSemiparametricModel | ParametricModel))
+                          and (self._attached is not None or self._solve) and traits.takes_rigid)
         if consistent:
-            if not isinstance(model, ConsistentSemiparametricModel | ParametricModel):
+            if not traits.takes_rigid:
                 raise ValueError("consistent=True needs the consistent SP (the default) or the P learner")
             rigid = self.estimator.column_scale * self.consistent().base
-        elif isinstance(model, ParametricModel) and model.rigid_override is not None:
+        elif traits.kind == "P" and cast(ParametricModel, model).rigid_override is not None:
             rigid = model.parameters  # asked for the learned π̂, not the projection the live P predicts with
-        if isinstance(model, ConsistentSemiparametricModel):
+        if traits.combination == "consistent":
+            model = cast(ConsistentSemiparametricModel, model)
             if X.shape[0] == 1:
                 pred = model.predict_model(X[0], rigid)
                 return Prediction(pred.parametric[None], pred.residual[None], pred.total[None],
                                   np.asarray(pred.variance)[None])
             return model.predict_model_many(X, rigid)
-        if isinstance(model, ParametricModel) and (X.shape[0] > 1 or rigid is not None):
-            return model.predict_many(X, rigid)
+        if traits.kind == "P" and (X.shape[0] > 1 or rigid is not None):
+            return cast(ParametricModel, model).predict_many(X, rigid)
         preds = [predict_with_variance(model, x) for x in X]  # the other learners: one state at a time
         return Prediction(np.array([p.parametric for p in preds]), np.array([p.residual for p in preds]),
                           np.array([p.total for p in preds]), np.array([p.variance for p in preds]))

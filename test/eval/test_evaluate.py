@@ -247,8 +247,8 @@ def test_paper_checks_judge_sp_and_spj_separately() -> None:
 
 def test_build_models_spj_is_the_joint_fit_whatever_the_configuration_says() -> None:
     from semiparam_ros.core.config import load_config
+    from semiparam_ros.core.learners.cascade import SemiparametricModel
     from semiparam_ros.core.learners.joint import JointSemiparametricModel
-    from semiparam_ros.core.learners.semiparametric import SemiparametricModel
     from semiparam_ros.eval.replay import JOINT_SP, build_models
 
     small = {"nonparametric.n_features": 20, "nonparametric.standardizer_warmup": 5}
@@ -267,8 +267,8 @@ def test_build_models_spj_is_the_joint_fit_whatever_the_configuration_says() -> 
 
 def test_build_models_spc_is_the_papers_cascade_whatever_the_configuration_says() -> None:
     from semiparam_ros.core.config import load_config
+    from semiparam_ros.core.learners.cascade import SemiparametricModel
     from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
-    from semiparam_ros.core.learners.semiparametric import SemiparametricModel
     from semiparam_ros.eval.replay import CASCADE_SP, build_models
 
     config = load_config(CONFIG).with_overrides({"nonparametric.n_features": 20})

@@ -8,11 +8,9 @@ import numpy as np
 import pytest
 from helpers import REPO
 
-from semiparam_ros.core.learners.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    SemiparametricModel,
-)
+from semiparam_ros.core.learners.cascade import SemiparametricModel
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.baselines import Persistence
 from semiparam_ros.eval.horizon import (

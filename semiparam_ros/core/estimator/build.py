@@ -10,20 +10,19 @@ is known, at :data:`NOMINAL_PERIOD_S`.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.config import EstimatorConfig, parameter_spec
 from semiparam_ros.core.kinds import OutputKind
+from semiparam_ros.core.learners.cascade import SemiparametricModel
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.learners.contract import PeriodSettings
 from semiparam_ros.core.learners.joint import JointSemiparametricModel
-from semiparam_ros.core.learners.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    SemiparametricModel,
-)
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.urdf import RegressorSpec
 from semiparam_ros.core.stream.acceleration import AccelerationConfig
@@ -287,6 +286,74 @@ def build_model(config: EstimatorConfig, kind: ModelKind = "SP",
     if sample_period_s is not None:
         model.on_period(sample_period_s)
     return model
+
+
+@dataclass(frozen=True)
+class ModelTraits:
+    """What the estimator and the served model need to know of a learner's kind: the builder's answer.
+
+    The builder is the one place that knows the learner classes; everything else asks
+    :func:`traits_of` (no ``isinstance`` on a learner class elsewhere).
+
+    Attributes:
+        kind: ``"P"``, ``"NP"`` or ``"SP"``.
+        combination: The SP's ``semiparametric.combination`` (``cascade``, ``joint``, ``consistent``);
+            None for P and NP.
+        takes_rigid: Whether it predicts with one rigid body that a consistent projection can replace
+            (P and the consistent SP: :class:`~semiparam_ros.core.learners.contract.RigidBodyUser`).
+        learns_context: Whether learning a sample it just predicted goes through ``learn_ahead`` of that
+            prediction's context (the consistent SP, whose a-priori prediction is the one it learns from);
+            the others learn with ``predict_learn_one`` (the paper's predict-then-learn, bit for bit).
+
+    >>> traits_of(NonparametricModel(3, 1, n_features=4, standardizer_warmup=0))
+    ModelTraits(kind='NP', combination=None, takes_rigid=False, learns_context=False)
+    """
+
+    kind: str
+    combination: str | None
+    takes_rigid: bool
+    learns_context: bool
+
+
+def learner_variants() -> tuple[tuple[ModelKind, str], ...]:
+    """Every learner :func:`build_model` makes, as ``(kind, semiparametric.combination)`` pairs.
+
+    P and NP, and SP in each combination the parameter table allows (P and NP ignore the combination).
+
+    >>> learner_variants()
+    (('P', 'cascade'), ('NP', 'cascade'), ('SP', 'cascade'), ('SP', 'joint'), ('SP', 'consistent'))
+    """
+    combinations = parameter_spec("semiparametric.combination").choices or ()
+    return (("P", "cascade"), ("NP", "cascade"), *(("SP", c) for c in combinations))
+
+
+def traits_of(model: object) -> ModelTraits:
+    """Return the :class:`ModelTraits` of a learner :func:`build_model` made.
+
+    Raises:
+        TypeError: For an object that is not one of the builder's learners.
+    """
+    if isinstance(model, ConsistentSemiparametricModel):
+        return ModelTraits("SP", "consistent", takes_rigid=True, learns_context=True)
+    if isinstance(model, JointSemiparametricModel):
+        return ModelTraits("SP", "joint", takes_rigid=False, learns_context=False)
+    if isinstance(model, SemiparametricModel):
+        return ModelTraits("SP", "cascade", takes_rigid=False, learns_context=False)
+    if isinstance(model, ParametricModel):
+        return ModelTraits("P", None, takes_rigid=True, learns_context=False)
+    if isinstance(model, NonparametricModel):
+        return ModelTraits("NP", None, takes_rigid=False, learns_context=False)
+    raise TypeError(f"not a learner of the builder: {type(model).__name__}")
+
+
+def rigid_body_part(model: object) -> ParametricModel | None:
+    """Return a model's rigid-body learner: P itself, the parametric stage of an SP; None for NP.
+
+    >>> rigid_body_part(NonparametricModel(3, 1, n_features=4, standardizer_warmup=0)) is None
+    True
+    """
+    par = model if isinstance(model, ParametricModel) else getattr(model, "parametric", None)
+    return par if isinstance(par, ParametricModel) else None
 
 
 def period_settings(config: EstimatorConfig) -> PeriodSettings:

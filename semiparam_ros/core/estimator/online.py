@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -26,13 +27,13 @@ from semiparam_ros.core.estimator.build import (
     build_regressor,
     column_scale,
     gate_config,
+    rigid_body_part,
+    traits_of,
 )
 from semiparam_ros.core.estimator.state import check_magnitudes, meta_arrays, read_meta, read_period
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.learners._step_kernels import joined_within
-from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
-from semiparam_ros.core.learners.contract import Prediction
-from semiparam_ros.core.learners.semiparametric import ParametricModel, rigid_body_part
+from semiparam_ros.core.learners.contract import Prediction, RigidBodyUser
 from semiparam_ros.core.learners.uncertainty import NoiseScale
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, consistent_parameters
@@ -85,10 +86,6 @@ class StepResult:
         return self.sample.y - self.prediction.total
 
 
-#: The models that predict with one rigid body, so with a consistent projection once one is solved.
-_TAKES_RIGID = (ConsistentSemiparametricModel, ParametricModel)
-
-
 class OnlineEstimator:
     """Pipeline + semiparametric learner, driven one message at a time.
 
@@ -99,6 +96,7 @@ class OnlineEstimator:
 
     Example:
         >>> from semiparam_ros.core.config import EstimatorConfig
+        >>> from semiparam_ros.core.stream.messages import JointStateData
         >>> est = OnlineEstimator(EstimatorConfig.defaults())  # iCub right arm, F/T sensor wrench
         >>> est.regressor.n_base
         17
@@ -115,6 +113,8 @@ class OnlineEstimator:
         self.regressor = regressor if regressor is not None else build_regressor(config)
         self.pipeline = build_pipeline(config)
         self.model = build_model(config, kind, self.regressor)
+        #: What the estimator needs to know of its learner's kind (the builder's answer).
+        self.traits = traits_of(self.model)
         self._scale = column_scale(config, self.regressor)
         self.learning_enabled = bool(config["learning_enabled"])
         self._n_joints = len(config["robot.joints"])
@@ -227,7 +227,7 @@ class OnlineEstimator:
             # SP's predict-then-learn is the a-priori prediction above, then learning it
             learned = self.learning_enabled
             if learned:
-                if isinstance(model, ConsistentSemiparametricModel):
+                if self.traits.learns_context:
                     model.learn_ahead_checked(ahead, y)
                 else:
                     prediction = model.predict_learn_one(x, y)
@@ -339,7 +339,7 @@ class OnlineEstimator:
         """
         return (bool(self.config["parametric.consistent"])
                 and self.config.output_kind == OutputKind.JOINT_TORQUES
-                and isinstance(self.model, _TAKES_RIGID))
+                and self.traits.takes_rigid)
 
     def _project_if_due(self, stamp_ns: int) -> None:
         """Solve the consistent projection if the node's schedule, in the samples' time, says it is due.
@@ -349,9 +349,9 @@ class OnlineEstimator:
         solution (a warm start from a checkpoint); a solver failure keeps the last solution. Nothing is
         solved before the first learned sample (the projection of the prior is the prior).
         """
-        model = self.model
-        if not (self.projects and isinstance(model, _TAKES_RIGID)):
+        if not self.projects:
             return
+        model = cast(RigidBodyUser, self.model)
         last = self._projected_at
         if last is not None and stamp_ns - last < self.config["parametric.consistent_period"] * 1e9:
             return
@@ -386,10 +386,10 @@ class OnlineEstimator:
         Raises:
             RejectedSampleError: An estimate of another size or with non-finite values (model unchanged).
         """
-        model = self.model
-        if not isinstance(model, _TAKES_RIGID):
+        if not self.traits.takes_rigid:
             return False
-        model.use_rigid(None if estimate is None else self._scale * np.asarray(estimate.base))
+        rigid = None if estimate is None else self._scale * np.asarray(estimate.base)
+        cast(RigidBodyUser, self.model).use_rigid(rigid)
         return True
 
     def apply_runtime_parameters(self, config: EstimatorConfig) -> None:
@@ -604,6 +604,7 @@ class OnlineEstimator:
         elif saved_period is not None:  # else the period it learned at (measured again once data come)
             model.on_period(saved_period)
         self.model = model
+        self.traits = traits_of(model)
         self.noise = noise
         self.gate = gate
         self.payload = payload

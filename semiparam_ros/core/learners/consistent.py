@@ -1,6 +1,6 @@
 """A semiparametric model that stays a model: a consistent, abstaining residual plus a fast error tracker.
 
-The paper's cascade (:class:`~semiparam_ros.core.learners.semiparametric.SemiparametricModel`) is an excellent
+The paper's cascade (:class:`~semiparam_ros.core.learners.cascade.SemiparametricModel`) is an excellent
 one-step-ahead predictor and a poor *model*: trained on one motion and used without updates on another it
 is worse than its own rigid-body part, because (a) its residual learned the targets ``y − Φ(x)π̂_t`` while
 π̂_t was still moving, so it is inconsistent with the final π̂; (b) random Fourier features are global
@@ -85,7 +85,7 @@ its residual weighted for the error it has on other motion: the residual's error
 c samples (:meth:`correlation_samples`), so its error there is ``c σ² v`` rather than ``σ² v``
 (:meth:`residual_weight` with ``served``).
 
-Parts (:class:`~semiparam_ros.core.learners.semiparametric.Prediction`): ``parametric = ŷ_P``,
+Parts (:class:`~semiparam_ros.core.learners.contract.Prediction`): ``parametric = ŷ_P``,
 ``residual = g·r + correction``, ``correction = wΦδ_f + κb̂`` (so ``total − correction`` is model(x)),
 ``variance`` the relative variance of the rigid-body part plus the residual stage's.
 
@@ -113,17 +113,14 @@ from semiparam_ros.core.learners._consistent_kernels import (
     weighted_residual,
 )
 from semiparam_ros.core.learners.adaptation import forgetting_factor
+from semiparam_ros.core.learners.base import Regressor, checked_rigid
 from semiparam_ros.core.learners.contract import Prediction, PredictionContext
 from semiparam_ros.core.learners.cross_products import EntryCrossProducts
 from semiparam_ros.core.learners.features import Standardizer
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.core.learners.rrls import RecursiveRLS
-from semiparam_ros.core.learners.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    Regressor,
-    _TwoStageModel,
-    checked_rigid,
-)
+from semiparam_ros.core.learners.two_stage import TwoStageModel
 from semiparam_ros.core.validation import check_finite_array, check_positive_int, check_range
 from semiparam_ros.errors import CheckpointError
 
@@ -360,7 +357,7 @@ class _Context(PredictionContext):
         self.fast_candidate = fast_candidate  # κ_f Φδ_f at x before its weight (zeros without a tracker)
 
 
-class ConsistentSemiparametricModel(_TwoStageModel):
+class ConsistentSemiparametricModel(TwoStageModel):
     """Rigid-body part, consistent abstaining residual and fast error tracker (see the module docstring).
 
     Args:

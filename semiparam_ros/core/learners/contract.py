@@ -1,11 +1,16 @@
 """The learner contract: what the estimator, adaptation and the semiparametric combinations need of a learner.
 
-Every learner of :mod:`semiparam_ros.core.learners.semiparametric` (P, NP, the cascade SP),
-:mod:`~semiparam_ros.core.learners.joint` (SPJ) and :mod:`~semiparam_ros.core.learners.consistent`
-(the consistent SP) satisfies :class:`Learner`; the type checker holds them to it
-(:data:`semiparam_ros.core.estimator.build.Model`) and ``test/core/learners/test_contract.py`` runs the
-same behavioural checks over each. A learner predicts a :class:`Prediction`; ``predict_ahead`` keeps a
-:class:`PredictionContext` that ``learn_ahead`` consumes.
+The narrow contract is :class:`OnlineModel`: predict, learn, copy. Every model of the project satisfies
+it — the learners (:mod:`~semiparam_ros.core.learners.parametric` P,
+:mod:`~semiparam_ros.core.learners.nonparametric` NP, and the SP combinations
+:mod:`~semiparam_ros.core.learners.cascade`, :mod:`~semiparam_ros.core.learners.joint` and
+:mod:`~semiparam_ros.core.learners.consistent`) and the evaluation's reference models — and
+``test/core/learners/test_contract.py`` runs the same behavioural checks over all of them. On top, a
+learner the estimator runs has three facets: :class:`StreamingModel` (predict now, decide, then learn:
+``predict_ahead`` keeps a :class:`PredictionContext` that ``learn_ahead`` consumes), :class:`AdaptiveModel`
+(the sample period and forgetting) and :class:`CheckpointModel` (its state as named arrays);
+:class:`Learner` is the three together. :class:`RigidBodyUser` is the facet of the models that predict
+with one rigid body a consistent projection can replace.
 
 **The sample period.** A learner is told the measured sample period once, by :meth:`Learner.on_period`,
 and converts there what its configuration gives in seconds (:class:`PeriodSettings`): the forgetting of
@@ -14,8 +19,8 @@ correction's memory. Until then it runs with its per-sample factors. ``on_period
 the same period again changes nothing, and a restored checkpoint is told the current one.
 
 The stages of a semiparametric model talk to each other through the public methods of
-:class:`~semiparam_ros.core.learners.semiparametric.ParametricModel` (``phi_fresh``, ``predict_phi``,
-``prior_output``, …), :class:`~semiparam_ros.core.learners.semiparametric.NonparametricModel`
+:class:`~semiparam_ros.core.learners.parametric.ParametricModel` (``phi_fresh``, ``predict_phi``,
+``prior_output``, …), :class:`~semiparam_ros.core.learners.nonparametric.NonparametricModel`
 (``features_of``, ``predict_input``, ``learn_input``) and
 :class:`~semiparam_ros.core.learners.rrls.RecursiveRLS` (``predict_checked``, ``checked_step``,
 ``defer_step``, …): the ``*_checked`` methods take inputs the caller already validated (finite, the right
@@ -40,7 +45,17 @@ import numpy as np
 
 from semiparam_ros.core.learners.rrls import RecursiveRLS
 
-__all__ = ["Learner", "PeriodSettings", "Prediction", "PredictionContext"]
+__all__ = [
+    "AdaptiveModel",
+    "CheckpointModel",
+    "Learner",
+    "OnlineModel",
+    "PeriodSettings",
+    "Prediction",
+    "PredictionContext",
+    "RigidBodyUser",
+    "StreamingModel",
+]
 
 
 @dataclass(frozen=True)
@@ -106,34 +121,47 @@ class PeriodSettings:
 
 
 @runtime_checkable
-class Learner(Protocol):
-    """An online learner of ``y = f(x)`` (see the module docstring).
+class OnlineModel(Protocol):
+    """The narrow contract: predict, learn, copy (every learner and every evaluation model).
+
+    The evaluation protocol, the horizon table and the reference models of ``semiparam_ros.eval`` need
+    no more of a model; ``test/core/learners/test_contract.py`` runs the same checks over all of them.
+    """
+
+    def predict_one(self, x: Any) -> Prediction:
+        """Predict y at x (units of y)."""
+        ...
+
+    def learn_one(self, x: Any, y: Any) -> None:
+        """Learn one sample (x, y)."""
+        ...
+
+    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
+        """Predict y at x a priori, then learn (x, y); returns the prediction."""
+        ...
+
+    def copy(self) -> Any:
+        """Return an independent copy: learning one changes nothing in the other."""
+        ...
+
+
+@runtime_checkable
+class StreamingModel(OnlineModel, Protocol):
+    """The facet the estimator's per-sample step uses: predict now, decide (the contact gate), then learn.
 
     Attributes:
         n_outputs: Length of y.
         n_samples_seen: Samples learned so far (a prediction context is valid only while it is unchanged).
-        period_settings: What :meth:`on_period` converts.
-        sample_period_s: The period [s] last announced by :meth:`on_period` (None before).
         prediction_age_s: Age [s] of the learned state at the predictions that follow, beyond one sample
             period (0 = the previous sample was learned; set by the estimator from the stamps).
     """
 
     n_outputs: int
     n_samples_seen: int
-    period_settings: PeriodSettings
-    sample_period_s: float | None
     prediction_age_s: float
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
         """Predict y at x; with ``return_variance`` the relative predictive variance per output."""
-        ...
-
-    def learn_one(self, x: Any, y: Any) -> None:
-        """Learn one sample."""
-        ...
-
-    def predict_learn_one(self, x: Any, y: Any) -> Prediction:
-        """Predict y at x a priori, then learn (x, y); returns the prediction."""
         ...
 
     def predict_ahead(self, x: Any) -> PredictionContext:
@@ -148,16 +176,29 @@ class Learner(Protocol):
         """Predict x cheaply for a sample that will not be learned."""
         ...
 
-    def on_period(self, sample_period_s: float) -> float | None:
-        """Take the measured sample period T [s]; returns the adaptive stages' β if τ set it."""
-        ...
-
     def has_pending(self) -> bool:
         """Tell whether a learner holds a deferred update."""
         ...
 
     def apply_pending(self) -> bool:
         """Apply deferred updates now; returns whether any was pending."""
+        ...
+
+
+@runtime_checkable
+class AdaptiveModel(Protocol):
+    """The facet of the sample period and forgetting (see the module docstring).
+
+    Attributes:
+        period_settings: What :meth:`on_period` converts.
+        sample_period_s: The period [s] last announced by :meth:`on_period` (None before).
+    """
+
+    period_settings: PeriodSettings
+    sample_period_s: float | None
+
+    def on_period(self, sample_period_s: float) -> float | None:
+        """Take the measured sample period T [s]; returns the adaptive stages' β if τ set it."""
         ...
 
     def rls_stages(self) -> tuple[RecursiveRLS, ...]:
@@ -172,9 +213,10 @@ class Learner(Protocol):
         """Set the residual standardizer's warm-up [samples] if it is still running."""
         ...
 
-    def copy(self) -> Any:
-        """Return a deep copy of the learned state (sharing the injected regressor callable)."""
-        ...
+
+@runtime_checkable
+class CheckpointModel(Protocol):
+    """The facet of persistence: the learned state as named arrays, and forgetting it."""
 
     def reset(self) -> None:
         """Forget everything learned."""
@@ -190,4 +232,31 @@ class Learner(Protocol):
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the learned state to one ``.npz`` file atomically."""
+        ...
+
+
+@runtime_checkable
+class Learner(StreamingModel, AdaptiveModel, CheckpointModel, Protocol):
+    """A learner the estimator runs: the narrow contract with its streaming, adaptive and checkpoint facets.
+
+    Every learner :func:`~semiparam_ros.core.estimator.build.build_model` makes satisfies it (the type
+    checker holds them to it through :data:`semiparam_ros.core.estimator.build.Model`).
+    """
+
+
+@runtime_checkable
+class RigidBodyUser(Protocol):
+    """The facet of a learner that predicts with one rigid body a consistent projection can replace.
+
+    P and the consistent SP (``ModelTraits.takes_rigid``): ``use_rigid(θ)`` makes the predictions use θ
+    (learner units) instead of the learned π̂ until ``use_rigid(None)``.
+    """
+
+    def use_rigid(self, rigid: np.ndarray | None) -> None:
+        """Predict with ``rigid`` (learner units) from now on; None: the learned parameters again."""
+        ...
+
+    @property
+    def rigid_override(self) -> np.ndarray | None:
+        """The rigid body set by :meth:`use_rigid`, or None."""
         ...

@@ -1,6 +1,6 @@
 """Joint semiparametric learner: rigid-body parameters and kernel residual fitted as one ridge problem.
 
-The paper's semiparametric model (:class:`~semiparam_ros.core.learners.semiparametric.SemiparametricModel`) is
+The paper's semiparametric model (:class:`~semiparam_ros.core.learners.cascade.SemiparametricModel`) is
 a
 cascade: the rigid-body stage is fitted alone and the kernel stage learns what it leaves over, from
 ``[x, ŷ]``. This module fits instead the partially linear model ``y = Φ(x) π + Wᵀφ(s(x)) + ε`` as a whole,
@@ -49,20 +49,18 @@ from typing import Any
 
 import numpy as np
 
+from semiparam_ros.core.learners.base import Regressor
 from semiparam_ros.core.learners.contract import Prediction, PredictionContext
 from semiparam_ros.core.learners.features import Standardizer
-from semiparam_ros.core.learners.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    Regressor,
-    _TwoStageModel,
-)
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
+from semiparam_ros.core.learners.two_stage import TwoStageModel
 from semiparam_ros.errors import CheckpointError
 
 __all__ = ["JointSemiparametricModel"]
 
 
-class JointSemiparametricModel(_TwoStageModel):
+class JointSemiparametricModel(TwoStageModel):
     """Rigid-body parameters and a random-feature residual fitted jointly (exact ridge solution of (1)).
 
     Args:

@@ -857,8 +857,8 @@ def test_joint_combination_online_equals_offline_model_and_checkpoint_round_trip
     learn) predicts; its checkpoint restores bit-identical predictions; a cascade estimator refuses it."""
     from itertools import islice
 
+    from semiparam_ros.core.learners.cascade import SemiparametricModel
     from semiparam_ros.core.learners.joint import JointSemiparametricModel
-    from semiparam_ros.core.learners.semiparametric import SemiparametricModel
     from semiparam_ros.io.bags import read_messages
 
     cfg = config.with_overrides({"semiparametric.combination": "joint"})
@@ -976,7 +976,7 @@ def test_the_rigid_body_model_predicts_with_the_consistent_projection_it_serves(
     solution is the projection of its state in learner units; None and a bad value leave the learned π̂."""
     from helpers.bags import ur5_config, write_ur5_torque_bag
 
-    from semiparam_ros.core.learners.semiparametric import ParametricModel
+    from semiparam_ros.core.learners.parametric import ParametricModel
     from semiparam_ros.core.rigid_body.identification import consistent_parameters
     from semiparam_ros.eval.replay import load_samples
 

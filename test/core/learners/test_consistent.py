@@ -9,7 +9,7 @@ import pytest
 
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel, ErrorTracker
 from semiparam_ros.core.learners.features import Standardizer
-from semiparam_ros.core.learners.semiparametric import ParametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.errors import CheckpointError, RejectedSampleError
 
 

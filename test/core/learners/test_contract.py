@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from semiparam_ros.core.config import EstimatorConfig
-from semiparam_ros.core.estimator.build import build_model, build_regressor
+from semiparam_ros.core.estimator.build import build_model, build_regressor, learner_variants, traits_of
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.contract import Learner, PeriodSettings
 from semiparam_ros.core.stream.messages import Sample
 
-LEARNERS = [("P", "cascade"), ("NP", "cascade"), ("SP", "cascade"), ("SP", "joint"), ("SP", "consistent")]
+LEARNERS = list(learner_variants())  # every learner the builder makes
 TAU_S, WARMUP_S = 5.0, 0.3
 
 
@@ -50,6 +50,8 @@ def test_inputs_are_not_mutated_and_learn_one_equals_predict_learn_one(kind, com
     cfg = config(combination)
     a, b, c = (build_model(cfg, kind, regressor) for _ in range(3))
     assert isinstance(a, Learner)
+    traits = traits_of(a)
+    assert traits.kind == kind and traits.combination in (combination if kind == "SP" else None,)
     for x, y in stream(60, 1):
         x0, y0 = x.copy(), y.copy()
         a.learn_one(x, y)
@@ -131,3 +133,96 @@ def test_a_restored_consistent_model_takes_the_streams_period_in_every_part():
     assert [r.forgetting for r in loader.model.adaptive_stages()] == \
         [r.forgetting for r in fresh.adaptive_stages()]
     assert loader.model.nonparametric.standardizer.warmup == fresh.nonparametric.standardizer.warmup
+
+
+# ----------------------------------------------------------------------------- the narrow contract
+# Every model of the project — the builder's learners and the evaluation's reference models — is an
+# OnlineModel: predict, learn, copy. The same checks run over all of them.
+
+def _eval_models(regressor):
+    """name → a fresh model of each kind the evaluation runs (built anew per call)."""
+    from semiparam_ros.eval.baselines import (
+        FixedParameters,
+        Persistence,
+        batch_least_squares,
+        least_squares_model,
+    )
+    from semiparam_ros.eval.diagnostics import FrozenParametricSP
+    from semiparam_ros.eval.served import node_learner
+
+    cfg = config("cascade")
+    rng = np.random.default_rng(7)
+    b = 4
+
+    def linear(x):  # a fixed regressor Φ(x) (6, b), smooth in x
+        x = np.asarray(x)
+        return np.outer(np.tanh(x[:6]), np.ones(b)) + np.outer(np.ones(6), np.cos(x[:b]))
+
+    X = rng.uniform(-1, 1, (60, 3 * len(cfg["robot.joints"])))
+    Y = np.array([linear(x) @ np.arange(1.0, b + 1) for x in X]) + rng.normal(0, 0.01, (60, 6))
+    return {
+        "Persistence": lambda: Persistence(6),
+        "FixedParameters": lambda: FixedParameters(linear, np.arange(1.0, b + 1)),
+        "LeastSquaresFit": lambda: least_squares_model(linear, batch_least_squares(linear, X, Y)),
+        "FrozenParametricSP": lambda: FrozenParametricSP(build_model(cfg, "SP", regressor), 20),
+        "NodeLearner": lambda: node_learner(config("consistent"), "SP"),
+        **{f"{k}/{c}": (lambda k=k, c=c: build_model(config(c), k, regressor)) for k, c in LEARNERS},
+    }
+
+
+EVAL_MODELS = ["Persistence", "FixedParameters", "LeastSquaresFit", "FrozenParametricSP", "NodeLearner",
+               *(f"{k}/{c}" for k, c in LEARNERS)]
+
+
+def _total(prediction) -> np.ndarray:
+    return np.asarray(getattr(prediction, "total", prediction))
+
+
+@pytest.mark.parametrize("name", EVAL_MODELS)
+def test_every_model_is_an_online_model_that_does_not_mutate_its_inputs(name, regressor):
+    from semiparam_ros.core.learners.contract import OnlineModel
+
+    model = _eval_models(regressor)[name]()
+    assert isinstance(model, OnlineModel)
+    for x, y in stream(40, 11):
+        x0, y0 = x.copy(), y.copy()
+        model.predict_one(x)
+        model.predict_learn_one(x, y)
+        model.learn_one(x, y)
+        assert np.array_equal(x, x0) and np.array_equal(y, y0)
+        assert np.all(np.isfinite(_total(model.predict_one(x))))
+
+
+@pytest.mark.parametrize("name", EVAL_MODELS)
+def test_predict_learn_one_is_learn_one_after_the_a_priori_prediction(name, regressor):
+    """predict_learn_one returns what the model predicted before learning, and learns what learn_one learns
+    (the next predictions of the two agree: bit for bit, or to the rounding of the fused update)."""
+    make = _eval_models(regressor)[name]
+    a, b = make(), make()
+    data = stream(50, 12)
+    for x, y in data:
+        a.learn_one(x, y)
+        b.predict_learn_one(x, y)
+    for x, _ in stream(10, 13):
+        np.testing.assert_allclose(_total(a.predict_one(x)), _total(b.predict_one(x)), rtol=1e-9, atol=1e-9)
+    c = make()
+    for x, y in data[:30]:
+        c.learn_one(x, y)
+    x, y = data[30]
+    before = _total(c.copy().predict_one(x))
+    np.testing.assert_allclose(_total(c.predict_learn_one(x, y)), before, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", EVAL_MODELS)
+def test_a_copy_is_independent(name, regressor):
+    model = _eval_models(regressor)[name]()
+    for x, y in stream(30, 14):
+        model.learn_one(x, y)
+    probe = [x for x, _ in stream(5, 15)]
+    twin = model.copy()
+    twin.predict_one(probe[0])  # a deferred update is applied by the first prediction (rounding path)
+    want = [_total(twin.predict_one(x)).copy() for x in probe]
+    for x, y in stream(30, 16):
+        model.learn_one(x, y * 3.0 + 1.0)
+    for x, w in zip(probe, want, strict=True):
+        assert np.array_equal(_total(twin.predict_one(x)), w)

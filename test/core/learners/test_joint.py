@@ -6,13 +6,11 @@ import numpy as np
 import pytest
 from scipy.linalg import cho_factor, cho_solve
 
+from semiparam_ros.core.learners.cascade import SemiparametricModel
 from semiparam_ros.core.learners.features import Standardizer
 from semiparam_ros.core.learners.joint import JointSemiparametricModel
-from semiparam_ros.core.learners.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    SemiparametricModel,
-)
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
 
 T, P, D, N_IN = 3, 4, 12, 2
 

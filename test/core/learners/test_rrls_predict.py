@@ -17,13 +17,11 @@ from helpers.rrls import closed_form, random_steps
 from scipy.linalg import cho_factor, cho_solve
 
 from semiparam_ros.core.learners._kernels import solve_predict
+from semiparam_ros.core.learners.cascade import SemiparametricModel
 from semiparam_ros.core.learners.joint import JointSemiparametricModel
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.core.learners.rrls import RecursiveRLS
-from semiparam_ros.core.learners.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    SemiparametricModel,
-)
 from semiparam_ros.errors import RejectedSampleError
 
 EPS = np.finfo(float).eps

@@ -6,13 +6,11 @@ import numpy as np
 import pytest
 from scipy.linalg import cho_factor, cho_solve
 
+from semiparam_ros.core.learners.cascade import SemiparametricModel
 from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.core.learners.features import Standardizer
-from semiparam_ros.core.learners.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    SemiparametricModel,
-)
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
 
 G = 9.81
 PI_TRUE = np.array([1.5, 2.0, 0.3, -0.4])

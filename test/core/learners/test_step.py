@@ -18,13 +18,11 @@ import pytest
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners import _step_kernels as kernels
+from semiparam_ros.core.learners.cascade import SemiparametricModel
 from semiparam_ros.core.learners.features import RandomFourierFeatures, Standardizer
 from semiparam_ros.core.learners.joint import JointSemiparametricModel
-from semiparam_ros.core.learners.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    SemiparametricModel,
-)
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.core.learners.uncertainty import predict_with_variance
 from semiparam_ros.core.stream.gate import exceeds
 from semiparam_ros.core.stream.messages import Sample

@@ -5,11 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semiparam_ros.core.learners.semiparametric import (
-    NonparametricModel,
-    ParametricModel,
-    SemiparametricModel,
-)
+from semiparam_ros.core.learners.cascade import SemiparametricModel
+from semiparam_ros.core.learners.nonparametric import NonparametricModel
+from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.core.learners.uncertainty import predict_with_variance
 from semiparam_ros.errors import RejectedSampleError
 
