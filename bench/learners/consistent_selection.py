@@ -54,7 +54,7 @@ def score(config_path: Path, train_bag: Path, test_bag: Path, lam: float, overri
     for x in te.X:
         yp, r, _, phi = sp._model_valid(x, sp.parametric.phi_cached(x))
         if phi is not None:
-            _, v = npm.rls.predict_checked(phi, True)
+            _, v = npm.rls.predict(phi, return_variance=True, checked=True)
             nu = npm.rls.lam * float(v[0])
             r = r / np.exp(-((nu / sp.novelty_scale) ** 2))  # undo the default weight: the raw residual
         else:

@@ -91,7 +91,7 @@ def shrunk_residual(z: float) -> Iterator[None]:
         pred = original(self, X, rigid)
         npm = self.nonparametric
         phi = np.ascontiguousarray(npm.rff.map_checked(npm.standardizer.apply_checked(np.asarray(X, float))))
-        v = npm.rls.predict_checked(phi, True)[1][:, None]
+        v = npm.rls.predict(phi, return_variance=True, checked=True)[1][:, None]
         g = self.residual_weight(v[:, 0], served=True)
         own = g * g * self.correlation_samples() * self.error_scales()[1] * v  # variance of g r's own error
         r = pred.residual

@@ -139,7 +139,7 @@ class SemiparametricModel(TwoStageModel):
         assert var is not None  # asked for
         if npm.standardizer.ready:
             phi = npm.features_of(np.concatenate([xv, yp]))
-            P, v = npm.rls.predict_checked(phi, True)
+            P, v = npm.rls.predict(phi, return_variance=True, checked=True)
             assert v is not None  # asked for
             r = P[0]
             var = var + float(v[0])

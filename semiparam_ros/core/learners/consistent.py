@@ -570,7 +570,8 @@ class ConsistentSemiparametricModel(TwoStageModel):
         of the online prediction's.
         """
         par_model, npm = self.parametric, self.nonparametric
-        var = par_model.rls.predict_checked(np.ascontiguousarray(Phi), True)[1]  # diag(Φ A⁻¹ Φᵀ)
+        rows = np.ascontiguousarray(Phi)
+        var = par_model.rls.predict(rows, return_variance=True, checked=True)[1]  # diag(Φ A⁻¹ Φᵀ)
         assert var is not None  # asked for
         own = rigid is None  # the model's own rigid part: the reference θ_ref (see use_rigid)
         yp = Phi @ (self._reference if rigid is None else rigid)
@@ -582,7 +583,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
             return yp, np.zeros(self.n_outputs), var, None
         t = self.n_outputs
         phi = npm.features_of(xv)
-        P, v = npm.rls.predict_checked(phi, True)
+        P, v = npm.rls.predict(phi, return_variance=True, checked=True)
         assert v is not None  # asked for
         raw = P[0] if rigid is None else P[0] - self._entries_residual(phi, rigid - self._reference)[0]
         s2, spread = self._weight_scales(served=model_variance)
@@ -729,7 +730,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         kappa = kappa_state * fade
         # the same fade over FAST_FADE × the distances
         kappa_fast = kappa_state ** (1.0 / self.FAST_FADE ** 2) * fade
-        P, v = self.fast.predict_checked(Phi, True)
+        P, v = self.fast.predict(Phi, return_variance=True, checked=True)
         assert v is not None  # asked for
         useful = self._fast_mask
         if useful is None:
@@ -887,7 +888,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         r = np.zeros_like(yp)
         if npm.standardizer.ready:
             phi = np.ascontiguousarray(npm.rff.map_checked(npm.standardizer.apply_checked(X2)))
-            P, v = npm.rls.predict_checked(phi, True)
+            P, v = npm.rls.predict(phi, return_variance=True, checked=True)
             assert v is not None  # asked for
             r = P if rigid is None else P - self._entries_residual(phi, rigid - self._reference)
             r = r * self.residual_weight(v, served=True)

@@ -22,9 +22,9 @@ The stages of a semiparametric model talk to each other through the public metho
 :class:`~semiparam_ros.core.learners.parametric.ParametricModel` (``phi_fresh``, ``predict_phi``,
 ``prior_output``, …), :class:`~semiparam_ros.core.learners.nonparametric.NonparametricModel`
 (``features_of``, ``predict_input``, ``learn_input``) and
-:class:`~semiparam_ros.core.learners.rrls.RecursiveRLS` (``predict_checked``, ``checked_step``,
-``defer_step``, …): the ``*_checked`` methods take inputs the caller already validated (finite, the right
-shape), so a combination validates once.
+:class:`~semiparam_ros.core.learners.rrls.RecursiveRLS` (``predict(..., checked=True)``,
+``checked_step``, ``defer_step``, …): ``checked=True`` and the ``*_checked`` methods take inputs the
+caller already validated (finite, the right shape), so a combination validates once.
 
 Units: ``x = [q, q̇, q̈]`` (rad, rad/s, rad/s²); ``y`` a wrench (N, N·m, sensor frame) or joint torques (N·m).
 

@@ -160,7 +160,8 @@ class JointSemiparametricModel(TwoStageModel):
         if npm.standardizer.ready:
             phi = npm.features_of(xv)
             # one forward substitution (O(D²)) instead of the t(1+p)-column weights (O(t(1+p)·D²))
-            P, v = npm.rls.predict_checked(phi, return_variance)
+            P, v = (npm.rls.predict(phi, return_variance=True, checked=True) if return_variance
+                    else (npm.rls.predict(phi, checked=True), None))
             pk = P[0]
             var_k = float(v[0]) if v is not None else 0.0
         else:
@@ -170,7 +171,7 @@ class JointSemiparametricModel(TwoStageModel):
         y0 = self.parametric.prior_output(Phi)
         if y0 is not None:
             par, total = par + y0, total + y0
-        var = var_k + self.parametric.rls.variance_checked(eU) if return_variance else None
+        var = var_k + self.parametric.rls.variance(eU, checked=True) if return_variance else None
         return Prediction(par, total - par, total, var), phi
 
     def predict_ahead_checked(self, xv: np.ndarray) -> PredictionContext:
@@ -211,7 +212,7 @@ class JointSemiparametricModel(TwoStageModel):
             # after the warm-up: until then it holds only its prior, which is left undecayed)
             npm.hold_warmup(xv, xv, measured.copy())  # learned jointly once the statistics are ready
             par = Phi @ pi
-            self.parametric.rls.update_checked(Phi, yv.reshape(-1, 1))
+            self.parametric.rls.update(Phi, yv.reshape(-1, 1), checked=True)
             if y0 is not None:
                 par = par + y0
             pred = Prediction(par, np.zeros(t), par.copy())
@@ -224,7 +225,7 @@ class JointSemiparametricModel(TwoStageModel):
             # after the kernel learner's has been made
             Zp = np.ascontiguousarray(E[:, t:].reshape(-1, p))
             Up = np.ascontiguousarray(E[:, :t].reshape(-1, 1))
-            self.parametric.rls.update_checked(Zp, Up)
+            self.parametric.rls.update(Zp, Up, checked=True)
             if y0 is not None:
                 par, total = par + y0, total + y0
             pred = Prediction(par, total - par, total)

@@ -136,7 +136,8 @@ class NonparametricModel(LearnerBase):
             return np.zeros(self.n_outputs), var
         phi = self.features_of(xin)
         # one forward substitution gives both (fused with a pending update: see RecursiveRLS.predict)
-        P, v = self.rls.predict_checked(phi, return_variance)
+        P, v = (self.rls.predict(phi, return_variance=True, checked=True) if return_variance
+                else (self.rls.predict(phi, checked=True), None))
         var = np.full(self.n_outputs, float(v[0])) if v is not None else None
         return P[0], var
 
@@ -148,8 +149,8 @@ class NonparametricModel(LearnerBase):
             return np.zeros(self.n_outputs)
         phi = self.features_of(xin)
         if want_prediction:
-            return self.rls.predict_update_checked(phi, target.reshape(1, -1))[0]
-        self.rls.update_checked(phi, target.reshape(1, -1))
+            return self.rls.predict_update(phi, target.reshape(1, -1), checked=True)[0]
+        self.rls.update(phi, target.reshape(1, -1), checked=True)
         return np.zeros(0)
 
     def rls_stages(self) -> tuple[RecursiveRLS, ...]:
@@ -166,7 +167,7 @@ class NonparametricModel(LearnerBase):
             r, var, phi = np.zeros(t), np.zeros(t), None
         else:
             phi = self.features_of(xv)
-            P, v = self.rls.predict_checked(phi, True)
+            P, v = self.rls.predict(phi, return_variance=True, checked=True)
             assert v is not None  # asked for
             r, var = P[0], np.full(t, float(v[0]))
         return PredictionContext(Prediction(np.zeros(t), r, r.copy(), var), self, xv, None, phi)
@@ -178,7 +179,7 @@ class NonparametricModel(LearnerBase):
             self.hold_warmup(context.x, context.x, yv.copy())
             self.learn_held()
         else:
-            self.rls.update_checked(phi, yv.reshape(1, -1))
+            self.rls.update(phi, yv.reshape(1, -1), checked=True)
         self.n_samples_seen += 1
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:

@@ -120,7 +120,9 @@ class ParametricModel(LearnerBase):
 
         ``Φπ`` instead where :meth:`use_rigid` set π.
         """
-        P, var = self.rls.predict_checked(np.ascontiguousarray(Phi), want_variance)
+        rows = np.ascontiguousarray(Phi)
+        P, var = (self.rls.predict(rows, return_variance=True, checked=True) if want_variance
+                  else (self.rls.predict(rows, checked=True), None))
         if self._rigid is not None:
             return Phi @ self._rigid, var
         yp = P[:, 0]
@@ -172,7 +174,7 @@ class ParametricModel(LearnerBase):
         """``(Φ(π₀ + δ̂), diag(Φ A⁻¹ Φᵀ))`` of stacked regressors (N, t, p), both (N, t)."""
         n, t, p = Phi.shape
         rows = np.ascontiguousarray(Phi.reshape(n * t, p))
-        P, var = self.rls.predict_checked(rows, True)
+        P, var = self.rls.predict(rows, return_variance=True, checked=True)
         assert var is not None  # asked for
         yp = P[:, 0] if not self._has_prior else P[:, 0] + rows @ self.prior
         return yp.reshape(n, t), var.reshape(n, t)
@@ -181,13 +183,13 @@ class ParametricModel(LearnerBase):
         """A-priori ``Φ(π₀ + δ̂)``, then learn ``y − Φπ₀`` (validated inputs); counters untouched."""
         y0 = self.prior_output(Phi)
         if y0 is None:
-            return self.rls.predict_update_checked(Phi, y.reshape(-1, 1))[:, 0]
-        return self.rls.predict_update_checked(Phi, (y - y0).reshape(-1, 1))[:, 0] + y0
+            return self.rls.predict_update(Phi, y.reshape(-1, 1), checked=True)[:, 0]
+        return self.rls.predict_update(Phi, (y - y0).reshape(-1, 1), checked=True)[:, 0] + y0
 
     def update_phi(self, Phi: np.ndarray, y: np.ndarray) -> None:
         """Learn ``y − Φπ₀`` (validated inputs); counters untouched."""
         y0 = self.prior_output(Phi)
-        self.rls.update_checked(Phi, (y if y0 is None else y - y0).reshape(-1, 1))
+        self.rls.update(Phi, (y if y0 is None else y - y0).reshape(-1, 1), checked=True)
 
     # --- internals shared with SemiparametricModel
     def phi_cached(self, x: np.ndarray) -> np.ndarray:

@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -292,7 +292,7 @@ class RecursiveRLS:
         return float(s[0] / s[-1]) if s[-1] > 0 else math.inf
 
     # ------------------------------------------------------------------ learning
-    def update(self, Z: np.ndarray, U: np.ndarray) -> None:
+    def update(self, Z: np.ndarray, U: np.ndarray, *, checked: bool = False) -> None:
         """Absorb one time step of k ≥ 1 rows in O(k·b²).
 
         The rows are checked and copied now; the rotations run at the next use of the state, fused with
@@ -301,11 +301,17 @@ class RecursiveRLS:
         Args:
             Z: (k, b) rows, or (b,) for one row.
             U: (k, t) targets, or (t,) for one row.
+            checked: Z and U are C-contiguous float64 (k, b) / (k, t) arrays of the right shapes, as a
+                combination of learners passes them after validating its input once (their values are
+                still checked).
 
         Raises:
             RejectedSampleError: Wrong shapes, or non-finite / absurdly large (> 1e150) entries; the
                 learner is left unchanged.
         """
+        if checked:
+            self._defer(Z, U)
+            return
         if (type(Z) is np.ndarray and type(U) is np.ndarray and Z.shape == self._row_shape
                 and U.shape == self._out_shape and Z.dtype is _F64 and U.dtype is _F64
                 and Z.flags.c_contiguous and U.flags.c_contiguous):
@@ -358,7 +364,7 @@ class RecursiveRLS:
         self.n_steps += 1
         self.n_samples_seen += step[0].shape[0]
 
-    def predict_update(self, Z: np.ndarray, U: np.ndarray) -> np.ndarray:
+    def predict_update(self, Z: np.ndarray, U: np.ndarray, *, checked: bool = False) -> np.ndarray:
         """Predict the rows with the current weights, then absorb them as one time step (one pass).
 
         The a-priori prediction ``Z W_old`` comes out of the update's rotations; it equals
@@ -367,6 +373,7 @@ class RecursiveRLS:
         Args:
             Z: (k, b) rows, or (b,) for one row.
             U: (k, t) targets, or (t,) for one row.
+            checked: Z and U are already validated C-contiguous float64 (k, b) / (k, t) arrays.
 
         Returns:
             The a-priori prediction, (k, t) or (t,) like U.
@@ -374,16 +381,14 @@ class RecursiveRLS:
         Raises:
             RejectedSampleError: As :meth:`update`; the learner is left unchanged.
         """
+        if checked:
+            return self._predict_update_rows(Z, U)
         Z2, U2, single = self._check_rows(Z, U)
-        P = self.predict_update_checked(Z2, U2)
+        P = self._predict_update_rows(Z2, U2)
         return P[0] if single else P
 
-    def update_checked(self, Z2: np.ndarray, U2: np.ndarray) -> None:
-        """:meth:`update` for C-contiguous float64 (k, b) / (k, t) arrays of checked shape."""
-        self._defer(Z2, U2)
-
-    def predict_update_checked(self, Z2: np.ndarray, U2: np.ndarray) -> np.ndarray:
-        """:meth:`predict_update` for already validated C-contiguous float64 (k, b) / (k, t) arrays."""
+    def _predict_update_rows(self, Z2: np.ndarray, U2: np.ndarray) -> np.ndarray:
+        """:meth:`predict_update` of validated C-contiguous float64 (k, b) / (k, t) arrays."""
         k = Z2.shape[0]
         if k > _MAX_TRACKED_ROWS:
             P = Z2 @ self.weights
@@ -473,8 +478,20 @@ class RecursiveRLS:
         return True
 
     # ------------------------------------------------------------------ prediction
+    @overload
+    def predict(self, Z: np.ndarray, *, return_variance: Literal[False] = False,
+                checked: bool = False) -> np.ndarray: ...
+
+    @overload
+    def predict(self, Z: np.ndarray, *, return_variance: Literal[True],
+                checked: bool = False) -> tuple[np.ndarray, np.ndarray]: ...
+
+    @overload
+    def predict(self, Z: np.ndarray, *, return_variance: bool,
+                checked: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]: ...
+
     def predict(self, Z: np.ndarray, *, return_variance: bool = False,
-                ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+                checked: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """``Z W``, and optionally ``z A⁻¹ zᵀ`` per row, without forming ``W`` for a few rows.
 
         Up to 8 rows are predicted by one forward substitution ``Rᵀv = zᵀ`` (``z W = v·d``,
@@ -485,6 +502,8 @@ class RecursiveRLS:
         Args:
             Z: (k, b) rows or (b,) for one row.
             return_variance: Also return ``z A⁻¹ zᵀ`` per row (see :meth:`variance`).
+            checked: Z is an already validated C-contiguous float64 (k, b) array (a combination of
+                learners validates its input once); the result is (k, t) (and (k,)).
 
         Returns:
             (k, t), or (t,) for one row; with ``return_variance`` the pair ``(prediction, variance)``,
@@ -493,11 +512,14 @@ class RecursiveRLS:
         Raises:
             RejectedSampleError: Wrong shape or non-finite entries.
         """
+        if checked:
+            P, var = self._predict_rows(Z, return_variance)
+            return (P, var) if return_variance else P  # type: ignore[return-value]
         if (type(Z) is np.ndarray and Z.shape == self._row_shape and Z.dtype is _F64
                 and Z.flags.c_contiguous):
             return self._predict_row(Z, return_variance)
         Z2, single = self._check_features(Z)
-        P, var = self.predict_checked(Z2, return_variance)
+        P, var = self._predict_rows(Z2, return_variance)
         if single:
             return (P[0], var[0]) if return_variance else P[0]  # type: ignore[index]
         return (P, var) if return_variance else P  # type: ignore[return-value]
@@ -505,7 +527,7 @@ class RecursiveRLS:
     def _predict_row(self, z: np.ndarray, want_variance: bool) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """:meth:`predict` of one C-contiguous float64 (b,) row: the kernels check its values.
 
-        The same kernels and operations as :meth:`predict_checked` with k = 1 (so the same bits), in one
+        The same kernels and operations as :meth:`_predict_rows` with k = 1 (so the same bits), in one
         compiled call that checks the row before it touches the state.
         """
         P = np.empty(self.n_outputs)
@@ -529,8 +551,8 @@ class RecursiveRLS:
         # the variance is a () scalar, as var[0] of the general path
         return (P, np.float64(var)) if want_variance else P  # type: ignore[return-value]
 
-    def predict_checked(self, Z2: np.ndarray, want_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        """:meth:`predict` for a validated C-contiguous float64 (k, b) array: ``(Z W, var or None)``."""
+    def _predict_rows(self, Z2: np.ndarray, want_variance: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`predict` of a validated C-contiguous float64 (k, b) array: ``(Z W, var or None)``."""
         k = Z2.shape[0]
         # the path depends on k only (not on what is cached), so equal states give bit-equal predictions
         if k <= _MAX_SOLVED_ROWS:
@@ -544,9 +566,9 @@ class RecursiveRLS:
                 solve_predict(self._M, Z2, P, var)
             return P, (var if want_variance else None)
         P = Z2 @ self.weights
-        return P, (self.variance_checked(Z2) if want_variance else None)
+        return P, (self._variance_rows(Z2) if want_variance else None)
 
-    def variance(self, Z: np.ndarray) -> np.ndarray:
+    def variance(self, Z: np.ndarray, *, checked: bool = False) -> np.ndarray:
         """``z A⁻¹ zᵀ`` per row by one triangular solve (``‖R⁻ᵀzᵀ‖²``).
 
         Multiply by the noise variance σ² for the predictive variance of each output; with forgetting,
@@ -554,6 +576,7 @@ class RecursiveRLS:
 
         Args:
             Z: (k, b) rows or (b,) for one row.
+            checked: Z is an already validated C-contiguous float64 (k, b) array; the result is (k,).
 
         Returns:
             (k,) non-negative values, or a float array of shape () for one row.
@@ -561,12 +584,14 @@ class RecursiveRLS:
         Raises:
             RejectedSampleError: Wrong shape or non-finite entries.
         """
+        if checked:
+            return self._variance_rows(Z)
         Z2, single = self._check_features(Z)
-        out = self.variance_checked(Z2)
+        out = self._variance_rows(Z2)
         return out[0] if single else out
 
-    def variance_checked(self, Z2: np.ndarray) -> np.ndarray:
-        """Return the relative predictive variance of checked rows Z2 (no pending update left behind)."""
+    def _variance_rows(self, Z2: np.ndarray) -> np.ndarray:
+        """Return the relative predictive variance of validated rows Z2 (no pending update left behind)."""
         self._flush()
         if Z2.shape[0] <= _MAX_SOLVED_ROWS:
             P = np.empty((Z2.shape[0], self.n_outputs))

@@ -132,7 +132,8 @@ def test_the_residual_is_trusted_as_far_as_the_rigid_body_part_is_poor():
         for x, y in zip(X, Y, strict=True):
             m.learn_one(x, y)
         Xt = rng.uniform(0.6, 0.9, size=(50, 6))  # beside the training box: moderately novel
-        v = np.array([m.nonparametric.rls.predict_checked(m.nonparametric.features_of(x), True)[1][0]
+        npm = m.nonparametric
+        v = np.array([npm.rls.predict(npm.features_of(x), return_variance=True, checked=True)[1][0]
                       for x in Xt])
         weights[name] = m.residual_weight(v).mean()
     assert weights["poor"] > 0.3
@@ -159,8 +160,8 @@ def test_far_from_the_data_the_model_is_its_rigid_body_part_and_helps_inside():
     assert np.all(np.abs(far.residual) < 1e-3 * np.abs(far.parametric).max())
     # its weight there is a fraction of the weight inside the data (where v is small)
     npm = m.nonparametric
-    v_far = npm.rls.predict_checked(npm.features_of(np.full(6, 8.0)), True)[1][0]
-    v_in = npm.rls.predict_checked(npm.features_of(np.zeros(6)), True)[1][0]
+    v_far = npm.rls.predict(npm.features_of(np.full(6, 8.0)), return_variance=True, checked=True)[1][0]
+    v_in = npm.rls.predict(npm.features_of(np.zeros(6)), return_variance=True, checked=True)[1][0]
     w_far, w_in = m.residual_weight(v_far), m.residual_weight(v_in)
     assert np.all(w_far <= 0.5 * w_in) and w_in.max() > 0.5
     # inside the training region the residual removes most of what the rigid-body part misses
@@ -472,7 +473,7 @@ def test_the_model_alone_is_as_uncertain_as_its_residual_is_unsure_and_correlate
     assert np.all(noise > 0) and s2[0] > 0.0 and np.all(c >= 1.0)
     npm, lam = m.nonparametric, m.nonparametric.rls.lam
     for x in (np.zeros(6), np.full(6, 1.2), np.full(6, 8.0)):
-        v = npm.rls.predict_checked(npm.features_of(x), True)[1][0]
+        v = npm.rls.predict(npm.features_of(x), return_variance=True, checked=True)[1][0]
         var_p = m.parametric.predict_phi(regressor(x), True)[1]
         g, nu = m.residual_weight(v, served=True), min(lam * v, 1.0)
         # the weight of the model used alone: the Wiener weight with the residual's correlated error c σ² v
@@ -484,13 +485,15 @@ def test_the_model_alone_is_as_uncertain_as_its_residual_is_unsure_and_correlate
         for other in (m.residual_weight(v), np.clip(g + 0.05, 0, 1), np.clip(g - 0.05, 0, 1)):
             worse = ((1 - other) ** 2 * s2 * (1 - nu) + other ** 2 * c * noise * v + s2 * nu) / noise
             assert np.all(worse >= want - 1e-12 * np.abs(want))
-        raw = npm.rls.predict_checked(npm.features_of(x), True)[0][0]
+        raw = npm.rls.predict(npm.features_of(x), return_variance=True, checked=True)[0][0]
         np.testing.assert_allclose(m.predict_model(x).residual, g * raw, rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(m.predict_model(x).variance, var_p + want, rtol=1e-12)
         np.testing.assert_allclose(m.predict_model_many(x[None]).variance[0], var_p + want, rtol=1e-12)
         np.testing.assert_allclose(m.predict_one(x, return_variance=True).variance, var_p + v, rtol=1e-12)
-    far = m.model_variance(npm.rls.predict_checked(npm.features_of(np.full(6, 8.0)), True)[1][0])
-    inside = m.model_variance(npm.rls.predict_checked(npm.features_of(np.zeros(6)), True)[1][0])
+    def rel_var(x):
+        return npm.rls.predict(npm.features_of(x), return_variance=True, checked=True)[1][0]
+
+    far, inside = m.model_variance(rel_var(np.full(6, 8.0))), m.model_variance(rel_var(np.zeros(6)))
     assert inside[0] < 0.2 * far[0]  # the data explain the error inside; far away the model abstains
 
 

@@ -167,8 +167,8 @@ def test_single_row_fast_path_gives_the_general_paths_bits(beta):
     """One contiguous float64 row (staged update, one-call prediction) against (1, b) blocks, bit for bit.
 
     The fast path runs the same kernels on the same operands as the general one (``_check_rows`` and
-    ``predict_checked`` with k = 1), so predictions, variances and the state must be identical; consecutive
-    updates with no prediction between them (the two stage buffers alternating) included.
+    ``predict(Z, checked=True)`` with k = 1), so predictions, variances and the state must be identical;
+    consecutive updates with no prediction between them (the two stage buffers alternating) included.
     """
     rng = np.random.default_rng(11)
     b, t = 37, 4
@@ -183,7 +183,7 @@ def test_single_row_fast_path_gives_the_general_paths_bits(beta):
         if n % 2:
             fast.R, slow.R  # noqa: B018 (flush both: the prediction then takes the solve-only kernel)
         got, got_var = fast.predict(zq, return_variance=True)
-        want, want_var = slow.predict_checked(zq[None, :], True)
+        want, want_var = slow.predict(zq[None, :], return_variance=True, checked=True)
         assert np.array_equal(got, want[0]) and got_var == want_var[0]
         assert got.shape == (t,) and np.shape(got_var) == ()
         assert fast.n_samples_seen == slow.n_samples_seen and fast.n_steps == slow.n_steps
@@ -245,7 +245,7 @@ def test_single_row_predictions_are_fresh_arrays():
 def test_single_row_shapes():
     rls = RecursiveRLS(5, 3)
     rls.update(np.ones(5), np.ones(3))
-    assert rls.predict_checked(np.ones((1, 5)), False)[1] is None  # no variance unless asked for
+    assert (rls.predict(np.ones((1, 5)), checked=True), None)[1] is None  # no variance unless asked for
     p, v = rls.predict(np.ones(5), return_variance=True)
     assert p.shape == (3,) and np.shape(v) == ()
     assert rls.predict(np.ones((2, 5))).shape == (2, 3)
