@@ -28,7 +28,7 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "estimator = semiparam_ros.ros.run:main",
+            "estimator = semiparam_ros.ros.main:main",
             "simulate = semiparam_ros.cli.simulate:main",
             "evaluate = semiparam_ros.cli.evaluate:main",
             "learn = semiparam_ros.cli.learn:main",

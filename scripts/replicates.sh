@@ -29,7 +29,7 @@ source scripts/paper_params.sh
 # this page reproduces the paper's learner, the cascade, whatever the package default (docs/generalization.md)
 tuned+=(--set semiparametric.combination=cascade)
 # one job per seed (simulate the two logs, run the protocol, keep the scalars), on every core through
-# joblib (semiparam_ros/eval/parallel.py); each job has one BLAS thread, so the numbers do not depend on --jobs
+# joblib (semiparam_ros/jobs/parallel.py); each job has one BLAS thread, so the numbers do not depend on --jobs
 .venv/bin/python - "$config" "$out/figures/replicates.json" "$jobs" $seeds "--" "${tuned[@]}" <<'PY'
 import sys
 import tempfile
@@ -37,11 +37,11 @@ from pathlib import Path
 
 from semiparam_ros.cli.evaluate import parse_overrides
 from semiparam_ros.cli.simulate import main as simulate
-from semiparam_ros.eval.parallel import run_jobs
-from semiparam_ros.eval.replay import evaluate_bags
+from semiparam_ros.jobs.parallel import run_jobs
+from semiparam_ros.eval.bags.replay import evaluate_bags
 from docs.tools.replicates import replicate_summary, replicates_markdown
-from semiparam_ros.report.paper import protocol_report, write_json
-from semiparam_ros.report.run import load_evaluation_config
+from semiparam_ros.eval.protocol.report import protocol_report, write_json
+from semiparam_ros.report.evaluate import load_evaluation_config
 
 config_path, out, jobs = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
 rest = sys.argv[4:]

@@ -43,7 +43,7 @@ def test_colcon_build_installs_entry_point_and_ament_marker(tmp_path):
     assert os.access(script, os.X_OK)
     assert "'console_scripts', 'estimator'" in script.read_text() or "ros.run" in script.read_text()
     entry_points = list(install.glob("lib/python3*/site-packages/semiparam_ros*-info/entry_points.txt"))
-    assert entry_points and "estimator = semiparam_ros.ros.run:main" in entry_points[0].read_text()
+    assert entry_points and "estimator = semiparam_ros.ros.main:main" in entry_points[0].read_text()
     marker = install / "share" / "ament_index" / "resource_index" / "packages" / "semiparam_ros"
     assert marker.is_file()
     assert (install / "share" / "semiparam_ros" / "package.xml").is_file()

@@ -12,7 +12,7 @@ import pytest
 MODULES = [
     "semiparam_ros.atomic",
     "semiparam_ros.core.estimator.online",
-    "semiparam_ros.service.feedforward",
+    "semiparam_ros.serving.feedforward",
     "semiparam_ros.core.learners.features",
     "semiparam_ros.core.stream.pipeline",
     "semiparam_ros.core.stream.rate",
@@ -23,12 +23,12 @@ MODULES = [
     "semiparam_ros.core.learners.nonparametric",
     "semiparam_ros.core.estimator.build",
     "semiparam_ros.core.kinds",
-    "semiparam_ros.service.assembly",
+    "semiparam_ros.serving.assembly",
     "semiparam_ros.core.learners.consistent",
-    "semiparam_ros.service.serving",
+    "semiparam_ros.serving.learned_model",
     "semiparam_ros.core.learners.joint",
     "semiparam_ros.core.validation",
-    "semiparam_ros.eval.horizon",
+    "semiparam_ros.eval.protocol.horizon",
 ]
 
 

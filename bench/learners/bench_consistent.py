@@ -28,7 +28,7 @@ from threadpoolctl import threadpool_limits
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import Sample
-from semiparam_ros.eval.replay import load_samples
+from semiparam_ros.eval.bags.replay import load_samples
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_consistent.json"

@@ -43,7 +43,7 @@ import semiparam_ros.core.learners.rrls as rrls
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import JointStateData
-from semiparam_ros.eval.replay import Topics
+from semiparam_ros.eval.bags.replay import Topics
 from semiparam_ros.io.bags import read_messages
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]

@@ -27,8 +27,8 @@ import numpy as np
 
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.stream.rate import measured_period_s
-from semiparam_ros.eval.protocol import train
-from semiparam_ros.eval.replay import build_models, load_samples
+from semiparam_ros.eval.bags.replay import build_models, load_samples
+from semiparam_ros.eval.protocol.prequential import train
 
 ROOT = Path(__file__).resolve().parents[2]
 NU0 = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)

@@ -2,7 +2,8 @@
 
 Two targets of the one-default-model work are not met on the real KUKA LWR4+ logs: frozen SP on log 1 → 2
 at most 0.85 × min(P, NP), and frozen SP no worse than its rigid-body part P on 1 → 3 and 2 → 3. This
-script measures why, every model served as a user gets it (:func:`~semiparam_ros.eval.served.learn_served`:
+script measures why, every model served as a user gets it
+(:func:`~semiparam_ros.eval.models.served.learn_served`:
 the node's estimator, checkpoint, ``load_model``) and scored with the protocol of ``real_robots`` (10
 sequential parts of the test log, RMSE over each part's second half, mean over joints and parts):
 
@@ -47,9 +48,9 @@ from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.learners.features import Standardizer
 from semiparam_ros.errors import RejectedSampleError
-from semiparam_ros.eval.protocol import split_bounds
-from semiparam_ros.eval.replay import load_samples
-from semiparam_ros.eval.served import NodeLearner, learn_served, serve
+from semiparam_ros.eval.bags.replay import load_samples
+from semiparam_ros.eval.models.served import NodeLearner, learn_served, serve
+from semiparam_ros.eval.protocol.prequential import split_bounds
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from repeatability import align, protocol_rmse  # a sibling script

@@ -26,8 +26,8 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.eval.protocol import split_bounds
-from semiparam_ros.eval.replay import load_samples
+from semiparam_ros.eval.bags.replay import load_samples
+from semiparam_ros.eval.protocol.prequential import split_bounds
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "repeatability_kuka_12.json"

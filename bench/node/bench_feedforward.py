@@ -1,6 +1,6 @@
 """Benchmark: latency desired state → feed-forward published, with the node learning at 1 kHz.
 
-Starts the node (``python -m semiparam_ros.ros.run`` with ``config/panda.yaml``: 7 joints,
+Starts the node (``python -m semiparam_ros.ros.main`` with ``config/panda.yaml``: 7 joints,
 joint torques, D = 500) as a separate process, then streams over Fast DDS on loopback, from this process:
 ``/joint_states`` at ``--hz`` (a smooth motion whose efforts are the URDF's RNEA torques plus noise, so the
 node learns every sample) and ``/estimator/desired_state`` (``trajectory_msgs/JointTrajectory``, one
@@ -66,7 +66,7 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
     domain, env = private_domain(tmp, 13, 7 if learning else 0)
     log_path = tmp / f"node_{'learning' if learning else 'frozen'}_{int(consistent)}.log"
     log = open(log_path, "w")
-    cmd = [sys.executable, "-m", "semiparam_ros.ros.run", "--ros-args", "--params-file",
+    cmd = [sys.executable, "-m", "semiparam_ros.ros.main", "--ros-args", "--params-file",
            str(CONFIG), "-p", f"learning_enabled:={'true' if learning else 'false'}",
            "-p", "diagnostics.period:=0.5",
            "-p", f"parametric.consistent:={'true' if consistent else 'false'}"]

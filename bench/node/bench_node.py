@@ -3,7 +3,7 @@
 Generates a synthetic 1 kHz bag (joint states + wrenches with equal stamps every millisecond; the wrench is
 the iCub right arm's rigid-body F/T wrench from the URDF plus a smooth non-rigid residual and noise),
 then, for every executor × D in one run (side by side, same bag, same machine load), starts the node as a
-separate process (``python -m semiparam_ros.ros.run --executor E`` with
+separate process (``python -m semiparam_ros.ros.main --executor E`` with
 ``config/icub_right_arm.yaml``, default sensor-data QoS), replays the bag over Fast DDS on loopback at
 1 kHz and measures:
 
@@ -130,7 +130,7 @@ def run(messages: list, n_pairs: int, hz: float, features: int, executor: str, t
     domain, env = private_domain(tmp, 17)
     log_path = tmp / f"node_{executor}_{features}.log"
     log = open(log_path, "w")
-    cmd = [sys.executable, "-m", "semiparam_ros.ros.run", "--executor", executor, "--ros-args",
+    cmd = [sys.executable, "-m", "semiparam_ros.ros.main", "--executor", executor, "--ros-args",
            "--params-file", str(CONFIG), "-p", f"nonparametric.n_features:={features}",
            "-p", "diagnostics.period:=0.5", "-p", f"acceleration.method:={acceleration}"]
     if max_delay_s is not None:

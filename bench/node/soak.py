@@ -83,7 +83,7 @@ def run(seconds: float, hz: float, window_s: float) -> dict:
     domain, env = private_domain(tmp, 19)
     log = open(tmp / "node.log", "w")
     node_proc = subprocess.Popen(
-        [sys.executable, "-m", "semiparam_ros.ros.run", "--ros-args", "--params-file", str(CONFIG),
+        [sys.executable, "-m", "semiparam_ros.ros.main", "--ros-args", "--params-file", str(CONFIG),
          "-p", "checkpoint.path:=" + str(tmp / "soak.npz"), "-p", "checkpoint.load_on_start:=false"],
         env=env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
     ps = psutil.Process(node_proc.pid)

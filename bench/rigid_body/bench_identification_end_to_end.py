@@ -36,7 +36,7 @@ from excitation_scale_floor import soft_power  # this folder: run as a script
 from semiparam_ros.cli import excite, export_urdf, learn, simulate
 from semiparam_ros.core.rigid_body.excitation import ExcitationLimits, condition_number, random_multisine
 from semiparam_ros.io.trajectory_files import read_excitation
-from semiparam_ros.service.serving import load_model
+from semiparam_ros.serving.learned_model import load_model
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results" / "bench_identification_end_to_end.json"

@@ -20,8 +20,8 @@ import tempfile
 import numpy as np
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.service.learn import learn_bags
-from semiparam_ros.service.serving import load_model
+from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.learned_model import load_model
 from semiparam_ros.sim.arms import ArmScenarioConfig, ParameterPerturbation, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 

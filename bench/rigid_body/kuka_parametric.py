@@ -20,7 +20,7 @@ import numpy as np
 
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.build import build_model
-from semiparam_ros.eval.replay import load_samples
+from semiparam_ros.eval.bags.replay import load_samples
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from semiparam_ros.eval.compare import PairStats
-from semiparam_ros.report.paper import CHECKED_SP_KINDS
+from semiparam_ros.eval.protocol.compare import PairStats
+from semiparam_ros.eval.protocol.report import CHECKED_SP_KINDS
 
 __all__ = ["RestatedCheck", "restated_checks"]
 

@@ -23,9 +23,9 @@ from typing import Any
 from docs.tools.claims import restated_checks
 from docs.tools.replicates import ReplicateSummary, replicates_markdown
 from semiparam_ros.atomic import atomic_write_text
-from semiparam_ros.eval.compare import compare_pair, format_p
-from semiparam_ros.eval.options import Variant
-from semiparam_ros.report.paper import AdaptationReport, ProtocolReport
+from semiparam_ros.eval.protocol.compare import compare_pair, format_p
+from semiparam_ros.eval.protocol.options import Variant
+from semiparam_ros.eval.protocol.report import AdaptationReport, ProtocolReport
 from semiparam_ros.report.tables import (
     adaptation_table,
     checks_table,

@@ -1,15 +1,18 @@
 """The paper's protocol replicated over independent simulated logs (simulator seeds).
 
-One run of the protocol (:mod:`semiparam_ros.eval.protocol`) is one pair of logs: its 10 test parts share the
+One run of the protocol (:mod:`semiparam_ros.eval.protocol.prequential`) is one pair of logs: its 10 test
+parts share the
 same trained models and the same noise realisation of the training log, so they say how sure we are about
 *these* logs, not whether a criterion holds on logs of the same kind in general. Re-simulating the XY and XZ
 logs with another seed draws new sensor noise and a new wander of the hand's speed, circle centre and radius
 (:mod:`semiparam_ros.sim.scenario`); everything else (robot, non-rigid effects, hyperparameters, protocol) is
 unchanged. Each seed is then an independent replicate of the whole experiment, and:
 
-* per criterion of the issue (:func:`~semiparam_ros.report.paper.paper_checks`): on how many seeds it holds,
+* per criterion of the issue (:func:`~semiparam_ros.eval.protocol.report.paper_checks`): on how many seeds it
+  holds,
   and the spread of its value;
-* per pair of learners (A vs B), group, segment and target: :func:`~semiparam_ros.eval.compare.compare_pair`
+* per pair of learners (A vs B), group, segment and target:
+  :func:`~semiparam_ros.eval.protocol.compare.compare_pair`
   on the per-seed means (``n`` = seeds; the seeds are independent) and on all parts of all seeds pooled
   (``n`` = seeds × parts; more power, but the parts of one seed share their trained models, so its p-values
   are optimistic).
@@ -25,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.eval.compare import DEFAULT_PAIRS, Comparison, compare_pair
-from semiparam_ros.report.paper import (
+from semiparam_ros.eval.protocol.compare import DEFAULT_PAIRS, Comparison, compare_pair
+from semiparam_ros.eval.protocol.report import (
     SEGMENTS,
     Check,
     GroupStats,
@@ -45,7 +48,7 @@ _PROTOCOL_KEYS = ("split_size", "window_samples")
 
 @dataclass(frozen=True)
 class Criterion:
-    """One criterion of :func:`~semiparam_ros.report.paper.paper_checks` over the seeds.
+    """One criterion of :func:`~semiparam_ros.eval.protocol.report.paper_checks` over the seeds.
 
     Attributes:
         checks: The check on each seed (same identifier), in seed order.

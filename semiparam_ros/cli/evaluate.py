@@ -18,7 +18,7 @@ contact detection per episode, the error after the contacts vs before, payload a
 
     evaluate contacts bags/generated/icub_contacts --json results/contacts.json --plot results/contacts.png
 
-Argument parsing only; the work is done by :mod:`semiparam_ros.report.run`.
+Argument parsing only; the work is done by :mod:`semiparam_ros.report.evaluate`.
 """
 
 from __future__ import annotations
@@ -95,7 +95,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``evaluate`` (subcommands ``paper``, ``payload``, ``contacts``)."""
-    from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
+    from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 
     parser = argparse.ArgumentParser(prog="evaluate", description="Replay bags through the estimator's "
                                      "pipeline and learners.")
@@ -170,16 +170,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
-    from semiparam_ros.eval.horizon import DEFAULT_HORIZONS  # heavy imports after argument checks
-    from semiparam_ros.eval.options import ProtocolOptions
-    from semiparam_ros.eval.replay import Topics
-    from semiparam_ros.report.run import (
-        ReportPaths,
-        evaluate_contacts,
-        evaluate_paper,
-        evaluate_payload,
-        load_evaluation_config,
-    )
+    from semiparam_ros.core.config import load_evaluation_config
+    from semiparam_ros.eval.bags.replay import Topics
+    from semiparam_ros.eval.protocol.horizon import DEFAULT_HORIZONS  # heavy imports after argument checks
+    from semiparam_ros.eval.protocol.options import ProtocolOptions
+    from semiparam_ros.report.evaluate import ReportPaths, evaluate_contacts, evaluate_paper, evaluate_payload
 
     try:
         cfg = load_evaluation_config(args.config, parse_overrides(args.overrides))

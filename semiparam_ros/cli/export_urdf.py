@@ -36,7 +36,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from semiparam_ros.atomic import atomic_write_text
     from semiparam_ros.core.rigid_body.identification import export_urdf
-    from semiparam_ros.service.serving import load_model
+    from semiparam_ros.serving.learned_model import load_model
 
     try:
         model = load_model(args.checkpoint)

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from semiparam_ros.cli.errors import error_exit
 from semiparam_ros.cli.evaluate import parse_overrides
-from semiparam_ros.eval.options import DEFAULT_SPLITS
+from semiparam_ros.eval.protocol.options import DEFAULT_SPLITS
 
 __all__ = ["build_parser", "main"]
 
@@ -66,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         0 on success, 2 on invalid input, 1 if a file cannot be read or written.
     """
     args = build_parser().parse_args(argv)
-    from semiparam_ros.eval.horizon import DEFAULT_HORIZONS  # heavy imports after argument parsing
+    from semiparam_ros.eval.protocol.horizon import DEFAULT_HORIZONS  # heavy imports after argument parsing
     from semiparam_ros.report.real_robot import run_comparison
 
     horizons = DEFAULT_HORIZONS if args.horizons is None else (args.horizons or None)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from semiparam_ros.cli.errors import error_exit
 from semiparam_ros.cli.evaluate import add_config_arguments, parse_overrides
-from semiparam_ros.eval.options import DEFAULT_WINDOW_S
+from semiparam_ros.eval.protocol.options import DEFAULT_WINDOW_S
 
 __all__ = ["build_parser", "main"]
 
@@ -105,7 +105,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         Exit status: 0 on success, 2 on invalid input, 1 if a file cannot be read or written.
     """
     args = build_parser().parse_args(argv)
-    from semiparam_ros.tune.run import run_tune  # heavy imports after argument parsing
+    from semiparam_ros.tune.tuning import run_tune  # heavy imports after argument parsing
 
     grid = {
         k: v

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,8 +40,10 @@ __all__ = [
     "RUNTIME_TARGETS",
     "EstimatorConfig",
     "ParameterSpec",
+    "default_config_path",
     "describe_parameters",
     "load_config",
+    "load_evaluation_config",
     "parameter_spec",
     "runtime_targets",
     "structural_values",
@@ -357,7 +360,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "units of the noise variance) above which an outlier is motion the model has not seen, "
                   "learned, not a contact; 0 = every outlier is a contact", min=0.0, max=1e12,
                   runtime="estimator"),
-    # feed-forward at desired states (joint torques; service/feedforward.py)
+    # feed-forward at desired states (joint torques; serving/feedforward.py)
     ParameterSpec("feedforward.joints", "string_array", [],
                   "joint order of ~/feedforward_commands and ~/feedforward (a JointGroupEffortController's "
                   "joints); empty = robot.joints"),
@@ -775,3 +778,38 @@ def write_config(config: EstimatorConfig, path: str | Path, node_name: str = "/*
         text = "".join(f"# {line}\n" for line in header.splitlines()) + text
     with atomic_open(path, "w") as fh:
         fh.write(text)
+
+
+def default_config_path() -> Path | None:
+    """Return the shipped ``icub_right_arm.yaml``: the source tree's, else the installed share copy.
+
+    Returns:
+        The path, or ``None`` when neither exists (the parameter defaults are then used).
+    """
+    candidates = [
+        Path(__file__).resolve().parents[2] / "config" / "icub_right_arm.yaml",
+        Path(sys.prefix) / "share" / "semiparam_ros" / "config" / "icub_right_arm.yaml",
+    ]
+    return next((c for c in candidates if c.is_file()), None)
+
+
+def load_evaluation_config(
+    path: str | Path | None, overrides: Mapping[str, Any] | None = None
+) -> EstimatorConfig:
+    """Load a parameter file and apply overrides.
+
+    Args:
+        path: ROS 2 parameter file, or ``None`` for the shipped ``icub_right_arm.yaml`` (the parameter
+            defaults if it cannot be found).
+        overrides: Dotted names to values.
+
+    Returns:
+        The validated configuration.
+
+    Raises:
+        ValueError: On a bad file, unknown parameter or invalid value.
+    """
+    if path is None:
+        path = default_config_path()
+    config = load_config(path) if path is not None else EstimatorConfig.defaults()
+    return config.with_overrides(dict(overrides)) if overrides else config

@@ -1,1 +1,9 @@
 """Reports a user runs on their bags: the paper's protocol, real logs, tables, figures and pages."""
+
+__all__ = [
+    "evaluate",
+    "figures",
+    "per_sample",
+    "real_robot",
+    "tables",
+]

@@ -28,9 +28,9 @@ import numpy as np
 from semiparam_ros.atomic import atomic_savefig
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.kinds import OutputKind
-from semiparam_ros.eval.contacts import ContactReport, ContactRun, GroundTruthEpisodes, external_truth
-from semiparam_ros.eval.options import Variant
-from semiparam_ros.report.paper import AdaptationReport, ProtocolReport
+from semiparam_ros.eval.bags.contacts import ContactReport, ContactRun, GroundTruthEpisodes, external_truth
+from semiparam_ros.eval.protocol.options import Variant
+from semiparam_ros.eval.protocol.report import AdaptationReport, ProtocolReport
 
 __all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_contacts", "plot_protocol"]
 
@@ -45,7 +45,7 @@ _EXTRA = ("tab:orange", "tab:brown", "tab:gray", "tab:olive", "tab:cyan", "tab:p
 
 
 def _color(kind: str, index: int) -> str:
-    """Colour of a report key: its learner's (:class:`~semiparam_ros.eval.options.Variant`), else a spare."""
+    """Return the colour of a report key: its learner's (an ``options.Variant``), or a spare."""
     learner = Variant.parse(kind).kind
     return COLORS[learner] if learner in COLORS else _EXTRA[index % len(_EXTRA)]
 
@@ -73,8 +73,8 @@ def plot_protocol(report: ProtocolReport, path: str | Path, *, truth: bool = Fal
     """Draw the paper's Fig. 3 from a protocol report and write it as PNG (atomically).
 
     Args:
-        report: Output of :func:`~semiparam_ros.report.paper.protocol_report` (uses ``curves``; groups, units
-            and labels from its output kind).
+        report: Output of :func:`~semiparam_ros.eval.protocol.report.protocol_report` (uses ``curves``;
+            groups, units and labels from its output kind).
         path: Destination ``.png``.
         truth: Plot the errors against the noise-free outputs (requires them in the report).
         title: Figure title.
@@ -123,7 +123,7 @@ def plot_adaptation(report: AdaptationReport, path: str | Path, *, title: str | 
     """Draw the payload scenario (error vs time around the change) and write it as PNG (atomically).
 
     Args:
-        report: Output of :func:`~semiparam_ros.report.paper.adaptation_report`.
+        report: Output of :func:`~semiparam_ros.eval.protocol.report.adaptation_report`.
         path: Destination ``.png``.
         title: Figure title.
         dpi: Resolution.
@@ -184,7 +184,7 @@ def plot_contacts(report: ContactReport, truth: GroundTruthEpisodes, runs: Mappi
     Args:
         report: The contact report (units, pickup).
         truth: The true episodes.
-        runs: ``{"on": ..., "off": ...}`` of :func:`~semiparam_ros.eval.contacts.run_contacts`.
+        runs: ``{"on": ..., "off": ...}`` of :func:`~semiparam_ros.eval.bags.contacts.run_contacts`.
         path: PNG destination.
         bag: The bag, to read the true external effect (optional).
         config: Its configuration (needed with ``bag``).

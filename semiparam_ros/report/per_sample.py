@@ -20,7 +20,7 @@ import numpy as np
 
 from semiparam_ros.atomic import atomic_open, atomic_savefig
 from semiparam_ros.core.learners.uncertainty import NoiseScale
-from semiparam_ros.eval.protocol import ProtocolResult
+from semiparam_ros.eval.protocol.prequential import ProtocolResult
 
 __all__ = ["per_sample_figure", "per_sample_table", "write_per_sample"]
 

@@ -1,13 +1,14 @@
 """P, NP and SP on a real arm's joint-torque logs, beside the references a robot user knows.
 
 :func:`compare_on_logs` trains on one log and runs the project's protocol on another
-(:func:`~semiparam_ros.eval.protocol.run_protocol`: the test log in sequential parts, each from a copy of
+(:func:`~semiparam_ros.eval.protocol.prequential.run_protocol`: the test log in sequential parts, each from a
+copy of
 the trained model; "at regime" = the second half of each part), for:
 
 - the learners P, NP, SP (the configuration as given) and SPC (the paper's cascade), updated online on
   the test parts (test-then-train) and frozen after training (:data:`FROZEN_SUFFIX`: no test updates, i.e.
   generalization; a learner with a fast correction is used as its model, see
-  :func:`~semiparam_ros.eval.protocol.predict_only`);
+  :func:`~semiparam_ros.eval.protocol.prequential.predict_only`);
 - P without friction and offsets (:data:`P_RIGID`), to measure what the friction columns add;
 - the CAD model (:data:`CAD`: RNEA with the URDF's parameters, no learning);
 - batch identification (:data:`BATCH`: ordinary least squares on the whole training log with the
@@ -19,7 +20,7 @@ external torque added to the measured torques over a window is seen in the resid
 (fully if frozen, partly if it keeps learning), but only at the window's first sample by persistence.
 
 The result is a typed :class:`RealRobotComparison` (the protocol's
-:class:`~semiparam_ros.report.paper.ProtocolReport` plus acceptance criteria as
+:class:`~semiparam_ros.eval.protocol.report.ProtocolReport` plus acceptance criteria as
 :class:`Criterion` records and the :class:`InjectedTorque` measurement); :func:`comparison_markdown`
 renders its tables. Units: N·m (errors, torques), s.
 """
@@ -38,26 +39,26 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.baselines import (
+from semiparam_ros.eval.bags.replay import load_samples
+from semiparam_ros.eval.models.baselines import (
     Persistence,
     batch_least_squares,
     cad_model,
     identification_regressor,
     least_squares_model,
 )
-from semiparam_ros.eval.horizon import (
+from semiparam_ros.eval.models.served import NodeLearner, node_learner, served_model
+from semiparam_ros.eval.protocol.horizon import (
     DEFAULT_HORIZONS,
     HorizonReport,
     evaluate_horizons,
     horizon_figure,
     horizon_markdown,
 )
-from semiparam_ros.eval.metrics import OutputSpec
-from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
-from semiparam_ros.eval.protocol import SampleArrays, predict_only, run_protocol, test_then_train
-from semiparam_ros.eval.replay import load_samples
-from semiparam_ros.eval.served import NodeLearner, node_learner, served_model
-from semiparam_ros.report.paper import ProtocolReport, protocol_report
+from semiparam_ros.eval.protocol.metrics import OutputSpec
+from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
+from semiparam_ros.eval.protocol.prequential import SampleArrays, predict_only, run_protocol, test_then_train
+from semiparam_ros.eval.protocol.report import ProtocolReport, protocol_report
 
 __all__ = [
     "BATCH",
@@ -145,7 +146,7 @@ class RealRobotComparison:
         friction_joints: Joints the friction criterion is evaluated on.
         criteria: The acceptance criteria.
         injected: The external-torque measurement, or ``None`` if not run.
-        horizons: Every model's error by the age of the model (:mod:`semiparam_ros.eval.horizon`), or
+        horizons: Every model's error by the age of the model (:mod:`semiparam_ros.eval.protocol.horizon`), or
             ``None`` if not run.
         excitation: What the training data excited (:func:`excitation_summary`).
         coverage: Per learner, the fraction of the test log's errors within ±2σ of its served model
@@ -282,8 +283,8 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
         inject: Also run :func:`injected_torque_recovery`
             (a 1 N·m step for 1 s at the middle of the test log, after the gate's warm-up).
         protocol: Extra settings recorded in the report.
-        horizons: Horizons of :func:`~semiparam_ros.eval.horizon.evaluate_horizons` [s] (0 = one step,
-            ``"frozen"``), run on the learners trained by the protocol, the CAD model, the batch fit and
+        horizons: Horizons of :func:`~semiparam_ros.eval.protocol.horizon.evaluate_horizons` [s] (0 = one
+            step, ``"frozen"``), run on the learners trained by the protocol, the CAD model, the batch fit and
             persistence; ``None`` = not run.
         progress: Progress bar (only on a terminal).
 
@@ -344,7 +345,7 @@ def excitation_summary(config: EstimatorConfig, model: Any, test: SampleArrays) 
     Args:
         config: The configuration the model was built with.
         model: A trained learner with a rigid-body part (``parametric`` stage, or a P learner), or a
-            :class:`~semiparam_ros.eval.served.NodeLearner` of one.
+            :class:`~semiparam_ros.eval.models.served.NodeLearner` of one.
         test: The test stream.
 
     Returns:
@@ -502,8 +503,8 @@ def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", t
         ValueError: On a missing data folder, bad configuration or unreadable bags.
     """
     from semiparam_ros.atomic import atomic_write_text
-    from semiparam_ros.report.paper import write_json
-    from semiparam_ros.report.run import load_evaluation_config
+    from semiparam_ros.core.config import load_evaluation_config
+    from semiparam_ros.plain_json import write_json
 
     if not Path(data).is_dir():
         raise ConfigurationError(f"data folder {data} does not exist")

@@ -10,11 +10,11 @@ import math
 from collections.abc import Sequence
 
 from semiparam_ros.core.kinds import OutputKind
-from semiparam_ros.eval.compare import Comparison, format_p
-from semiparam_ros.eval.contacts import ContactReport
-from semiparam_ros.eval.metrics import GROUP_UNITS
-from semiparam_ros.eval.options import DEFAULT_FIRST_S
-from semiparam_ros.report.paper import AdaptationReport, Check, ProtocolReport
+from semiparam_ros.eval.bags.contacts import ContactReport
+from semiparam_ros.eval.protocol.compare import Comparison, format_p
+from semiparam_ros.eval.protocol.metrics import GROUP_UNITS
+from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S
+from semiparam_ros.eval.protocol.report import AdaptationReport, Check, ProtocolReport
 
 __all__ = [
     "adaptation_table",
@@ -223,7 +223,7 @@ def contacts_table(report: ContactReport) -> str:
     """Gate on and off: detection per episode summarized, error after vs before the contacts, payload.
 
     Args:
-        report: A :class:`~semiparam_ros.eval.contacts.ContactReport`.
+        report: A :class:`~semiparam_ros.eval.bags.contacts.ContactReport`.
 
     Returns:
         Markdown: one summary table (a row per gate setting) and one row per episode.

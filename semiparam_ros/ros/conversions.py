@@ -49,7 +49,7 @@ from semiparam_ros.core.stream.messages import (
     wrench_from_msg,
 )
 from semiparam_ros.errors import RejectedSampleError
-from semiparam_ros.service.feedforward import DesiredState, FeedForwardCommand, TrajectoryPoint
+from semiparam_ros.serving.feedforward import DesiredState, FeedForwardCommand, TrajectoryPoint
 
 __all__ = [
     "SerializedOutput",
@@ -141,7 +141,7 @@ def desired_state_from_msg(msg: Any) -> DesiredState:
 
     Returns:
         The plain-array form (values are checked later, by
-        :class:`~semiparam_ros.service.feedforward.FeedForward`).
+        :class:`~semiparam_ros.serving.feedforward.FeedForward`).
 
     Raises:
         RejectedSampleError: A stamp with ``nanosec ≥ 10⁹`` or negative, or non-numeric values.

@@ -78,7 +78,7 @@ from semiparam_ros.core.estimator.build import rmse_window_samples
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.kinds import InputKind, OutputKind
 from semiparam_ros.core.stream.gate import Verdict
-from semiparam_ros.service.learning_loop import LearningLoop, Stepped
+from semiparam_ros.serving.learning_loop import LearningLoop, Stepped
 
 __all__ = ["NodeStatistics", "diagnostic_array"]
 

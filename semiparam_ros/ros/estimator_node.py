@@ -1,18 +1,18 @@
 """The ``estimator`` node: ROS entities wired to the plain-Python learning loop.
 
 Run it with ``ros2 run semiparam_ros estimator --ros-args --params-file config/icub_right_arm.yaml`` (or
-``python -m semiparam_ros.ros.run …``: the command line lives in :mod:`semiparam_ros.ros.run`). Its topics,
+``python -m semiparam_ros.ros.main …``: the command line lives in :mod:`semiparam_ros.ros.main`). Its topics,
 services, QoS and threads are documented in docs/node.md. The work is done by parts that never import
-rclpy: :class:`~semiparam_ros.service.learning_loop.LearningLoop` (input queue, overload policy, the
+rclpy: :class:`~semiparam_ros.serving.learning_loop.LearningLoop` (input queue, overload policy, the
 estimator offline replay uses too, so a bag gives the same numbers either way),
-:class:`~semiparam_ros.service.model_service.ModelService` (feed-forward, gravity, payload, link inertias)
-and :class:`~semiparam_ros.service.checkpoint_writer.CheckpointWriter` (the checkpoint thread). This module
+:class:`~semiparam_ros.serving.model_service.ModelService` (feed-forward, gravity, payload, link inertias)
+and :class:`~semiparam_ros.serving.checkpoint_writer.CheckpointWriter` (the checkpoint thread). This module
 converts messages, hands them on, and publishes what comes back.
 
-The parts are assembled by :func:`~semiparam_ros.service.assembly.assemble`. One executor thread runs
+The parts are assembled by :func:`~semiparam_ros.serving.assembly.assemble`. One executor thread runs
 everything that touches the estimator. A subscription callback converts its message (taken serialised),
 queues it, takes what else already waits on both subscriptions, and drains the loop at once
-(:meth:`~semiparam_ros.service.learning_loop.LearningLoop.drain`: predict, publish, then learn): at most
+(:meth:`~semiparam_ros.serving.learning_loop.LearningLoop.drain`: predict, publish, then learn): at most
 ``_BATCH`` inputs per turn, a catch-up timer for a backlog, an idle timer for the deferred update. Bad
 input is dropped and counted by reason in ``/diagnostics``; any other exception in a callback is a
 programming error: logged FATAL, it propagates out of ``spin`` and ends the process.
@@ -47,10 +47,10 @@ from semiparam_ros.ros.outputs import PARAMETERS_QOS, Outputs
 from semiparam_ros.ros.parameter_files import parameter_files, unmatched_files_message
 from semiparam_ros.ros.parameters import ParameterError, declare_parameters, make_parameter_validator
 from semiparam_ros.ros.save_service import SaveService
-from semiparam_ros.service.assembly import assemble, checkpoint_path
-from semiparam_ros.service.checkpoint_writer import CheckpointWriter
-from semiparam_ros.service.learning_loop import Input, Stepped
-from semiparam_ros.service.model_service import ModelService
+from semiparam_ros.serving.assembly import assemble, checkpoint_path
+from semiparam_ros.serving.checkpoint_writer import CheckpointWriter
+from semiparam_ros.serving.learning_loop import Input, Stepped
+from semiparam_ros.serving.model_service import ModelService
 
 __all__ = ["INPUT_QOS", "PARAMETERS_QOS", "EstimatorNode", "StartupError"]
 

@@ -3,7 +3,7 @@
 A controller's ``~/desired_state`` (a ``JointTrajectory``; the point at "now") is answered on
 ``~/feedforward_commands``, ``~/feedforward`` and ``~/feedforward/std``; a trajectory on ``~/trajectory`` is
 published on ``~/trajectory_with_effort`` with every point's effort. The model and its bookkeeping live in
-:class:`~semiparam_ros.service.model_service.ModelService`; this module converts, hands on and publishes.
+:class:`~semiparam_ros.serving.model_service.ModelService`; this module converts, hands on and publishes.
 Topics and QoS: docs/node.md; the ways to wire a controller: docs/feedforward.md.
 """
 
@@ -20,7 +20,7 @@ from semiparam_ros.ros import conversions as cv
 from semiparam_ros.ros.callbacks import quiet_at_shutdown
 from semiparam_ros.ros.inputs import GONE, ThrottledWarnings, take
 from semiparam_ros.ros.outputs import Outputs
-from semiparam_ros.service.model_service import ModelService
+from semiparam_ros.serving.model_service import ModelService
 
 __all__ = ["FeedForwardEndpoints"]
 

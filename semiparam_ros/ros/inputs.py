@@ -24,7 +24,7 @@ from semiparam_ros.core.kinds import InputKind
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.ros import conversions as cv
 from semiparam_ros.ros.diagnostics import NodeStatistics
-from semiparam_ros.service.learning_loop import LearningLoop
+from semiparam_ros.serving.learning_loop import LearningLoop
 
 __all__ = ["GONE", "INPUT_QOS", "MAX_DRAIN", "InputStreams", "ThrottledWarnings", "take"]
 

@@ -24,7 +24,7 @@ from semiparam_ros.core.estimator.online import StepResult
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate
 from semiparam_ros.ros import conversions as cv
-from semiparam_ros.service.feedforward import FeedForwardCommand
+from semiparam_ros.serving.feedforward import FeedForwardCommand
 
 __all__ = ["PARAMETERS_QOS", "Outputs"]
 

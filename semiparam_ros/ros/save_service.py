@@ -1,7 +1,7 @@
 """``~/save`` served by a hidden helper node in a thread of its own, so its wait blocks no learning.
 
 The reply waits for the checkpoint file
-(:meth:`~semiparam_ros.service.checkpoint_writer.CheckpointWriter.save`); served from the node's own executor,
+(:meth:`~semiparam_ros.serving.checkpoint_writer.CheckpointWriter.save`); served from the node's own executor,
 that wait would stall learning (and needs a coroutine, which the ``EventsExecutor`` never awaits). The service
 name is resolved with the node's remappings; the helper (``_<name>_save``, no parameter services, no rosout)
 takes it as is.

@@ -43,7 +43,7 @@ from semiparam_ros.sim.contacts import (
     ContactEpisode,
 )
 from semiparam_ros.sim.ik import ArmKinematics
-from semiparam_ros.sim.pipeline import (
+from semiparam_ros.sim.recording import (
     Measurement,
     RecordingConfig,
     add_payload,
@@ -506,7 +506,7 @@ def true_parameters(config: ArmScenarioConfig) -> np.ndarray:
 
 @dataclass(frozen=True)
 class JointTorqueMeasurement:
-    """An arm's joint torque sensors (a :class:`~semiparam_ros.sim.pipeline.MeasurementModel`).
+    """An arm's joint torque sensors (a :class:`~semiparam_ros.sim.recording.MeasurementModel`).
 
     The reading is ``rigid + friction(q̇, q̈) − Jᵀ F`` (viscous and Coulomb friction, offsets, armature;
     a contact force F at the end effector) plus white noise per joint drawn from ``rng``.
@@ -526,7 +526,7 @@ class JointTorqueMeasurement:
 
     def measure(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, t: np.ndarray, rigid: np.ndarray,
                 force: np.ndarray | None, rng: np.random.Generator) -> Measurement:
-        """See :meth:`semiparam_ros.sim.pipeline.MeasurementModel.measure` (joint torques in N·m)."""
+        """See :meth:`semiparam_ros.sim.recording.MeasurementModel.measure` (joint torques in N·m)."""
         count, n = rigid.shape
         tau_f = self.friction.torques(dq, ddq)
         contact_wrench = np.zeros((count, 6))

@@ -36,7 +36,7 @@ from semiparam_ros.sim.arms import (
 )
 from semiparam_ros.sim.contacts import ContactConfig, contacts_timing
 from semiparam_ros.sim.effects import DEFAULT_EFFECTS, EffectParameters
-from semiparam_ros.sim.pipeline import RecordingConfig
+from semiparam_ros.sim.recording import RecordingConfig
 from semiparam_ros.sim.scenario import (
     DEFAULT_VARIABILITY,
     ScenarioConfig,

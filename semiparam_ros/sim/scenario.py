@@ -56,7 +56,7 @@ from semiparam_ros.sim.effects import (
     sensor_reading,
 )
 from semiparam_ros.sim.ik import ARM_JOINTS, ArmKinematics, ClikResult, clik_periodic_orbit
-from semiparam_ros.sim.pipeline import (
+from semiparam_ros.sim.recording import (
     DEFAULT_START_NS,
     Measurement,
     RecordingConfig,
@@ -590,7 +590,7 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
 class FTSensorMeasurement:
     """The iCub's six-axis F/T sensor in the upper arm.
 
-    A :class:`~semiparam_ros.sim.pipeline.MeasurementModel`.
+    A :class:`~semiparam_ros.sim.recording.MeasurementModel`.
     The reading is ``sensor_reading(rigid + harness + contacts)`` (calibration, offset and drift of
     :mod:`semiparam_ros.sim.effects`) plus white noise, force then torque drawn from ``rng``.
 
@@ -605,7 +605,7 @@ class FTSensorMeasurement:
 
     def measure(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, t: np.ndarray, rigid: np.ndarray,
                 force: np.ndarray | None, rng: np.random.Generator) -> Measurement:
-        """See :meth:`~semiparam_ros.sim.pipeline.MeasurementModel.measure` (N, N·m, sensor frame)."""
+        """See :meth:`~semiparam_ros.sim.recording.MeasurementModel.measure` (N, N·m, sensor frame)."""
         fx = self.effects
         cables = harness_wrench(self.kin, q, dq, fx)
         contact_w = external = None

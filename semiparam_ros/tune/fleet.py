@@ -1,7 +1,7 @@
 """One checkpoint per robot of a fleet, learned in parallel, with a summary (``learn-fleet``).
 
 ``ROOT`` holds one folder per robot, each holding that robot's bags (rosbag2 folders or ``.mcap`` files).
-Every robot is one job: its bags are learned in name order by :func:`~semiparam_ros.service.learn.learn_bags`
+Every robot is one job: its bags are learned in name order by :func:`~semiparam_ros.serving.learn.learn_bags`
 (exactly what ``learn BAG… --config C`` does), except the last one when there are two or more, which is
 held out: the learned model, frozen, predicts its states as served (``LearnedModel.predict``) and the
 summary reports that error. The configuration of robot ``r`` is the file ``config_pattern`` names with
@@ -34,11 +34,11 @@ import numpy as np
 from semiparam_ros.atomic import atomic_write_bytes, atomic_write_text
 from semiparam_ros.core.config import load_config
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.parallel import run_jobs
-from semiparam_ros.eval.replay import Topics, load_samples
-from semiparam_ros.service.learn import learn_bags
-from semiparam_ros.service.serving import LearnedModel
-from semiparam_ros.tune.validation import served_error
+from semiparam_ros.eval.bags.replay import Topics, load_samples
+from semiparam_ros.jobs.parallel import run_jobs
+from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.learned_model import LearnedModel
+from semiparam_ros.tune.held_out import served_error
 
 __all__ = ["FleetRow", "Robot", "discover_robots", "fleet_markdown", "learn_fleet"]
 

@@ -35,11 +35,11 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import build_model, build_regressor
 from semiparam_ros.core.stream.rate import measured_period_s
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.metrics import OutputSpec, component_rmse
-from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_WINDOW_S
-from semiparam_ros.eval.parallel import run_jobs
-from semiparam_ros.eval.protocol import SampleArrays, progress_enabled
-from semiparam_ros.report.paper import ProtocolReport
+from semiparam_ros.eval.protocol.metrics import OutputSpec, component_rmse
+from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S, DEFAULT_WINDOW_S
+from semiparam_ros.eval.protocol.prequential import SampleArrays, progress_enabled
+from semiparam_ros.eval.protocol.report import ProtocolReport
+from semiparam_ros.jobs.parallel import run_jobs
 
 __all__ = [
     "DEFAULT_GRID",
@@ -399,9 +399,9 @@ def _protocol_job(
     kinds: Sequence[str],
     options: Mapping[str, Any],
 ) -> ProtocolReport:
-    from semiparam_ros.eval.protocol import run_protocol
-    from semiparam_ros.eval.replay import build_models
-    from semiparam_ros.report.paper import protocol_report
+    from semiparam_ros.eval.bags.replay import build_models
+    from semiparam_ros.eval.protocol.prequential import run_protocol
+    from semiparam_ros.eval.protocol.report import protocol_report
 
     period = measured_period_s(train.stamps_ns)
     models = build_models(config, kinds, n_train=len(train), sample_period_s=period)
@@ -490,7 +490,7 @@ def grid_table(selection: Selection, *, first_s: float | None = None) -> str:
     Returns:
         The table with a trailing newline.
     """
-    from semiparam_ros.eval.metrics import GROUP_UNITS
+    from semiparam_ros.eval.protocol.metrics import GROUP_UNITS
 
     groups = list(selection.best.rmse)
     where = "hold-out" if selection.method == "holdout" else "at regime"

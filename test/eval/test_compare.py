@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from semiparam_ros.eval.compare import compare_pair
-from semiparam_ros.eval.metrics import OutputSpec
-from semiparam_ros.report.paper import (
+from semiparam_ros.eval.protocol.compare import compare_pair
+from semiparam_ros.eval.protocol.metrics import OutputSpec
+from semiparam_ros.eval.protocol.report import (
     GroupStats,
     ModelStats,
     ProtocolReport,

@@ -15,9 +15,9 @@ import pytest
 import yaml
 from helpers import REPO
 
-from semiparam_ros.eval.contacts import ContactReport, contact_report, read_episodes, run_contacts
-from semiparam_ros.report.paper import to_plain, write_json
-from semiparam_ros.report.run import load_evaluation_config
+from semiparam_ros.core.config import load_evaluation_config
+from semiparam_ros.eval.bags.contacts import ContactReport, contact_report, read_episodes, run_contacts
+from semiparam_ros.plain_json import to_plain, write_json
 
 OVERRIDES = {"nonparametric.n_features": 100}
 

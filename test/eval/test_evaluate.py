@@ -12,9 +12,10 @@ import pytest
 import scipy.stats
 from helpers.bags import CONFIG, ROOT, UR5_JOINTS, ur5_config, write_ur5_torque_bag
 
-from semiparam_ros.eval.metrics import OutputSpec, group_rmse, window_samples, windowed_rmse
-from semiparam_ros.eval.protocol import SampleArrays, run_adaptation, run_protocol, split_bounds
-from semiparam_ros.report.paper import ProtocolReport, paper_checks, protocol_report, write_json
+from semiparam_ros.eval.protocol.metrics import OutputSpec, group_rmse, window_samples, windowed_rmse
+from semiparam_ros.eval.protocol.prequential import SampleArrays, run_adaptation, run_protocol, split_bounds
+from semiparam_ros.eval.protocol.report import ProtocolReport, paper_checks, protocol_report
+from semiparam_ros.plain_json import write_json
 from semiparam_ros.report.tables import protocol_table
 
 WRENCH = OutputSpec.wrench()
@@ -249,7 +250,7 @@ def test_build_models_spj_is_the_joint_fit_whatever_the_configuration_says() -> 
     from semiparam_ros.core.config import load_config
     from semiparam_ros.core.learners.cascade import SemiparametricModel
     from semiparam_ros.core.learners.joint import JointSemiparametricModel
-    from semiparam_ros.eval.replay import JOINT_SP, build_models
+    from semiparam_ros.eval.bags.replay import JOINT_SP, build_models
 
     small = {"nonparametric.n_features": 20, "nonparametric.standardizer_warmup": 5}
     cascade = load_config(CONFIG).with_overrides({**small, "semiparametric.combination": "cascade"})
@@ -269,7 +270,7 @@ def test_build_models_spc_is_the_papers_cascade_whatever_the_configuration_says(
     from semiparam_ros.core.config import load_config
     from semiparam_ros.core.learners.cascade import SemiparametricModel
     from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
-    from semiparam_ros.eval.replay import CASCADE_SP, build_models
+    from semiparam_ros.eval.bags.replay import CASCADE_SP, build_models
 
     config = load_config(CONFIG).with_overrides({"nonparametric.n_features": 20})
     assert config["semiparametric.combination"] == "consistent"  # the shipped default
@@ -365,7 +366,7 @@ def test_test_skip_runs_the_protocol_within_one_bag() -> None:
     """train_limit = test_skip = n on one bag: trained on its first n samples, tested on the following ones
     (targets equal the bag's samples n, n+1, ...; the pipeline read independently)."""
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.eval.replay import evaluate_bags, load_samples
+    from semiparam_ros.eval.bags.replay import evaluate_bags, load_samples
 
     config = load_config(CONFIG).with_overrides({"nonparametric.n_features": 20})
     bag = BAGS / "icub_xy"
@@ -384,7 +385,7 @@ def _page_inputs(tmp_path: Path):
     """Toy reports of every kind the results page reads, written as JSON and read back."""
     from docs.tools.pages import load_inputs
     from docs.tools.replicates import replicate_summary
-    from semiparam_ros.report.paper import adaptation_report
+    from semiparam_ros.eval.protocol.report import adaptation_report
 
     def kinds():
         return {"P": ToyRidge(3, 6, lam=1e6), "NP": ToyRidge(3, 6), "SP": ToyRidge(3, 6, lam=0.5),
@@ -451,7 +452,7 @@ def test_no_module_of_the_package_writes_prose_pages() -> None:
 
     import semiparam_ros.eval as package
 
-    for path in Path(package.__file__).parent.glob("*.py"):
+    for path in Path(package.__file__).parent.rglob("*.py"):
         tree = ast.parse(path.read_text())
         docstrings = {id(node.body[0].value) for node in ast.walk(tree)
                       if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef) and node.body
@@ -475,8 +476,8 @@ def test_figures_draw_spj_in_its_own_colour_and_name() -> None:
 def test_adaptation_figure_is_a_valid_png(tmp_path: Path) -> None:
     from matplotlib.image import imread
 
+    from semiparam_ros.eval.protocol.report import adaptation_report
     from semiparam_ros.report.figures import plot_adaptation
-    from semiparam_ros.report.paper import adaptation_report
 
     stream = toy_stream(3000, 10, shift_at=1500)
     adapt = run_adaptation({"SP adaptive": ToyRidge(3, 6, forgetting=0.99), "SP": ToyRidge(3, 6)}, stream,
@@ -495,7 +496,7 @@ TUNED = {"parametric.lam": 0.01, "nonparametric.lam": 0.001, "nonparametric.sigm
 
 def _committed_report(splits: int) -> ProtocolReport:
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.eval.replay import evaluate_bags
+    from semiparam_ros.eval.bags.replay import evaluate_bags
 
     config = load_config(CONFIG).with_overrides(TUNED)
     result, _ = evaluate_bags(BAGS / "icub_xy", BAGS / "icub_xz", config, splits=splits,
@@ -578,9 +579,9 @@ def test_payload_adaptation_on_committed_bag(tmp_path: Path) -> None:
     from matplotlib.image import imread
 
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.eval.replay import evaluate_adaptation
+    from semiparam_ros.eval.bags.replay import evaluate_adaptation
+    from semiparam_ros.eval.protocol.report import adaptation_report
     from semiparam_ros.report.figures import plot_adaptation
-    from semiparam_ros.report.paper import adaptation_report
 
     # the paper's cascade, whose only way to follow a payload is the learners' forgetting (the default
     # consistent model follows it with its fast correction: test_contacts)
@@ -607,7 +608,7 @@ def test_payload_adaptation_on_committed_bag(tmp_path: Path) -> None:
 
 def test_frozen_parametric_sp_diagnostic() -> None:
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.eval.replay import FROZEN_P, build_models
+    from semiparam_ros.eval.bags.replay import FROZEN_P, build_models
 
     config = load_config(CONFIG).with_overrides({"nonparametric.n_features": 30,
                                                  "nonparametric.standardizer_warmup": 5,
@@ -633,7 +634,7 @@ def test_frozen_parametric_sp_diagnostic() -> None:
 
 def test_payload_cli_and_pickup_time(tmp_path: Path, capsys) -> None:
     from semiparam_ros.cli.evaluate import main
-    from semiparam_ros.eval.replay import read_change_time
+    from semiparam_ros.eval.bags.replay import read_change_time
 
     assert read_change_time(BAGS / "icub_payload") == (20.0, 1_700_000_020_000_000_000)
     with pytest.raises(ValueError, match="pickup"):
@@ -659,7 +660,7 @@ def test_payload_cli_and_pickup_time(tmp_path: Path, capsys) -> None:
 def test_limited_load_stops_reading_the_ground_truth_early(monkeypatch) -> None:
     """A prefix of the bag decodes only the matching prefix of the ground-truth topic (plus 1 s)."""
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.eval import replay
+    from semiparam_ros.eval.bags import replay
 
     read = replay.read_messages
     yielded = {"n": 0}
@@ -698,9 +699,9 @@ def ur5_bags(tmp_path_factory):
 def test_six_joint_torques_are_evaluated_per_joint_not_as_a_wrench(ur5_bags, tmp_path: Path) -> None:
     """robot.output decides the groups: six joint torques are one "torque" group over the joints with
     per-joint RMSE [N·m] and nMSE, never force/torque halves; checked against a direct computation."""
-    from semiparam_ros.eval.replay import evaluate_bags
+    from semiparam_ros.eval.bags.replay import evaluate_bags
+    from semiparam_ros.report.evaluate import evaluation_text
     from semiparam_ros.report.figures import plot_protocol
-    from semiparam_ros.report.run import evaluation_text
 
     config = ur5_config()
     result, _ = evaluate_bags(ur5_bags / "train", ur5_bags / "test", config, kinds=("P", "NP", "SP"),
@@ -737,7 +738,7 @@ def test_six_joint_torques_are_evaluated_per_joint_not_as_a_wrench(ur5_bags, tmp
 def test_icub_wrench_report_keeps_force_and_torque_groups_and_per_axis_values() -> None:
     """The iCub wrench case: force and torque groups as before, plus the six axes (no per-joint means)."""
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.eval.replay import evaluate_bags
+    from semiparam_ros.eval.bags.replay import evaluate_bags
 
     config = load_config(CONFIG).with_overrides({"nonparametric.n_features": 30})
     result, _ = evaluate_bags(BAGS / "icub_xy", BAGS / "icub_xz", config, kinds=("P",), splits=2,

@@ -8,9 +8,9 @@ from helpers import REPO
 
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.stream.rate import measured_period_s
-from semiparam_ros.eval.horizon import delayed_predictions
-from semiparam_ros.eval.protocol import SampleArrays, train
-from semiparam_ros.eval.replay import build_models
+from semiparam_ros.eval.bags.replay import build_models
+from semiparam_ros.eval.protocol.horizon import delayed_predictions
+from semiparam_ros.eval.protocol.prequential import SampleArrays, train
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 
 ROOT = REPO

@@ -12,8 +12,8 @@ from semiparam_ros.core.learners.cascade import SemiparametricModel
 from semiparam_ros.core.learners.nonparametric import NonparametricModel
 from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.baselines import Persistence
-from semiparam_ros.eval.horizon import (
+from semiparam_ros.eval.models.baselines import Persistence
+from semiparam_ros.eval.protocol.horizon import (
     FROZEN,
     delayed_predictions,
     evaluate_horizons,
@@ -21,7 +21,7 @@ from semiparam_ros.eval.horizon import (
     inside_training_range,
     parse_horizons,
 )
-from semiparam_ros.eval.protocol import SampleArrays, train
+from semiparam_ros.eval.protocol.prequential import SampleArrays, train
 
 
 def line(x: np.ndarray) -> np.ndarray:
@@ -152,7 +152,7 @@ def test_evaluate_cli_reports_horizons_in_text_json_and_figure(tmp_path):
     assert set(h["mean"]) == {"CAD", "P", "SP", "persistence"}
     # persistence held 1 s, recomputed from the bag's samples
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.eval.replay import load_samples
+    from semiparam_ros.eval.bags.replay import load_samples
 
     cfg = load_config(root / "config" / "icub_right_arm.yaml")
     test, _ = load_samples(root / "bags" / "icub_xz", cfg, limit=900)
@@ -163,7 +163,7 @@ def test_evaluate_cli_reports_horizons_in_text_json_and_figure(tmp_path):
     assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # the frozen column is the served model: the node's estimator on the training samples, its checkpoint,
     # load_model(...).predict on the scored test states
-    from semiparam_ros.eval.served import served_model
+    from semiparam_ros.eval.models.served import served_model
 
     train, _ = load_samples(root / "bags" / "icub_xy", cfg, limit=800)
     served = served_model(cfg.with_overrides({"nonparametric.n_features": 40}), "SP", train)

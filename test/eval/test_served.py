@@ -7,12 +7,12 @@ import pytest
 from helpers import KUKA, REPO
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.eval.protocol import SampleArrays
-from semiparam_ros.eval.replay import load_samples
-from semiparam_ros.eval.served import ServedModel, learn_served
+from semiparam_ros.eval.bags.replay import load_samples
+from semiparam_ros.eval.models.served import ServedModel, learn_served
+from semiparam_ros.eval.protocol.prequential import SampleArrays
 from semiparam_ros.report.real_robot import _models
-from semiparam_ros.service.learn import learn_bags
-from semiparam_ros.service.serving import load_model
+from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.learned_model import load_model
 
 needs_kuka = pytest.mark.skipif(not (KUKA / "measurements_1").is_dir(), reason=f"{KUKA} is absent")
 
@@ -54,9 +54,9 @@ def test_node_learner_is_the_node_step_and_the_bare_learner_without_the_gate():
     node learner without stamps is refused."""
     from semiparam_ros.core.config import load_config as load
     from semiparam_ros.core.stream.rate import measured_period_s
-    from semiparam_ros.eval.protocol import test_then_train
-    from semiparam_ros.eval.replay import build_models
-    from semiparam_ros.eval.served import node_learner
+    from semiparam_ros.eval.bags.replay import build_models
+    from semiparam_ros.eval.models.served import node_learner
+    from semiparam_ros.eval.protocol.prequential import test_then_train
 
     cfg = load(REPO / "config" / "icub_right_arm.yaml").with_overrides(
         {"nonparametric.n_features": 40, "gate.enabled": False, "adaptation.time_constant": 0.0,
@@ -89,7 +89,7 @@ def test_replay_predicts_with_the_consistent_projection_solved_on_the_nodes_sche
     state at that sample (solved again here from a copy of that state), and from then on the model's
     rigid-body part is Φ(x)·θ_consistent (θ = c ⊙ π in the learner's columns)."""
     from semiparam_ros.core.rigid_body.identification import consistent_parameters
-    from semiparam_ros.eval.served import node_learner
+    from semiparam_ros.eval.models.served import node_learner
 
     period = 5.0
     cfg = load_config(REPO / "config" / "kuka_lwr4.yaml").with_overrides(

@@ -116,13 +116,13 @@ def in_process_node(tmp_path: Path, monkeypatch: Any, **overrides: Any) -> Itera
 
 
 class NodeProcess:
-    """The estimator node as a subprocess (``python -m semiparam_ros.ros.run``)."""
+    """The estimator node as a subprocess (``python -m semiparam_ros.ros.main``)."""
 
     def __init__(self, ros_env: RosEnv, params: Iterable[str] = (), *, params_file: Path | None = CONFIG,
                  extra_args: Iterable[str] = (), tag: str = "node", executor: str | None = None,
                  node_args: Iterable[str] = ()) -> None:
         self.log_path = ros_env.tmp / f"{tag}_{next(_COUNTER)}.log"
-        cmd = [sys.executable, "-m", "semiparam_ros.ros.run"]
+        cmd = [sys.executable, "-m", "semiparam_ros.ros.main"]
         if executor is not None:
             cmd += ["--executor", executor]
         cmd += [*node_args, "--ros-args"]

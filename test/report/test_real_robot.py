@@ -9,7 +9,8 @@ from helpers.arms import random_state, reference_model, reference_rnea
 
 from semiparam_ros.core.config import load_config
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.baselines import (
+from semiparam_ros.eval.bags.replay import load_samples
+from semiparam_ros.eval.models.baselines import (
     FixedParameters,
     Persistence,
     batch_least_squares,
@@ -17,9 +18,8 @@ from semiparam_ros.eval.baselines import (
     identification_regressor,
     least_squares_model,
 )
-from semiparam_ros.eval.metrics import OutputSpec
-from semiparam_ros.eval.protocol import SampleArrays, run_protocol
-from semiparam_ros.eval.replay import load_samples
+from semiparam_ros.eval.protocol.metrics import OutputSpec
+from semiparam_ros.eval.protocol.prequential import SampleArrays, run_protocol
 from semiparam_ros.report.real_robot import (
     BATCH,
     BATCH_ONLINE,
@@ -182,8 +182,8 @@ def test_node_step_sees_an_injected_torque_with_the_gate_and_equals_test_then_tr
     learned, so the residual shows it whole."""
     from helpers.bags import ur5_config, write_ur5_torque_bag
 
-    from semiparam_ros.eval.protocol import test_then_train
-    from semiparam_ros.eval.replay import build_models
+    from semiparam_ros.eval.bags.replay import build_models
+    from semiparam_ros.eval.protocol.prequential import test_then_train
     from semiparam_ros.report.real_robot import _node_predictions
 
     write_ur5_torque_bag(tmp_path / "train", 20.0, seed=1)

@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 from docs.tools.replicates import ReplicateSummary, replicate_summary, replicates_markdown
-from semiparam_ros.report.paper import ProtocolReport
+from semiparam_ros.eval.protocol.report import ProtocolReport
 
 KINDS = ("P", "NP", "SP", "SPJ")
 # per learner: (force at regime, torque at regime, force first 3 s, torque first 3 s) scale

@@ -39,9 +39,9 @@ def test_launch_file_structure_and_installation():
     assert kw["name"].value == "estimator"
     # the executable is the node's console script, the executor names are the node's own
     setup = (REPO / "setup.py").read_text()
-    assert '"estimator = semiparam_ros.ros.run:main"' in setup
+    assert '"estimator = semiparam_ros.ros.main:main"' in setup
     assert '("share/" + package_name + "/launch", glob("launch/*.launch.py"))' in setup
-    from semiparam_ros.ros.run import EXECUTORS
+    from semiparam_ros.ros.main import EXECUTORS
 
     assert "events" in EXECUTORS and "single_threaded" in EXECUTORS
     # every LaunchConfiguration used is declared

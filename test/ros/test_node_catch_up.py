@@ -28,7 +28,7 @@ def test_backlog_beyond_a_batch_is_learned_by_the_catch_up_timer(ros_env, tmp_pa
 
     from semiparam_ros.ros import estimator_node
     from semiparam_ros.ros.estimator_node import EstimatorNode
-    from semiparam_ros.ros.run import EXECUTORS
+    from semiparam_ros.ros.main import EXECUTORS
 
     bag = source_bag(tmp_path_factory.mktemp("bags"))
     messages = load_raw(bag, TOPICS, limit=N_MESSAGES)

@@ -9,7 +9,7 @@ from helpers.ros import in_process_node, source_bag
 from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.io.bags import read_messages
-from semiparam_ros.ros.run import EXECUTORS
+from semiparam_ros.ros.main import EXECUTORS
 
 pytestmark = pytest.mark.ros
 

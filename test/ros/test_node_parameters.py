@@ -147,7 +147,7 @@ def test_misspelt_name_in_a_parameter_file_and_print_defaults(ros_env, tmp_path)
     proc.stop()
     assert "unknown parameter 'gate.treshold'" in out and "did you mean 'gate.threshold'" in out, out
     assert "Traceback" not in out
-    listing = subprocess.run([sys.executable, "-m", "semiparam_ros.ros.run", "--print-defaults"],
+    listing = subprocess.run([sys.executable, "-m", "semiparam_ros.ros.main", "--print-defaults"],
                              capture_output=True, text=True, timeout=120, env=ros_env.env, check=True).stdout
     lines = listing.splitlines()
     assert [line.split(" (")[0] for line in lines] == [p.name for p in PARAMETERS]

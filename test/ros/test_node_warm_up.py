@@ -9,7 +9,7 @@ import pytest
 
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
-from semiparam_ros.service.learning_loop import warm_up_kernels
+from semiparam_ros.serving.learning_loop import warm_up_kernels
 
 
 @pytest.mark.parametrize("output", ["wrench", "joint_torques"])

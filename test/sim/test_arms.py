@@ -400,7 +400,7 @@ def test_bag_feeds_the_joint_torque_pipeline(tmp_path, rate):
 def test_one_pipeline_and_one_writer_for_both_measurements(tmp_path):
     """Both robots' configurations share RecordingConfig's fields and checks; one entry simulates either."""
     from semiparam_ros.sim.generate import simulate_recording
-    from semiparam_ros.sim.pipeline import RecordingConfig
+    from semiparam_ros.sim.recording import RecordingConfig
     from semiparam_ros.sim.scenario import ScenarioConfig, SimulatedRecording
 
     arm = ArmScenarioConfig(name="p", robot="panda", duration=2.0, rate=100.0, payload_mass=0.3)

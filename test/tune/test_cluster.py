@@ -22,13 +22,13 @@ from threadpoolctl import threadpool_limits
 
 from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config, write_config
-from semiparam_ros.eval.cluster import connect, run_on_cluster
-from semiparam_ros.eval.replay import Topics, evaluate_bags, load_samples
-from semiparam_ros.service.learn import learn_bags
+from semiparam_ros.eval.bags.replay import Topics, evaluate_bags, load_samples
+from semiparam_ros.jobs.cluster import connect, run_on_cluster
+from semiparam_ros.serving.learn import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 from semiparam_ros.tune.fleet import learn_fleet
-from semiparam_ros.tune.validation import validation_error, validation_search
+from semiparam_ros.tune.held_out import validation_error, validation_search
 
 pytestmark = pytest.mark.slow
 
@@ -215,7 +215,7 @@ class _Workers:
 
 def test_workers_without_the_package_or_with_another_version_are_named():
     from semiparam_ros.errors import ClusterError
-    from semiparam_ros.eval.cluster import _check_workers
+    from semiparam_ros.jobs.cluster import _check_workers
     from semiparam_ros.version import __version__
 
     _check_workers(_Workers({"tcp://a:1": __version__}), "tcp://s:8786", 1.0)  # fine

@@ -7,7 +7,7 @@ import json
 import pytest
 from helpers import REPO
 
-from semiparam_ros.report.paper import ProtocolReport
+from semiparam_ros.eval.protocol.report import ProtocolReport
 from semiparam_ros.tune.selection import score_reports
 
 FIGS = REPO / "docs" / "figures"

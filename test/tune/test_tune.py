@@ -12,7 +12,7 @@ from semiparam_ros.cli.tune import main as tune_main
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.build import build_model
 from semiparam_ros.core.stream.rate import measured_period_s
-from semiparam_ros.eval.replay import load_samples
+from semiparam_ros.eval.bags.replay import load_samples
 from semiparam_ros.tune.selection import CachedRegressor, holdout_search, split_holdout
 
 ROOT = REPO

@@ -938,7 +938,7 @@ def test_an_inline_projection_that_fails_keeps_the_last_solution_and_loses_no_sa
     from helpers.bags import ur5_config, write_ur5_torque_bag
 
     import semiparam_ros.core.estimator.online as online
-    from semiparam_ros.eval.replay import load_samples
+    from semiparam_ros.eval.bags.replay import load_samples
 
     write_ur5_torque_bag(tmp_path / "log", 6.0, seed=3)
     cfg = ur5_config().with_overrides({"parametric.consistent_period": 1.0})
@@ -978,7 +978,7 @@ def test_the_rigid_body_model_predicts_with_the_consistent_projection_it_serves(
 
     from semiparam_ros.core.learners.parametric import ParametricModel
     from semiparam_ros.core.rigid_body.identification import consistent_parameters
-    from semiparam_ros.eval.replay import load_samples
+    from semiparam_ros.eval.bags.replay import load_samples
 
     write_ur5_torque_bag(tmp_path / "log", 4.0, seed=4)
     cfg = ur5_config().with_overrides({"parametric.consistent_period": 1.0, "gate.enabled": False})
@@ -1022,7 +1022,7 @@ def test_a_checkpoint_carries_the_period_it_was_learned_at(tmp_path):
     from semiparam_ros import load_model
     from semiparam_ros.core.checkpoint import atomic_save_npz as save_npz
     from semiparam_ros.core.checkpoint import load_npz
-    from semiparam_ros.eval.replay import load_samples
+    from semiparam_ros.eval.bags.replay import load_samples
 
     write_ur5_torque_bag(tmp_path / "log", 4.0, seed=5, rate_hz=250.0)
     cfg = ur5_config()

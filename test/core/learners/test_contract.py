@@ -141,14 +141,14 @@ def test_a_restored_consistent_model_takes_the_streams_period_in_every_part():
 
 def _eval_models(regressor):
     """name → a fresh model of each kind the evaluation runs (built anew per call)."""
-    from semiparam_ros.eval.baselines import (
+    from semiparam_ros.eval.models.baselines import (
         FixedParameters,
         Persistence,
         batch_least_squares,
         least_squares_model,
     )
-    from semiparam_ros.eval.diagnostics import FrozenParametricSP
-    from semiparam_ros.eval.served import node_learner
+    from semiparam_ros.eval.models.frozen import FrozenParametricSP
+    from semiparam_ros.eval.models.served import node_learner
 
     cfg = config("cascade")
     rng = np.random.default_rng(7)

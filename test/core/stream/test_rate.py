@@ -20,8 +20,8 @@ from semiparam_ros.core.stream.acceleration import (
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.core.stream.rate import RATE_SAMPLES, RateMeter, measured_period_s, samples_in
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.protocol import SampleArrays
-from semiparam_ros.eval.replay import build_models
+from semiparam_ros.eval.bags.replay import build_models
+from semiparam_ros.eval.protocol.prequential import SampleArrays
 
 ROOT = REPO
 T0_NS = 1_763_800_000 * 10**9

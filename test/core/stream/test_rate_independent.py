@@ -14,7 +14,7 @@ from semiparam_ros.core.learners.features import Standardizer
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.core.stream.rate import measured_period_s, samples_in
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.replay import build_models
+from semiparam_ros.eval.bags.replay import build_models
 
 ROOT = REPO
 T0_NS = 1_763_800_000 * 10**9

@@ -3,7 +3,7 @@
 A controller sends a desired state — one or several trajectory points (``trajectory_msgs/JointTrajectory``
 converted to :class:`DesiredState`) — and gets ``τ_ff = τ̂(q_d, q̇_d, q̈_d)`` back with its σ, in the joint
 order of its effort interface (``feedforward.joints``), from the learned model alone (no correction of the
-last measured error: it is evaluated ahead of the measurement; :class:`~semiparam_ros.service.serving.
+last measured error: it is evaluated ahead of the measurement; :class:`~semiparam_ros.serving.learned_model.
 LearnedModel`).
 
 Point selection: one point is used as is; with several, the point at ``now`` — linear interpolation of
@@ -22,7 +22,7 @@ Example:
     >>> import numpy as np
     >>> from semiparam_ros.core.config import EstimatorConfig
     >>> from semiparam_ros.core.estimator.online import OnlineEstimator
-    >>> from semiparam_ros.service.serving import LearnedModel
+    >>> from semiparam_ros.serving.learned_model import LearnedModel
     >>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": OutputKind.JOINT_TORQUES})
     >>> est = OnlineEstimator(cfg)
     >>> ff = FeedForward(LearnedModel(est))
@@ -47,7 +47,7 @@ import numpy as np
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.validation import MAX_ABS_INPUT
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
-from semiparam_ros.service.serving import LearnedModel
+from semiparam_ros.serving.learned_model import LearnedModel
 
 __all__ = ["DROP_REASONS", "TRAJECTORY_DROP_REASONS", "DesiredState", "FeedForward", "FeedForwardCommand",
            "TrajectoryEffort", "TrajectoryPoint", "controller_derivatives"]
@@ -357,7 +357,7 @@ class FeedForward:
         >>> import numpy as np
         >>> from semiparam_ros.core.config import EstimatorConfig
         >>> from semiparam_ros.core.estimator.online import OnlineEstimator
-        >>> from semiparam_ros.service.serving import LearnedModel
+        >>> from semiparam_ros.serving.learned_model import LearnedModel
         >>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": OutputKind.JOINT_TORQUES})
         >>> est = OnlineEstimator(cfg)
         >>> ff = FeedForward(LearnedModel(est))

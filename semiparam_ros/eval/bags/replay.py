@@ -24,12 +24,17 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import build_model, build_pipeline, build_regressor
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.stream.rate import measured_period_s
-from semiparam_ros.eval.diagnostics import FrozenParametricSP
-from semiparam_ros.eval.horizon import HorizonReport, evaluate_horizons
-from semiparam_ros.eval.metrics import OutputSpec
-from semiparam_ros.eval.options import CASCADE_SP, DEFAULT_WINDOW_S, JOINT_SP, ProtocolOptions, Variant
-from semiparam_ros.eval.parallel import run_jobs
-from semiparam_ros.eval.protocol import (
+from semiparam_ros.eval.models.frozen import FrozenParametricSP
+from semiparam_ros.eval.protocol.horizon import HorizonReport, evaluate_horizons
+from semiparam_ros.eval.protocol.metrics import OutputSpec
+from semiparam_ros.eval.protocol.options import (
+    CASCADE_SP,
+    DEFAULT_WINDOW_S,
+    JOINT_SP,
+    ProtocolOptions,
+    Variant,
+)
+from semiparam_ros.eval.protocol.prequential import (
     AdaptationResult,
     ProtocolResult,
     SampleArrays,
@@ -37,6 +42,7 @@ from semiparam_ros.eval.protocol import (
     run_protocol,
 )
 from semiparam_ros.io.bags import absolute_topic, iter_samples, read_messages, topic_info
+from semiparam_ros.jobs.parallel import run_jobs
 
 __all__ = [
     "CASCADE_SP",
@@ -62,7 +68,7 @@ GROUND_TRUTH_WRENCH_TOPIC = "/ground_truth/wrench"
 _TRUTH_MARGIN_NS = 1_000_000_000
 #: The paper's three learners.
 KINDS: tuple[str, ...] = ("P", "NP", "SP")
-#: Diagnostic variant (:class:`~semiparam_ros.eval.diagnostics.FrozenParametricSP`): SP whose rigid-body
+#: Diagnostic variant (:class:`~semiparam_ros.eval.models.frozen.FrozenParametricSP`): SP whose rigid-body
 #: stage stops learning after the training stream.
 FROZEN_P = "SPfrozenP"
 #: Kinds :func:`build_models` accepts besides :data:`KINDS`.
@@ -211,22 +217,23 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         config: Estimator configuration the learners and the pipeline are built from.
         topics: Topics to read; default from the configuration.
         kinds: Learners to compare.
-        options: Parts, windows and limits (:class:`~semiparam_ros.eval.options.ProtocolOptions`; the test
+        options: Parts, windows and limits (:class:`~semiparam_ros.eval.protocol.options.ProtocolOptions`;
+            the test
             limit counts before the skip, so ``train_limit = test_skip = n`` on one bag trains on its first n
             samples and tests on the rest).
         horizons: Ages of the model [s] (0 = one step, ``"frozen"``) for
-            :func:`~semiparam_ros.eval.horizon.evaluate_horizons`, run on the trained learners, the CAD
-            model and persistence over the whole test stream; ``None``: not run.
+            :func:`~semiparam_ros.eval.protocol.horizon.evaluate_horizons`, run on the trained learners, the
+            CAD model and persistence over the whole test stream; ``None``: not run.
         progress: Show a progress bar (only when stderr is a terminal).
         jobs: Models run in parallel on this machine (1: one after the other; -1: all cores).
         cluster: A Dask scheduler address or ``local:N`` running one job per model instead of ``jobs``;
             the numbers are those of the serial run.
-        **option_fields: Fields of :class:`~semiparam_ros.eval.options.ProtocolOptions` given one by one
-            (``splits=…``), replacing those of ``options``.
+        **option_fields: Fields of :class:`~semiparam_ros.eval.protocol.options.ProtocolOptions` given one by
+            one (``splits=…``), replacing those of ``options``.
 
     Returns:
         ``(result, info)`` where ``info`` records the bags, topics, limits and pipeline drops, and under
-        ``"horizons"`` the :class:`~semiparam_ros.eval.horizon.HorizonReport` when asked.
+        ``"horizons"`` the :class:`~semiparam_ros.eval.protocol.horizon.HorizonReport` when asked.
 
     Raises:
         ValueError: On unreadable bags or a test bag too short for the split request.
@@ -260,8 +267,8 @@ def evaluate_bags(train_path: str | Path, test_path: str | Path, config: Estimat
         "test_samples_available": len(test_data),
     }
     if horizons is not None:
-        from semiparam_ros.eval.baselines import Persistence, cad_model
-        from semiparam_ros.eval.protocol import train
+        from semiparam_ros.eval.models.baselines import Persistence, cad_model
+        from semiparam_ros.eval.protocol.prequential import train
 
         persistence = Persistence(test_data.n_outputs)
         train(persistence, train_data)
@@ -280,10 +287,11 @@ def _protocol_of(config: EstimatorConfig, kinds: tuple[str, ...], train_data: Sa
                  progress: bool = False) -> tuple[ProtocolResult, HorizonReport | None]:
     """Run the protocol for fresh learners of ``kinds`` (and their errors by age), as one job.
 
-    P, NP and the SP combinations run as the node runs them (:class:`~semiparam_ros.eval.served.NodeLearner`:
+    P, NP and the SP combinations run as the node runs them
+    (:class:`~semiparam_ros.eval.models.served.NodeLearner`:
     the estimator's step with its gate, σ and rate meter); the diagnostic kinds are bare learners.
     """
-    from semiparam_ros.eval.served import SERVED_COMBINATIONS, node_learner
+    from semiparam_ros.eval.models.served import SERVED_COMBINATIONS, node_learner
 
     bare = [k for k in kinds if k not in SERVED_COMBINATIONS]
     models = build_models(config, bare, n_train=len(train_data),
@@ -296,8 +304,8 @@ def _protocol_of(config: EstimatorConfig, kinds: tuple[str, ...], train_data: Sa
         return result, None
     # the frozen column is the served model: the node learners the protocol trained, their checkpoint,
     # load_model
-    from semiparam_ros.eval.horizon import FROZEN
-    from semiparam_ros.eval.served import NodeLearner, ServedModel, serve
+    from semiparam_ros.eval.models.served import NodeLearner, ServedModel, serve
+    from semiparam_ros.eval.protocol.horizon import FROZEN
 
     served = {}
     if FROZEN in horizons:
@@ -427,7 +435,7 @@ def evaluate_adaptation(bag: str | Path, config: EstimatorConfig, *, forgetting:
         progress: Show a tqdm progress bar.
 
     Returns:
-        ``(result, info)``; models are keyed by :attr:`~semiparam_ros.eval.options.Variant.label`
+        ``(result, info)``; models are keyed by :attr:`~semiparam_ros.eval.protocol.options.Variant.label`
         (``"<kind> adaptive (β=...)"``, ``"<kind> no adaptation"``).
 
     Raises:

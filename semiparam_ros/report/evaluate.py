@@ -7,22 +7,22 @@ the figure(s) and the markdown table, and return the text printed on the termina
 
 from __future__ import annotations
 
-import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from semiparam_ros.atomic import atomic_write_text
-from semiparam_ros.core.config import EstimatorConfig, load_config
+from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.kinds import OutputKind
-from semiparam_ros.eval.contacts import contact_report, run_contacts
-from semiparam_ros.eval.horizon import horizon_figure, horizon_markdown
-from semiparam_ros.eval.options import DEFAULT_WINDOW_S, ProtocolOptions
-from semiparam_ros.eval.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags
+from semiparam_ros.eval.bags.contacts import contact_report, run_contacts
+from semiparam_ros.eval.bags.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags
+from semiparam_ros.eval.protocol.horizon import horizon_figure, horizon_markdown
+from semiparam_ros.eval.protocol.options import DEFAULT_WINDOW_S, ProtocolOptions
+from semiparam_ros.eval.protocol.report import adaptation_report, protocol_report
 from semiparam_ros.io.bags import recovery_notes
+from semiparam_ros.plain_json import write_json
 from semiparam_ros.report.figures import plot_adaptation, plot_contacts, plot_protocol
-from semiparam_ros.report.paper import adaptation_report, protocol_report, write_json
 from semiparam_ros.report.per_sample import per_sample_figure, write_per_sample
 from semiparam_ros.report.tables import (
     adaptation_table,
@@ -34,51 +34,15 @@ from semiparam_ros.report.tables import (
 )
 
 __all__ = [
-    "ReportPaths", "default_config_path", "evaluate_contacts", "evaluate_paper", "evaluate_payload",
-    "evaluation_text", "load_evaluation_config",
+    "ReportPaths", "evaluate_contacts", "evaluate_paper", "evaluate_payload", "evaluation_text",
 ]
-
-
-def default_config_path() -> Path | None:
-    """Return the shipped ``icub_right_arm.yaml``: the source tree's, else the installed share copy.
-
-    Returns:
-        The path, or ``None`` when neither exists (the parameter defaults are then used).
-    """
-    candidates = [
-        Path(__file__).resolve().parents[2] / "config" / "icub_right_arm.yaml",
-        Path(sys.prefix) / "share" / "semiparam_ros" / "config" / "icub_right_arm.yaml",
-    ]
-    return next((c for c in candidates if c.is_file()), None)
-
-
-def load_evaluation_config(
-    path: str | Path | None, overrides: Mapping[str, Any] | None = None
-) -> EstimatorConfig:
-    """Load a parameter file and apply overrides.
-
-    Args:
-        path: ROS 2 parameter file, or ``None`` for the shipped ``icub_right_arm.yaml`` (the parameter
-            defaults if it cannot be found).
-        overrides: Dotted names to values.
-
-    Returns:
-        The validated configuration.
-
-    Raises:
-        ValueError: On a bad file, unknown parameter or invalid value.
-    """
-    if path is None:
-        path = default_config_path()
-    config = load_config(path) if path is not None else EstimatorConfig.defaults()
-    return config.with_overrides(dict(overrides)) if overrides else config
 
 
 def evaluation_text(report: Any) -> str:
     """Return the tables ``evaluate`` prints for a protocol report.
 
     Args:
-        report: A :class:`~semiparam_ros.report.paper.ProtocolReport`.
+        report: A :class:`~semiparam_ros.eval.protocol.report.ProtocolReport`.
 
     Returns:
         Markdown: the group table (measured and, when known, noise-free), the per-component table (RMSE and
@@ -147,7 +111,7 @@ def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: 
             says; ``SPC``: the paper's cascade).
         options: The protocol's parts, windows and limits (default :class:`ProtocolOptions`).
         horizons: Also score every model by its age (seconds, 0 = one step, ``"frozen"``;
-            :mod:`semiparam_ros.eval.horizon`), written under ``"horizons"`` in the JSON.
+            :mod:`semiparam_ros.eval.protocol.horizon`), written under ``"horizons"`` in the JSON.
         paths: Where to write the report, tables and figures (default: nowhere).
         progress: Show a progress bar (only when stderr is a terminal).
         jobs: Models run in parallel on this machine (the numbers do not depend on it).
@@ -239,7 +203,7 @@ def evaluate_contacts(bag: Path, config: EstimatorConfig, *, topics: Topics | No
         paths: Where to write (``plot``: the episodes and the gate's verdicts).
 
     Returns:
-        The text to print (:mod:`semiparam_ros.eval.contacts`).
+        The text to print (:mod:`semiparam_ros.eval.bags.contacts`).
 
     Raises:
         ValueError: On invalid configuration or bag, or a bag without contact episodes.

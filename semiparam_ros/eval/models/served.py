@@ -5,7 +5,7 @@ the one a user gets: the node and ``learn`` run every sample through :class:`Onl
 gate, σ, the rate meter, the learners' memory converted at the measured period), write a checkpoint, and
 ``load_model(...).predict`` serves it with the physically consistent rigid body where
 ``parametric.consistent`` is on. :func:`learn_served` does exactly that from a stream of samples (the
-samples the node's pipeline made from a bag: :func:`~semiparam_ros.eval.replay.load_samples`), and
+samples the node's pipeline made from a bag: :func:`~semiparam_ros.eval.bags.replay.load_samples`), and
 :class:`ServedModel` presents the loaded model to the protocol and the horizon table as a frozen model,
 so that a frozen row *is* ``learn`` → checkpoint → ``load_model(...).predict`` on the test states.
 
@@ -27,9 +27,9 @@ from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.errors import RejectedSampleError
-from semiparam_ros.eval.options import CASCADE_SP, JOINT_SP
-from semiparam_ros.eval.protocol import SampleArrays
-from semiparam_ros.service.serving import LearnedModel, load_model
+from semiparam_ros.eval.protocol.options import CASCADE_SP, JOINT_SP
+from semiparam_ros.eval.protocol.prequential import SampleArrays
+from semiparam_ros.serving.learned_model import LearnedModel, load_model
 
 __all__ = ["SERVED_COMBINATIONS", "NodeLearner", "ServedModel", "learn_served", "node_learner", "serve",
            "served_model"]
@@ -112,7 +112,7 @@ class ServedModel:
 
     Args:
         served: The model, e.g. from :func:`learn_served` or
-            :func:`~semiparam_ros.service.serving.load_model`.
+            :func:`~semiparam_ros.serving.learned_model.load_model`.
 
     """
 

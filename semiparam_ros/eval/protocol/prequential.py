@@ -9,9 +9,9 @@ component-averaged RMSE of forces and torques over a sliding window.
 This module works on plain arrays (:class:`SampleArrays`) and on any
 :class:`~semiparam_ros.core.learners.contract.OnlineModel` (``predict_learn_one(x, y)`` returning a
 prediction with a ``total`` attribute or an array, and ``copy()``), so it is tested against hand-written
-loops on toy models and used unchanged on bags by :mod:`semiparam_ros.eval.replay`. What the outputs
+loops on toy models and used unchanged on bags by :mod:`semiparam_ros.eval.bags.replay`. What the outputs
 are (a wrench or joint torques, hence the groups and units) is given by an
-:class:`~semiparam_ros.eval.metrics.OutputSpec`.
+:class:`~semiparam_ros.eval.protocol.metrics.OutputSpec`.
 
 A second protocol, :func:`run_adaptation`, follows one stream through an abrupt change (a payload picked
 up at a known time) and measures how fast each model's error returns to its pre-change level.
@@ -19,7 +19,7 @@ up at a known time) and measures how fast each model's error returns to its pre-
 Units: time in s (stamps in int ns), errors in N (forces) and N·m (torques), update times in µs.
 
 The results are arrays (:class:`ProtocolResult`, :class:`AdaptationResult`); the typed report built once
-from them is :func:`semiparam_ros.report.paper.protocol_report`.
+from them is :func:`semiparam_ros.eval.protocol.report.protocol_report`.
 """
 
 from __future__ import annotations
@@ -35,8 +35,14 @@ import numpy as np
 from semiparam_ros.core.learners.contract import OnlineModel
 from semiparam_ros.core.stream.rate import stream_period_s
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.metrics import OutputSpec, component_rmse, group_rmse, window_samples, windowed_rmse
-from semiparam_ros.eval.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
+from semiparam_ros.eval.protocol.metrics import (
+    OutputSpec,
+    component_rmse,
+    group_rmse,
+    window_samples,
+    windowed_rmse,
+)
+from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 
 __all__ = [
     "AdaptationResult",

@@ -11,14 +11,13 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from semiparam_ros.core.config import EstimatorConfig, write_config
+from semiparam_ros.core.config import EstimatorConfig, load_evaluation_config, write_config
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.options import DEFAULT_WINDOW_S
-from semiparam_ros.eval.replay import Topics, load_samples
-from semiparam_ros.report.paper import write_json
-from semiparam_ros.report.run import load_evaluation_config
+from semiparam_ros.eval.bags.replay import Topics, load_samples
+from semiparam_ros.eval.protocol.options import DEFAULT_WINDOW_S
+from semiparam_ros.plain_json import write_json
+from semiparam_ros.tune.held_out import VALIDATION_HORIZONS, validation_search
 from semiparam_ros.tune.selection import TUNED_KEYS, Selection, grid_table, holdout_search, protocol_search
-from semiparam_ros.tune.validation import VALIDATION_HORIZONS, validation_search
 
 __all__ = ["run_tune"]
 
@@ -73,7 +72,7 @@ def run_tune(
         split_size: Protocol method: samples per part.
         window_s: Protocol method: sliding window [s].
         jobs: Parallel jobs (-1: all cores); the numbers do not depend on it.
-        validate: Validation bags: select by held-out motion (:mod:`semiparam_ros.tune.validation`; the
+        validate: Validation bags: select by held-out motion (:mod:`semiparam_ros.tune.held_out`; the
             method is then ``"validate"``) instead of ``method``.
         cluster: A Dask scheduler address or ``local:N`` that runs the grid points instead of ``jobs``.
 
@@ -167,7 +166,7 @@ def _write_selection(selections: Mapping[str, Selection], kind: str, method: str
 def _run_validation(cfg: EstimatorConfig, train: list[Path], validate: list[Path], topics: Topics, *,
                     kind: str, n_features: int | None, grid: Mapping[str, Sequence[float]] | None, jobs: int,
                     cluster: str | None, progress: bool, out: Path | None, json_path: Path | None) -> str:
-    """``tune --train A… --validate B…``: selection by held-out motion (tune/validation.py)."""
+    """``tune --train A… --validate B…``: selection by held-out motion (tune/held_out.py)."""
     selection = validation_search(cfg, train, validate, topics=topics, kind=kind, n_features=n_features,
                                   grid=grid, jobs=jobs, cluster=cluster, progress=progress)
     source = f"{', '.join(map(str, train))} (validated on {', '.join(map(str, validate))})"

@@ -15,7 +15,8 @@ with ``gate.enabled`` true and once false, everything else as configured. For ea
 - **contact immunity**: the RMSE per output group (mean over the group's components of each component's
   RMSE) over ``window_s`` before the first episode (from the end of the warm-up at the earliest) and over
   ``window_s`` after the last episode's end (up to the pickup at the latest); ``ratio = after / before``;
-- **payload recovery** (:func:`~semiparam_ros.eval.protocol.recovery`, the payload scenario's definition):
+- **payload recovery** (:func:`~semiparam_ros.eval.protocol.prequential.recovery`, the payload scenario's
+  definition):
   the first time after the pickup from which the sliding-window RMSE stays within ``tolerance ×`` its level
   over the ``pre_s`` before the pickup; and the *adoption* time: the first time after the peak of the
   sliding-window RMSE at which it has fallen back by ``1 − adopted_fraction`` of the excess it rose above
@@ -41,10 +42,10 @@ from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.stream.episodes import flag_samples, score_episodes
 from semiparam_ros.core.stream.messages import JointStateData, WrenchData
 from semiparam_ros.core.stream.rate import stream_period_s
-from semiparam_ros.eval.metrics import OutputSpec, group_rmse, window_samples, windowed_rmse
-from semiparam_ros.eval.options import DEFAULT_WINDOW_S
-from semiparam_ros.eval.protocol import Recovery, recovery
-from semiparam_ros.eval.replay import Topics, payload_pickup, read_scenario
+from semiparam_ros.eval.bags.replay import Topics, payload_pickup, read_scenario
+from semiparam_ros.eval.protocol.metrics import OutputSpec, group_rmse, window_samples, windowed_rmse
+from semiparam_ros.eval.protocol.options import DEFAULT_WINDOW_S
+from semiparam_ros.eval.protocol.prequential import Recovery, recovery
 from semiparam_ros.io.bags import read_messages, topic_info
 
 __all__ = [

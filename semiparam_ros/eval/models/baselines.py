@@ -1,7 +1,7 @@
 """Reference models the learners are compared with on recorded joint-torque logs.
 
 Each is an online model of the protocol's interface (``predict_one``, ``predict_learn_one``, ``copy``), so
-:func:`~semiparam_ros.eval.protocol.run_protocol` runs it like P, NP and SP:
+:func:`~semiparam_ros.eval.protocol.prequential.run_protocol` runs it like P, NP and SP:
 
 - :class:`Persistence` predicts the previous measured output ``y_{k−1}`` (one step ahead; zeros before
   the first sample). It is the floor any one-step-ahead predictor must beat at high rates, and useless

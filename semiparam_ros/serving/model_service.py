@@ -5,11 +5,11 @@ callbacks and publishes what they return. The model is served from a copy refres
 model that changes at every sample makes the commanded torque jitter: docs/feedforward.md); with
 ``parametric.consistent`` that copy predicts with the physically consistent parameters a worker process
 re-solves every ``parametric.consistent_period``
-(:class:`~semiparam_ros.service.projection.ProjectionWorker`: cvxpy holds the GIL, so never in the
+(:class:`~semiparam_ros.serving.projection.ProjectionWorker`: cvxpy holds the GIL, so never in the
 learning thread).
 
 >>> from semiparam_ros.core.config import EstimatorConfig
->>> from semiparam_ros.service.learning_loop import LearningLoop
+>>> from semiparam_ros.serving.learning_loop import LearningLoop
 >>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": OutputKind.JOINT_TORQUES,
 ...                                                  "parametric.consistent": False})
 >>> loop = LearningLoop(OnlineEstimator(cfg), queue_size=10, max_delay_s=0.0)
@@ -33,15 +33,15 @@ from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, export_urdf
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate
 from semiparam_ros.errors import RejectedSampleError
-from semiparam_ros.service.feedforward import DesiredState, FeedForward, FeedForwardCommand, TrajectoryEffort
-from semiparam_ros.service.projection import ProjectionWorker
-from semiparam_ros.service.serving import LearnedModel
+from semiparam_ros.serving.feedforward import DesiredState, FeedForward, FeedForwardCommand, TrajectoryEffort
+from semiparam_ros.serving.learned_model import LearnedModel
+from semiparam_ros.serving.projection import ProjectionWorker
 
 if TYPE_CHECKING:
     from collections.abc import Callable
     from pathlib import Path
 
-    from semiparam_ros.service.learning_loop import LearningLoop
+    from semiparam_ros.serving.learning_loop import LearningLoop
 
 __all__ = ["ModelService"]
 

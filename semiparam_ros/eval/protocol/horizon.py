@@ -17,7 +17,7 @@ so the model predicting sample ``i`` has learned the training stream and every t
 ``d = 1`` is test-then-train (one step ahead); the *frozen* horizon learns no test sample at all, and
 uses a learner's model alone (``predict_model`` where it has one: the consistent SP without the fast
 correction of its last errors, which exists to track and has nothing to track in a frozen model).
-Persistence (:class:`~semiparam_ros.eval.baselines.Persistence`) through the same delay line is
+Persistence (:class:`~semiparam_ros.eval.models.baselines.Persistence`) through the same delay line is
 persistence *held h*: ``ŷ(t) = y(t − h)``. Models that never learn (the CAD model, a batch fit) give the
 same prediction at every horizon.
 
@@ -40,7 +40,7 @@ import numpy as np
 
 from semiparam_ros.atomic import atomic_savefig
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.eval.protocol import SampleArrays, stamps_for
+from semiparam_ros.eval.protocol.prequential import SampleArrays, stamps_for
 
 __all__ = [
     "DEFAULT_HORIZONS",
@@ -146,7 +146,7 @@ def delayed_predictions(model: Any, X: np.ndarray, Y: np.ndarray, delay: int,
 
     Example:
         >>> import numpy as np
-        >>> from semiparam_ros.eval.baselines import Persistence
+        >>> from semiparam_ros.eval.models.baselines import Persistence
         >>> Y = np.arange(5.0).reshape(-1, 1)
         >>> delayed_predictions(Persistence(1), np.zeros((5, 1)), Y, 2)[:, 0]  # y held 2 samples
         array([0., 0., 0., 1., 2.])
@@ -280,7 +280,7 @@ def evaluate_horizons(models: Mapping[str, Any], train: SampleArrays, test: Samp
         components: Output names (default ``y0``, ``y1``, …).
         frozen_models: Per model name, what predicts at the frozen horizon instead of the model itself
             (e.g. the served model, learned by the node's estimator and loaded from its checkpoint:
-            :class:`~semiparam_ros.eval.served.ServedModel`); it is not trained further.
+            :class:`~semiparam_ros.eval.models.served.ServedModel`); it is not trained further.
 
     Returns:
         The :class:`HorizonReport`.

@@ -16,9 +16,9 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import WrenchData
 from semiparam_ros.errors import CheckpointError
-from semiparam_ros.service.checkpoint_writer import CheckpointWriter, warm_start
-from semiparam_ros.service.learning_loop import LearningLoop
-from semiparam_ros.service.model_service import ModelService
+from semiparam_ros.serving.checkpoint_writer import CheckpointWriter, warm_start
+from semiparam_ros.serving.learning_loop import LearningLoop
+from semiparam_ros.serving.model_service import ModelService
 
 
 def _kind(msg) -> str:

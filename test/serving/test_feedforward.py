@@ -15,8 +15,8 @@ from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.errors import ConfigurationError
-from semiparam_ros.service.feedforward import DesiredState, FeedForward, TrajectoryPoint
-from semiparam_ros.service.serving import LearnedModel
+from semiparam_ros.serving.feedforward import DesiredState, FeedForward, TrajectoryPoint
+from semiparam_ros.serving.learned_model import LearnedModel
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 
 PANDA = REPO / "config" / "panda.yaml"

@@ -22,9 +22,9 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import build_regressor
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.errors import CheckpointError, ConfigurationError, StartupError
-from semiparam_ros.service.checkpoint_writer import warm_start
-from semiparam_ros.service.learning_loop import LearningLoop, warm_up_kernels
-from semiparam_ros.service.model_service import ModelService
+from semiparam_ros.serving.checkpoint_writer import warm_start
+from semiparam_ros.serving.learning_loop import LearningLoop, warm_up_kernels
+from semiparam_ros.serving.model_service import ModelService
 
 __all__ = ["Assembly", "assemble", "checkpoint_path"]
 

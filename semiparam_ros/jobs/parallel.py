@@ -3,7 +3,7 @@
 :func:`run_jobs` calls ``fn(*args)`` for every argument tuple and returns the results in order. With
 ``jobs == 1`` it is a plain loop in this process; otherwise joblib's default process backend (loky) runs
 them; with ``cluster`` (a Dask scheduler address or ``local:N``) the workers of that cluster do
-(:mod:`semiparam_ros.eval.cluster`). Every job runs with one BLAS thread in each case (``threadpoolctl``),
+(:mod:`semiparam_ros.jobs.cluster`). Every job runs with one BLAS thread in each case (``threadpoolctl``),
 and builds its own seeded learners from its arguments, so the results are the same numbers whatever runs
 them.
 """
@@ -50,7 +50,7 @@ def run_jobs(
         progress: Progress on stderr (a bar for serial runs, a line per finished job on a cluster; joblib
             reports nothing).
         unit: Unit name for the bar.
-        cluster: A Dask scheduler address or ``local:N`` (:func:`~semiparam_ros.eval.cluster.connect`).
+        cluster: A Dask scheduler address or ``local:N`` (:func:`~semiparam_ros.jobs.cluster.connect`).
         labels: What each job is, for the cluster's progress lines and errors.
 
     Returns:
@@ -61,7 +61,7 @@ def run_jobs(
             together, as a :class:`~semiparam_ros.errors.ClusterError` naming each job and its worker).
     """
     if cluster is not None:
-        from semiparam_ros.eval.cluster import connect, run_on_cluster
+        from semiparam_ros.jobs.cluster import connect, run_on_cluster
 
         with connect(cluster) as client:
             return run_on_cluster(client, fn, args, labels=labels, progress=progress, unit=unit)

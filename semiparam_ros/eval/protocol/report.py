@@ -1,11 +1,12 @@
 """The typed report of the paper's protocol: built once from the arrays, read by tables, figures, JSON, pages.
 
-:func:`protocol_report` turns a :class:`~semiparam_ros.eval.protocol.ProtocolResult` into a
+:func:`protocol_report` turns a :class:`~semiparam_ros.eval.protocol.prequential.ProtocolResult` into a
 :class:`ProtocolReport`: per model and group (force, torque) the RMSE at regime and over the first seconds
 (:class:`GroupStats`), per output component (wrench axis or joint) its RMSE and nMSE
 (:class:`ComponentStats`), the same against the noise-free outputs when the bag has them, the update
 times, the mean curves, the paper's criteria (:class:`Check`, named by identifiers) and the paired
-comparisons (:class:`~semiparam_ros.eval.compare.Comparison`). Nothing downstream recomputes or parses them.
+comparisons (:class:`~semiparam_ros.eval.protocol.compare.Comparison`). Nothing downstream recomputes or
+parses them.
 
 JSON (:meth:`ProtocolReport.to_json`; :meth:`ProtocolReport.from_json` reads it back) keeps these fields
 (stable across releases)::
@@ -33,22 +34,18 @@ output, pooled over splits.
 
 from __future__ import annotations
 
-import json
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.kinds import OutputKind
-from semiparam_ros.eval.compare import DEFAULT_PAIRS, Comparison, compare_pair
-from semiparam_ros.eval.metrics import OutputSpec, group_rmse
-from semiparam_ros.eval.options import DEFAULT_FIRST_S
-from semiparam_ros.eval.protocol import AdaptationResult, ProtocolResult, Recovery
+from semiparam_ros.eval.protocol.compare import DEFAULT_PAIRS, Comparison, compare_pair
+from semiparam_ros.eval.protocol.metrics import OutputSpec, group_rmse
+from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S
+from semiparam_ros.eval.protocol.prequential import AdaptationResult, ProtocolResult, Recovery
 
 __all__ = [
     "CHECKED_SP_KINDS",
@@ -65,8 +62,6 @@ __all__ = [
     "paired_comparisons",
     "paper_checks",
     "protocol_report",
-    "to_plain",
-    "write_json",
 ]
 
 #: The two segments of every split: ``regime`` (its second half) and ``first`` (its first ``first_s``).
@@ -75,7 +70,6 @@ SEGMENTS: tuple[str, ...] = ("regime", "first")
 #: Semiparametric kinds the criteria are evaluated for, each on its own (the paper's cascade; the joint fit).
 CHECKED_SP_KINDS: tuple[str, ...] = ("SP", "SPJ")
 
-_SCALAR_LIST = re.compile(r"\[((?:\s*[^\[\]{}\s][^\[\]{}]*?)?)\s*\]")
 
 
 def first_key(first_s: float) -> str:
@@ -469,7 +463,7 @@ def protocol_report(
     """Build the typed report of the paper's protocol, with its checks and paired comparisons.
 
     Args:
-        result: Output of :func:`~semiparam_ros.eval.protocol.run_protocol`.
+        result: Output of :func:`~semiparam_ros.eval.protocol.prequential.run_protocol`.
         config: Flat configuration (dotted names) the models were built from.
         protocol: Extra protocol settings to record (bags, topics, drops, ...).
 
@@ -586,7 +580,7 @@ def paired_comparisons(
         pairs: ``(A, B)`` pairs; a pair with a learner missing is skipped.
 
     Returns:
-        One :class:`~semiparam_ros.eval.compare.Comparison` per pair, target, group and segment.
+        One :class:`~semiparam_ros.eval.protocol.compare.Comparison` per pair, target, group and segment.
     """
     out: list[Comparison] = []
     for a, b in pairs:
@@ -611,7 +605,7 @@ class AdaptationReport:
 
     Attributes:
         output: What the outputs are.
-        summary: Per model name and group, the :class:`~semiparam_ros.eval.protocol.Recovery`.
+        summary: Per model name and group, the :class:`~semiparam_ros.eval.protocol.prequential.Recovery`.
         change_s: Time of the change from the stream's first sample [s].
         tolerance: Recovery tolerance (ratio to the pre-change level).
         deadline_s: Recovery deadline [s].
@@ -697,7 +691,7 @@ def adaptation_report(
     """Build the report of the adaptation (payload) scenario.
 
     Args:
-        result: Output of :func:`~semiparam_ros.eval.protocol.run_adaptation`.
+        result: Output of :func:`~semiparam_ros.eval.protocol.prequential.run_adaptation`.
         config: Flat configuration the models were built from.
         protocol: Extra settings to record.
         stride: Keep every ``stride``-th curve point (smaller files for long streams).
@@ -721,43 +715,3 @@ def adaptation_report(
             **{k: {g: _rounded(c[keep]) for g, c in v.items()} for k, v in result.curves.items()},
         },
     )
-
-
-# ------------------------------------------------------------------------------------------ writing
-def to_plain(value: Any) -> Any:
-    """Convert a report (or any nesting of mappings, sequences, arrays) to JSON-ready Python types.
-
-    Records with ``to_json`` are converted through it; non-finite floats become ``None``.
-    """
-    if hasattr(value, "to_json"):
-        return to_plain(value.to_json())
-    if isinstance(value, Mapping):
-        return {str(k): to_plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [to_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return to_plain(value.tolist())
-    if isinstance(value, np.generic):
-        return to_plain(value.item())
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, Path):
-        return str(value)
-    return value
-
-
-def write_json(report: Any, path: str | Path) -> None:
-    """Write a report (a record with ``to_json`` or a mapping) as JSON, atomically.
-
-    Non-finite floats are written as ``null`` (JSON has no NaN); lists of scalars stay on one line.
-
-    Args:
-        report: The report.
-        path: Destination file (parent directories are created).
-
-    Raises:
-        OSError: If the file cannot be written (it is then unchanged).
-    """
-    text = json.dumps(to_plain(report), indent=1)
-    text = _SCALAR_LIST.sub(lambda m: "[" + re.sub(r"\s*\n\s*", " ", m.group(1)).strip() + "]", text)
-    atomic_write_text(path, text + "\n")
