@@ -41,7 +41,7 @@ def test_colcon_build_installs_entry_point_and_ament_marker(tmp_path):
     script = install / "lib" / "semiparam_ros" / "estimator"
     assert script.is_file(), sorted(str(p.relative_to(install)) for p in install.rglob("*"))[:50]
     assert os.access(script, os.X_OK)
-    assert "'console_scripts', 'estimator'" in script.read_text() or "ros.run" in script.read_text()
+    assert "'console_scripts', 'estimator'" in script.read_text() or "ros.main" in script.read_text()
     entry_points = list(install.glob("lib/python3*/site-packages/semiparam_ros*-info/entry_points.txt"))
     assert entry_points and "estimator = semiparam_ros.ros.main:main" in entry_points[0].read_text()
     marker = install / "share" / "ament_index" / "resource_index" / "packages" / "semiparam_ros"

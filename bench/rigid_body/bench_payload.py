@@ -38,7 +38,7 @@ def run(robot: str, seed: int, pickup_s: float, after_s: float) -> dict:
     from semiparam_ros import load_model
     from semiparam_ros.core.config import load_config
     from semiparam_ros.core.estimator.online import OnlineEstimator
-    from semiparam_ros.core.rigid_body.dynamics import point_mass_parameters  # noqa: F401 (documents the truth)
+    from semiparam_ros.core.rigid_body.dynamics import point_mass_parameters  # noqa: F401 (documents the truth
     from semiparam_ros.core.rigid_body.payload import payload_from_parameters
     from semiparam_ros.core.stream.messages import JointStateData
     from semiparam_ros.sim.arms import ARM_ROBOTS, ArmScenarioConfig, arm_regressor, simulate_arm

@@ -22,7 +22,8 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
-from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, icub_urdf_path
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
+from semiparam_ros.core.rigid_body.urdf import icub_urdf_path
 
 ICUB_JOINTS = ["r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow"]
 UR5_JOINTS = [

@@ -57,7 +57,6 @@ __all__ = [
     "joint_state_from_msg",
     "joint_torques_msg",
     "parameters_msg",
-    "parameters_names_from_msg",
     "payload_msgs",
     "stamp_msg",
     "wrench_from_cdr",
@@ -238,7 +237,7 @@ def parameters_msg(names: Sequence[str], values: np.ndarray) -> Float64MultiArra
     Layout: ``dim[0]`` is the parameter axis (label ``base_parameters``, size n, stride n); ``dim[1 + i]``
     is a singleton dimension (size 1, stride 1) whose label is the name of ``data[i]``. The layout is a
     valid n × 1 × … × 1 array, and ``{d.label: v for d, v in zip(msg.layout.dim[1:], msg.data)}`` reads
-    the named values (:func:`parameters_names_from_msg`).
+    the named values.
 
     Args:
         names: Base-parameter names.
@@ -270,26 +269,6 @@ def parameters_msg(names: Sequence[str], values: np.ndarray) -> Float64MultiArra
     msg.layout.data_offset = 0
     msg.data = vals.tolist()
     return msg
-
-
-def parameters_names_from_msg(msg: Float64MultiArray) -> list[str]:
-    """Recover the parameter names from an ``~/inertial_parameters`` message.
-
-    Reads the labelled layout of :func:`parameters_msg`, and the comma-joined names in ``dim[0].label`` of
-    messages published before it (deprecated: names containing commas could not be told apart).
-
-    Args:
-        msg: A message built by :func:`parameters_msg`.
-
-    Returns:
-        The names, in the order of ``msg.data``.
-    """
-    dims = msg.layout.dim
-    if not dims or not dims[0].label:
-        return []
-    if dims[0].label == "base_parameters" and len(dims) == len(msg.data) + 1:
-        return [d.label for d in dims[1:]]
-    return dims[0].label.split(",")
 
 
 def payload_msgs(estimate: PayloadEstimate, stamp_ns: int) -> tuple[InertiaStamped, InertiaStamped]:

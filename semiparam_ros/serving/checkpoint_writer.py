@@ -202,4 +202,5 @@ def warm_start(estimator: OnlineEstimator, path: Path | None, *, load: bool) -> 
         raise CheckpointError(f"cannot warm start from checkpoint {path}: {err}\nDelete or move it, point "
                               "checkpoint.path elsewhere, or set checkpoint.load_on_start:=false to "
                               "overwrite it.") from err
-    return [*notes, f"warm start from {path} ({estimator.n_samples_learned} samples learned)"]
+    return [*notes, *estimator.migration_notes,
+            f"warm start from {path} ({estimator.n_samples_learned} samples learned)"]

@@ -28,7 +28,7 @@ def write_ur5_torque_bag(path: Path, seconds: float, seed: int, rate_hz: float =
     torque (a cable or spring: which no rigid-body + friction model expresses) and sensor noise."""
     import pinocchio as pin
 
-    from semiparam_ros.core.rigid_body.dynamics import example_robot_data_path
+    from semiparam_ros.core.rigid_body.urdf import example_robot_data_path
     from semiparam_ros.core.stream.messages import JointStateData
     from semiparam_ros.io.bags import BagWriter
 

@@ -274,6 +274,15 @@ def _parameter_value(value: Any) -> ParameterValue:
     raise TypeError(f"unsupported parameter value {value!r}")
 
 
+def parameters_names_from_msg(msg: Any) -> list[str]:
+    """The parameter names of an ``~/inertial_parameters`` message, read as a subscriber would: one
+    ``MultiArrayDimension`` labelled ``base_parameters`` over all values, then one dimension per value
+    whose label is its name (docs/node.md)."""
+    dims = msg.layout.dim
+    assert dims and dims[0].label == "base_parameters" and len(dims) == len(msg.data) + 1, dims
+    return [d.label for d in dims[1:]]
+
+
 def stamp_ns(msg: Any) -> int:
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 

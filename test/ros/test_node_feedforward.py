@@ -292,9 +292,9 @@ def test_payload_tare_and_pickup_over_dds(ros_env, checkpoint):
     gives its mass and centre of mass in the distal link's frame, ``~/payload/std`` their σ; the truth is
     the simulator's change of the carrying body's parameters. ``~/inertial_parameters`` names its values."""
     from geometry_msgs.msg import InertiaStamped
+    from helpers.ros import parameters_names_from_msg
 
     from semiparam_ros.core.rigid_body.payload import payload_from_parameters
-    from semiparam_ros.ros.conversions import parameters_names_from_msg
     from semiparam_ros.sim.arms import ARM_ROBOTS, arm_regressor
 
     rec = simulate_arm(ArmScenarioConfig(name="panda_pickup", robot="panda", duration=10.0, rate=200.0,

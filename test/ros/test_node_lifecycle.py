@@ -16,7 +16,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from semiparam_ros.core.estimator.online import OnlineEstimator
-from semiparam_ros.core.rigid_body.dynamics import resolve_urdf
+from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 
 pytestmark = pytest.mark.ros
 

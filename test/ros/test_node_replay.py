@@ -16,6 +16,7 @@ from helpers.ros import (
     diagnostic_values,
     make_ros_env,
     offline_replay,
+    parameters_names_from_msg,
     source_bag,
     stamp_ns,
     wait_until,
@@ -24,7 +25,6 @@ from helpers.ros import (
 from std_msgs.msg import Float64MultiArray
 
 from semiparam_ros.ros.bag_player import BagPlayer, load_raw
-from semiparam_ros.ros.conversions import parameters_names_from_msg
 
 pytestmark = pytest.mark.ros
 

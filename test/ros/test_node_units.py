@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
+from helpers.ros import parameters_names_from_msg
 from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray
 
 from semiparam_ros.core.config import PARAMETERS, EstimatorConfig, parameter_spec
 from semiparam_ros.core.stream.messages import joint_state_from_msg
@@ -22,7 +23,6 @@ from semiparam_ros.ros.conversions import (
     joint_state_from_cdr,
     joint_torques_msg,
     parameters_msg,
-    parameters_names_from_msg,
     payload_msgs,
     stamp_msg,
     wrench_from_cdr,
@@ -108,11 +108,6 @@ def test_parameters_message_names_and_layout():
     assert dims[0].stride == int(np.prod([d.size for d in dims]))  # the strides of a valid layout
     assert {d.label: v for d, v in zip(dims[1:], msg.data, strict=True)} == dict(zip(names, [1.0, 2.0, 3.0],
                                                                                     strict=True))
-    # the comma-joined layout published before is still read
-    old = Float64MultiArray()
-    old.layout.dim = [MultiArrayDimension(label="a,b", size=2, stride=2)]
-    old.data = [1.0, 2.0]
-    assert parameters_names_from_msg(old) == ["a", "b"]
     with pytest.raises(ValueError):
         parameters_msg(names, np.zeros(2))
 

@@ -10,7 +10,7 @@ from helpers.ros import REPO, NodeProcess, TestClient, make_ros_env
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from semiparam_ros.core.rigid_body.dynamics import example_robot_data_path, resolve_urdf
+from semiparam_ros.core.rigid_body.urdf import example_robot_data_path, resolve_urdf
 from semiparam_ros.errors import ConfigurationError
 
 PANDA_REL = "robots/panda_description/urdf/panda.urdf"

@@ -10,7 +10,8 @@ import pytest
 import yaml
 
 from semiparam_ros.cli.simulate import main
-from semiparam_ros.core.rigid_body.dynamics import is_physically_consistent, resolve_urdf
+from semiparam_ros.core.rigid_body.dynamics import is_physically_consistent
+from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 from semiparam_ros.core.stream.pipeline import SamplePipeline
 from semiparam_ros.io.bags import iter_samples, read_messages, read_topic_arrays
 from semiparam_ros.sim.arms import (

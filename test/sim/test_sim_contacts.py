@@ -11,7 +11,8 @@ import pinocchio as pin
 import pytest
 import yaml
 
-from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, icub_urdf_path
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
+from semiparam_ros.core.rigid_body.urdf import icub_urdf_path
 from semiparam_ros.io.bags import read_topic_arrays
 from semiparam_ros.sim.contacts import ContactConfig, ContactEpisode, contact_forces, draw_episodes
 from semiparam_ros.sim.effects import SENSOR_FRAME

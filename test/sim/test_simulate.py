@@ -16,7 +16,8 @@ from mcap.reader import make_reader
 
 from semiparam_ros.cli.simulate import main
 from semiparam_ros.core.learners.parametric import ParametricModel
-from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, icub_urdf_path, point_mass_parameters
+from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, point_mass_parameters
+from semiparam_ros.core.rigid_body.urdf import icub_urdf_path
 from semiparam_ros.core.stream.acceleration import AccelerationConfig
 from semiparam_ros.core.stream.messages import JointStateData, WrenchData
 from semiparam_ros.core.stream.pipeline import SamplePipeline

@@ -30,7 +30,15 @@ from semiparam_ros.core.estimator.build import (
     rigid_body_part,
     traits_of,
 )
-from semiparam_ros.core.estimator.state import check_magnitudes, meta_arrays, read_meta, read_period
+from semiparam_ros.core.estimator.migration import migrate
+from semiparam_ros.core.estimator.state import (
+    CHECKPOINT_VERSION,
+    check_magnitudes,
+    meta_arrays,
+    read_meta,
+    read_period,
+    read_version,
+)
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.learners._step_kernels import joined_within
 from semiparam_ros.core.learners.contract import Prediction, RigidBodyUser
@@ -115,6 +123,8 @@ class OnlineEstimator:
         self.model = build_model(config, kind, self.regressor)
         #: What the estimator needs to know of its learner's kind (the builder's answer).
         self.traits = traits_of(self.model)
+        #: What reading the last loaded checkpoint of an older format did (one line per step; empty if none).
+        self.migration_notes: list[str] = []
         self._scale = column_scale(config, self.regressor)
         self.learning_enabled = bool(config["learning_enabled"])
         self._n_joints = len(config["robot.joints"])
@@ -561,6 +571,10 @@ class OnlineEstimator:
         """
         self.load_state(load_npz(Path(path).expanduser()), path)
 
+    def _fresh_state(self) -> dict[str, np.ndarray]:
+        """Return the checkpoint arrays of a new estimator of this configuration (a migration fills in)."""
+        return OnlineEstimator(self.config, regressor=self.regressor, kind=self.kind).checkpoint_state()
+
     def load_state(self, state: dict[str, np.ndarray], path: str | Path = "checkpoint") -> None:
         """Restore the learned state from the arrays of a checkpoint already read (see :meth:`load`).
 
@@ -571,6 +585,7 @@ class OnlineEstimator:
         Raises:
             CheckpointError: As :meth:`load`.
         """
+        state, notes = migrate(state, read_version(state, path), CHECKPOINT_VERSION, self._fresh_state, path)
         n_learned = read_meta(state, path, self.config, self.kind, self.regressor)
         model = self.model.copy()
         noise = NoiseScale(self.model.n_outputs, self.noise.time_constant_s)
@@ -578,10 +593,8 @@ class OnlineEstimator:
         payload = None
         try:
             model.load_state_dict(state, "model.")
-            if "noise.s2" in state:  # checkpoints written before they carried σ and the gate have neither
-                noise.load_state_dict(state, "noise.")
-            if "gate.warm" in state:
-                gate.load_state_dict(state, "gate.")
+            noise.load_state_dict(state, "noise.")
+            gate.load_state_dict(state, "gate.")
             if "payload.reference" in state:  # a tare was made
                 payload = PayloadLearner.from_state_dict(self.regressor, state, "payload.")
         except CheckpointError as err:
@@ -605,6 +618,7 @@ class OnlineEstimator:
             model.on_period(saved_period)
         self.model = model
         self.traits = traits_of(model)
+        self.migration_notes = notes
         self.noise = noise
         self.gate = gate
         self.payload = payload

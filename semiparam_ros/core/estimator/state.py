@@ -22,8 +22,9 @@ from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.validation import MAX_ABS_INPUT
 from semiparam_ros.errors import CheckpointError
 
-#: Format version written to ``meta.version``; a checkpoint of another version is refused.
-CHECKPOINT_VERSION = 1
+#: Format version written to ``meta.version``; an older one is read through
+#: :func:`~semiparam_ros.core.estimator.migration.migrate`, a newer one is refused.
+CHECKPOINT_VERSION = 2
 
 
 def software_versions() -> dict[str, str]:
@@ -162,9 +163,24 @@ def read_meta(state: dict[str, np.ndarray], path: str | Path, config: EstimatorC
                               f"{_fingerprint_difference(saved, current)}")
     if n_learned < 0:
         raise CheckpointError(f"{path}: corrupt checkpoint: {n_learned} samples learned")
-    if "meta.robot" in state:  # checkpoints written before they were self-contained have none
-        _check_robot(path, state["meta.robot"], regressor)
+    if "meta.robot" not in state:
+        raise CheckpointError(f"{path}: corrupt checkpoint: it names no robot (meta.robot)")
+    _check_robot(path, state["meta.robot"], regressor)
     return n_learned
+
+
+def read_version(state: dict[str, np.ndarray], path: str | Path = "checkpoint") -> int:
+    """Return a checkpoint's format version (``meta.version``).
+
+    Raises:
+        CheckpointError: Not a checkpoint, or a version that is not one integer.
+    """
+    try:
+        return _scalar(state["meta.version"], int)
+    except KeyError as err:
+        raise CheckpointError(f"{path}: not a semiparam_ros checkpoint (missing {err})") from err
+    except (TypeError, ValueError) as err:
+        raise CheckpointError(f"{path}: corrupt checkpoint metadata: {err}") from err
 
 
 def _check_robot(path: str | Path, saved: np.ndarray, regressor: RigidBodyRegressor) -> None:

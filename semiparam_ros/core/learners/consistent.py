@@ -1077,21 +1077,16 @@ class ConsistentSemiparametricModel(TwoStageModel):
             raise CheckpointError("the checkpoint has no error scales of the residual's weight (written by "
                                   "an older version: learn it again)")
         scales = np.asarray(scales, dtype=np.float64)
-        if scales.shape == (3 + 4 * t,):  # written before the correlation statistics: none (c = 1)
-            scales = np.concatenate([scales, np.zeros(2 * t)])
         if (scales.shape != (3 + 6 * t,) or not np.isfinite(scales).all()
                 or bool((scales[:3 + 2 * t] < 0.0).any()) or bool((scales[3 + 3 * t:3 + 4 * t] < 0.0).any())
                 or bool((scales[3 + 5 * t:] < 0.0).any())):
             raise CheckpointError("the residual's error scales have the wrong size or invalid values")
-        state, converted = self._current_layout(state, prefix)
         D, E, p = self.nonparametric.rls.n_features, self._phi_entries.size, self.n_params
         try:
             entries_rhs = np.asarray(state[f"{prefix}entries_rhs"], dtype=np.float64)
             reference = np.asarray(state[f"{prefix}reference"], dtype=np.float64)
         except KeyError as err:
             raise CheckpointError(f"state is missing key {err}") from err
-        if reference.shape == (p + 1,):  # without the flag: a reference that followed π̂
-            reference = np.concatenate([reference, [0.0]])
         if (entries_rhs.shape != (D, E) or reference.shape != (p + 2,) or not np.isfinite(entries_rhs).all()
                 or not np.isfinite(reference).all() or reference[p] < 0.0):
             raise CheckpointError("the residual's reference or its regressor cross-products have the wrong "
@@ -1108,36 +1103,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._fast_errors = scales[3 + 2 * t:3 + 4 * t].reshape(2, t).copy()
         self._corr = scales[3 + 4 * t:].reshape(2, t).copy()
         self._weight_cache = self._fast_mask = None
-        if converted or reference[p + 1] != 0.0:
+        if reference[p + 1] != 0.0:
             # it predicted with the learned parameters, or with a rigid body set by use_rigid, which is not
             # restored (solved again from the state): the learned parameters until then
             self._rereference(self.parameters)
-
-    def _current_layout(self, state: dict[str, np.ndarray], prefix: str
-                        ) -> tuple[dict[str, np.ndarray], bool]:
-        """Convert a state written when the residual regressed every learned regressor entry.
-
-        Its learner held ``d = R⁻ᵀ[B_y | B_E]`` for the targets ``[y − Φπ₀, Φ_E]``: the residual of the
-        reference π₀ is ``[R | d_y]`` and the cross-products are ``B_E = Rᵀ d_E`` (exact). Returns the
-        state unchanged (and False) when it is already in today's layout.
-        """
-        key = f"{prefix}nonparametric.rls."
-        t, E = self.n_outputs, self._phi_entries.size
-        try:
-            n_out = int(state[f"{key}n_outputs"])
-        except KeyError:
-            return state, False  # the learners' own checks name what is missing
-        if n_out != t + E or f"{prefix}entries_rhs" in state:
-            return state, False
-        M = np.asarray(state[f"{key}M"], dtype=np.float64)
-        D = M.shape[0]
-        if M.shape != (D, D + t + E) or not np.isfinite(M).all():
-            raise CheckpointError("the residual learner's state has the wrong size or invalid values")
-        R = np.triu(M[:, :D])
-        new = dict(state)
-        new[f"{key}M"] = np.ascontiguousarray(M[:, :D + t])
-        new[f"{key}n_outputs"] = np.array(t)
-        new[f"{prefix}entries_rhs"] = R.T @ M[:, D + t:]
-        prior = np.asarray(state.get(f"{prefix}parametric.prior", self.parametric.prior), dtype=np.float64)
-        new[f"{prefix}reference"] = np.concatenate([prior.reshape(-1), [0.0, 0.0]])
-        return new, True

@@ -337,7 +337,7 @@ class Standardizer:
             warmup = int(state[f"{prefix}warmup"])
             count = int(state[f"{prefix}count"])
             ready = bool(state[f"{prefix}ready"])
-            min_scale = np.asarray(state.get(f"{prefix}min_scale", 0.0), dtype=np.float64)
+            min_scale = np.asarray(state[f"{prefix}min_scale"], dtype=np.float64)
         except KeyError as err:
             raise CheckpointError(f"Standardizer state is missing key {err}") from err
         if mean.ndim != 1 or m2.shape != mean.shape or scale.shape != mean.shape or mean.size == 0:

@@ -258,9 +258,11 @@ class NonparametricModel(LearnerBase):
                 or rls.n_features != rff.n_features or rls.n_outputs != self.n_outputs):
             raise CheckpointError(f"state does not fit a model with n_inputs={self.n_inputs}, "
                              f"n_outputs={self.n_outputs}")
-        # held warm-up rows (a checkpoint written before they were held has none: nothing to learn)
-        held_x = np.asarray(state.get(f"{prefix}held_x", np.zeros((0, self.n_inputs))), dtype=np.float64)
-        held_y = np.asarray(state.get(f"{prefix}held_y", np.zeros((0, self.n_outputs))), dtype=np.float64)
+        try:  # the held warm-up rows
+            held_x = np.asarray(state[f"{prefix}held_x"], dtype=np.float64)
+            held_y = np.asarray(state[f"{prefix}held_y"], dtype=np.float64)
+        except KeyError as err:
+            raise CheckpointError(f"state is missing key {err}") from err
         k = held_x.shape[0] if held_x.ndim == 2 else -1
         if (held_x.shape != (k, self.n_inputs) or held_y.shape != (k, self.n_outputs)
                 or k > max(std.count_, 0)

@@ -307,16 +307,15 @@ class ParametricModel(LearnerBase):
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
         """Replace the learned state (validated completely before anything changes).
 
-        The prior stored with the state is loaded with it (δ̂ is relative to it); a state without one
-        (written before priors existed) had a zero prior.
+        The prior stored with the state is loaded with it (δ̂ is relative to it).
 
         Raises:
             CheckpointError: Wrong kind, missing keys, or sizes that do not match this model's regressor.
         """
         self._check_kind(state, prefix)
         rls = RecursiveRLS.from_state_dict(state, f"{prefix}rls.")
-        prior = np.asarray(state.get(f"{prefix}prior", np.zeros(rls.n_features)), dtype=np.float64)
         try:
+            prior = np.asarray(state[f"{prefix}prior"], dtype=np.float64)
             n_outputs = int(state[f"{prefix}n_outputs"])
             n_seen = int(state[f"{prefix}n_samples_seen"])
         except KeyError as err:

@@ -56,36 +56,16 @@ import pinocchio as pin
 import scipy.linalg
 
 from semiparam_ros.core.kinds import OutputKind
-from semiparam_ros.core.rigid_body.urdf import (
-    EXAMPLE_ROBOT_DATA_SCHEME,
-    EXTRA_COLUMN_KINDS,
-    PACKAGE_SCHEME,
-    TOPIC_SCHEME,
-    RegressorSpec,
-    example_robot_data_path,
-    icub_urdf_path,
-    package_file,
-    prepare_urdf,
-    resolve_urdf,
-)
+from semiparam_ros.core.rigid_body.urdf import RegressorSpec, prepare_urdf
 from semiparam_ros.core.validation import as_float_array
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 
 __all__ = [
-    "EXAMPLE_ROBOT_DATA_SCHEME",
-    "EXTRA_COLUMN_KINDS",
     "INERTIAL_PARAMETER_NAMES",
-    "PACKAGE_SCHEME",
-    "TOPIC_SCHEME",
     "BaseParameterMap",
-    "RegressorSpec",
     "RigidBodyRegressor",
-    "example_robot_data_path",
-    "icub_urdf_path",
     "is_physically_consistent",
-    "package_file",
     "point_mass_parameters",
-    "resolve_urdf",
 ]
 
 #: Names of the 10 inertial parameters of one body, in Pinocchio's order (about the body frame origin).

@@ -1054,3 +1054,35 @@ def test_a_checkpoint_carries_the_period_it_was_learned_at(tmp_path):
     old = {k: v for k, v in state.items() if k != "meta.sample_period_s"}
     save_npz(tmp_path / "c.npz", old)
     OnlineEstimator(cfg).load(tmp_path / "c.npz")  # written before the period was stored: loads
+
+
+def test_a_version_1_checkpoint_is_migrated_and_a_current_one_missing_arrays_is_refused(config, tmp_path):
+    """Format 1 wrote no noise estimate, no gate and no robot in early checkpoints: read through the one
+    migration, such a file predicts as the model that wrote it, starts σ and the gate afresh, and says what
+    it did once. The same arrays missing from a current (version 2) checkpoint are a corrupt file."""
+    from semiparam_ros.core.checkpoint import atomic_save_npz as save_npz
+    from semiparam_ros.core.checkpoint import load_npz
+    from semiparam_ros.core.estimator.state import CHECKPOINT_VERSION
+
+    assert CHECKPOINT_VERSION == 2
+    est = OnlineEstimator(config)
+    feed(est, rich_stream().messages[:400])
+    est.save(tmp_path / "now.npz")
+    state = load_npz(tmp_path / "now.npz")
+    old = {k: v for k, v in state.items() if not k.startswith(("noise.", "gate.")) and k != "meta.robot"}
+    save_npz(tmp_path / "v1.npz", dict(old, **{"meta.version": np.array(1)}))
+    loaded = OnlineEstimator(config)
+    loaded.load(tmp_path / "v1.npz")
+    assert loaded.n_samples_learned == est.n_samples_learned
+    x = np.linspace(-0.5, 0.5, 3 * len(config["robot.joints"]))
+    np.testing.assert_array_equal(loaded.model.predict_one(x).total, est.model.predict_one(x).total)
+    fresh = OnlineEstimator(config)
+    np.testing.assert_array_equal(loaded.noise.state_dict()["s2"], fresh.noise.state_dict()["s2"])
+    notes = " ".join(loaded.migration_notes)
+    assert "version 1" in notes and "noise estimate" in notes and "contact gate" in notes
+    assert "names no robot" in notes
+    loaded.save(tmp_path / "again.npz")  # written in today's format
+    assert int(load_npz(tmp_path / "again.npz")["meta.version"]) == 2
+    save_npz(tmp_path / "v2_missing.npz", dict(old, **{"meta.version": np.array(2)}))
+    with pytest.raises(CheckpointError):
+        OnlineEstimator(config).load(tmp_path / "v2_missing.npz")

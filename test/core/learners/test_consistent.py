@@ -497,6 +497,19 @@ def test_the_model_alone_is_as_uncertain_as_its_residual_is_unsure_and_correlate
     assert inside[0] < 0.2 * far[0]  # the data explain the error inside; far away the model abstains
 
 
+def through_migration(old_state, **kwargs):
+    """A learner state of checkpoint format 1 read through the checkpoint's one migration path."""
+    from semiparam_ros.core.estimator.migration import migrate
+
+    v1 = {f"model.{k}": v for k, v in old_state.items()}
+    v1.update({"meta.version": np.array(1), "meta.robot": np.array("{}"), "noise.s2": np.zeros(2),
+               "gate.warm": np.array(True)})
+    fresh = {f"model.{k}": v for k, v in model(**kwargs).state_dict().items()}
+    new, notes = migrate(v1, 1, 2, lambda: fresh)
+    assert notes and int(new["meta.version"]) == 2
+    return {k[len("model."):]: v for k, v in new.items() if k.startswith("model.")}
+
+
 def test_a_checkpoint_without_correlation_statistics_loads_with_none():
     m = model()
     X, Y = data(200, 5)
@@ -506,7 +519,7 @@ def test_a_checkpoint_without_correlation_statistics_loads_with_none():
     state = m.state_dict()
     state["scales"] = state["scales"][:3 + 4 * 2]  # the layout before the correlation statistics
     old = model()
-    old.load_state_dict(state)
+    old.load_state_dict(through_migration(state))
     np.testing.assert_array_equal(old.correlation_samples(), [1.0, 1.0])
     np.testing.assert_array_equal(old.predict_one(X[0]).total, m.predict_one(X[0]).total)
     state["scales"] = np.concatenate([state["scales"], [0.0, 0.0, -1.0, 0.0]])  # a negative Σβm²
@@ -516,9 +529,11 @@ def test_a_checkpoint_without_correlation_statistics_loads_with_none():
 
 def test_a_checkpoint_that_regressed_every_regressor_entry_is_converted_exactly():
     """Before the reference, the residual learner regressed ``[y − Φπ₀, Φ_E]`` (``d = R⁻ᵀ[B_y | B_E]``).
-    Such a state, built here from a trained model's factor and cross-products, loads into today's layout
-    and predicts what the trained model predicts with the learned parameters as its reference."""
+    Such a state (checkpoint format 1), built here from a trained model's factor and cross-products, is
+    migrated into today's layout and predicts what the trained model predicts with the learned parameters
+    as its reference."""
     from scipy.linalg import solve_triangular
+
 
     m = model(tracker=True)
     X, Y = data(300, 13)
@@ -537,7 +552,7 @@ def test_a_checkpoint_that_regressed_every_regressor_entry_is_converted_exactly(
     old["nonparametric.rls.M"] = np.concatenate([R, d_y, d_E], axis=1)
     old["nonparametric.rls.n_outputs"] = np.array(2 + B_E.shape[1])
     loaded = model(tracker=True)
-    loaded.load_state_dict(old)
+    loaded.load_state_dict(through_migration(old, tracker=True))
     m.use_rigid(None)  # the trained model with the learned parameters as its reference
     Xt, _ = data(10, 14)
     np.testing.assert_allclose(loaded.predict_model_many(Xt).total, m.predict_model_many(Xt).total,
@@ -545,4 +560,4 @@ def test_a_checkpoint_that_regressed_every_regressor_entry_is_converted_exactly(
     np.testing.assert_allclose(loaded._cross.settled(), B_E, rtol=1e-9, atol=1e-12)
     old["nonparametric.rls.M"] = old["nonparametric.rls.M"][:, :-1]  # a damaged one is refused
     with pytest.raises(CheckpointError):
-        model(tracker=True).load_state_dict(old)
+        model(tracker=True).load_state_dict(through_migration(old, tracker=True))

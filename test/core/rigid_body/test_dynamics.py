@@ -14,10 +14,10 @@ from helpers.dynamics import G, reference_model, reference_state, reference_torq
 from semiparam_ros.core.rigid_body.dynamics import (
     INERTIAL_PARAMETER_NAMES,
     RigidBodyRegressor,
-    icub_urdf_path,
     is_physically_consistent,
     point_mass_parameters,
 )
+from semiparam_ros.core.rigid_body.urdf import icub_urdf_path
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 from semiparam_ros.sim.frames import body_placement, frame_in_body, frame_placement
 
