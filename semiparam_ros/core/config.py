@@ -264,7 +264,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   min=0, max=10**7, structural=True, unless=0),
     ParameterSpec("nonparametric.standardizer_warmup_s", "double", 2.0,
                   "duration of the input standardization's warm-up [s], converted to samples at the measured "
-                  "sample rate (2 s = the former 200 samples at 100 Hz); its samples are held and learned by "
+                  "sample rate (200 samples at 100 Hz); its samples are held and learned by "
                   "the residual stage once the statistics are ready", min=0.0, min_exclusive=True,
                   max=1e5, structural=True, only_if=(("nonparametric.standardizer_warmup", 0),)),
     ParameterSpec("nonparametric.learn_warmup", "bool", True,
@@ -370,8 +370,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   min=0.0, max=1e9),
     ParameterSpec("feedforward.refresh_period", "double", 1.0,
                   "the feed-forward is served from a copy of the model refreshed this often [s] while "
-                  "learning goes on; 0 = the live model (it changes at every sample: measured to inject "
-                  "torque jitter that degrades closed-loop tracking, docs/feedforward.md)",
+                  "learning goes on; 0 = the live model (it changes at every sample, which makes the "
+                  "commanded torque jitter: docs/feedforward.md)",
                   min=0.0, max=1e6),
     # run time
     ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)",
@@ -396,7 +396,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "diagnostics.rmse_window_s; 0 = use rmse_window_s", min=0, max=10**6),
     ParameterSpec("diagnostics.rmse_window_s", "double", 3.0,
                   "duration of the running RMSE window reported in diagnostics [s], converted to samples at "
-                  "the measured sample rate (3 s = the former 300 samples at 100 Hz)", min=0.0,
+                  "the measured sample rate (300 samples at 100 Hz)", min=0.0,
                   min_exclusive=True, max=1e5),
 )
 

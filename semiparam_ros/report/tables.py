@@ -1,7 +1,7 @@
 """Markdown tables of the typed reports: what ``evaluate``/``tune`` print and the results page embeds.
 
 Each function renders one record type into a table (numbers and short labels only); the words around the
-tables live in ``docs/`` (:mod:`semiparam_ros.eval.pages`).
+tables live in ``docs/`` (``docs/tools/pages.py``).
 """
 
 from __future__ import annotations

@@ -175,3 +175,17 @@ def test_numbers_in_exponent_notation_are_numbers(tmp_path):
         name = "nonparametric.n_features" if bad == "2.5e0" else "nonparametric.sigma"
         with pytest.raises(ValueError, match=fragment):
             validate_value(name, bad)
+
+
+def test_parameter_descriptions_say_what_a_parameter_does_not_its_history():
+    """What `ros2 param describe` shows: no history ("the former…", "no longer…", issue numbers) in the
+    descriptions, and every run-time parameter names what takes it."""
+    import re
+
+    from semiparam_ros.core.config import PARAMETERS, RUNTIME_TARGETS
+
+    history = re.compile(r"\b(former|formerly|previously|no longer|older|deprecated|issue \d+)\b",
+                         re.I)
+    assert [p.name for p in PARAMETERS if history.search(p.description)] == []
+    assert {p.runtime for p in PARAMETERS} <= {"", *RUNTIME_TARGETS}
+    assert {p.name for p in PARAMETERS if not p.read_only} == {p.name for p in PARAMETERS if p.runtime}

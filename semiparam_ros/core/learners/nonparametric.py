@@ -31,7 +31,7 @@ class NonparametricModel(LearnerBase):
         n_features: D, number of random Fourier features.
         sigma: Gaussian kernel width σ in standardized input units.
         lam: Ridge regularizer λ > 0.
-        forgetting: β ∈ (0, 1] per sample (prior-keeping, see ``core.rrls``).
+        forgetting: β ∈ (0, 1] per sample (prior-keeping, see ``core.learners.rrls``).
         seed: Seed of the random features.
         standardizer: A :class:`Standardizer` for x (copied). Default: none (identity) unless
             ``standardizer_warmup > 0``. An unfitted standardizer must have a warm-up.

@@ -28,7 +28,7 @@ class ParametricModel(LearnerBase):
         n_params: Number of (base) parameters.
         n_outputs: t, length of y.
         lam: Ridge regularizer λ > 0 (prior precision of π, units of Φ²).
-        forgetting: β ∈ (0, 1] per sample; β < 1 forgets while keeping the prior (see ``core.rrls``).
+        forgetting: β ∈ (0, 1] per sample; β < 1 forgets while keeping the prior (see ``core.learners.rrls``).
         prior: Prior mean π₀ (n_params,) the ridge pulls toward, e.g. a URDF's base parameters; default
             zero (the paper: no CAD prior).
 

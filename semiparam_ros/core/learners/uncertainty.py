@@ -44,7 +44,7 @@ def predict_with_variance(model: Any, x: np.ndarray) -> Prediction:
     about it — its uncertainty is then in the noise scale).
 
     Args:
-        model: Any learner of :mod:`semiparam_ros.core.learners.semiparametric` or
+        model: Any learner of :mod:`semiparam_ros.core.learners` (P, NP, the SP combinations) or
             :mod:`semiparam_ros.core.learners.joint`.
         x: The input ``[q, q̇, q̈]`` [rad, rad/s, rad/s²].
 
