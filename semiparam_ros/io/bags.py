@@ -37,7 +37,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from semiparam_ros.core.kinds import OutputKind
+from semiparam_ros.core.kinds import WRENCH_WIDTH, InputKind, OutputKind
 from semiparam_ros.core.stream.messages import (
     JointStateData,
     Sample,
@@ -528,7 +528,7 @@ class TopicArrays:
 
 _ARRAY_TYPES = {
     JOINT_STATE_TYPE: ("position", "velocity", "effort"),
-    WRENCH_STAMPED_TYPE: ("wrench",),
+    WRENCH_STAMPED_TYPE: (InputKind.WRENCH,),
     JOINT_TRAJECTORY_TYPE: ("positions", "velocities", "accelerations", "effort"),
 }
 
@@ -576,7 +576,7 @@ def read_topic_arrays(path: str | Path, topic: str, *, joints: Sequence[str] | N
         log_times.append(int(log_time))
         if msgtype == WRENCH_STAMPED_TYPE:
             f, t = msg.wrench.force, msg.wrench.torque
-            columns["wrench"].append(np.array([f.x, f.y, f.z, t.x, t.y, t.z]))
+            columns[InputKind.WRENCH].append(np.array([f.x, f.y, f.z, t.x, t.y, t.z]))
             continue
         if msgtype == JOINT_STATE_TYPE:
             msg_names = tuple(msg.name)
@@ -604,7 +604,7 @@ def read_topic_arrays(path: str | Path, topic: str, *, joints: Sequence[str] | N
                     f"{len(msg_names)} names"
                 )
             columns[key].append(val[order])
-    width = 6 if msgtype == WRENCH_STAMPED_TYPE else len(names or ())
+    width = WRENCH_WIDTH if msgtype == WRENCH_STAMPED_TYPE else len(names or ())
     stacked = {k: (np.stack(v) if v else np.empty((0, width))) for k, v in columns.items()}
     # drop fields that were empty in every message (e.g. a JointState without effort)
     stacked = {k: v for k, v in stacked.items() if v.shape[0] == 0 or not np.all(np.isnan(v))}

@@ -1,12 +1,13 @@
-"""ROS 2 parameters of the estimator node, declared from the single table :data:`core.config.PARAMETERS`.
+"""ROS 2 parameters of the estimator node, declared from the single table ``core.config.PARAMETERS``.
 
 Every parameter gets a ``ParameterDescriptor`` with its type, description, allowed range
 (``FloatingPointRange`` / ``IntegerRange`` for scalars, the range text in ``additional_constraints``
 otherwise) and ``read_only`` for the ones that fix the structure of the model (joints, URDF, number of
-features…): changing those needs a restart, and rclpy refuses them at run time on its own. The few
-run-time parameters (``learning_enabled``, ``checkpoint.period``) are checked by an on-set-parameters
-callback with :func:`core.config.validate_value`, which refuses invalid values with the same message the
-offline tools give.
+features…): changing those needs a restart, and rclpy refuses them at run time on its own. The run-time
+parameters — those the table gives a ``runtime`` target (:func:`runtime_parameter_names`: the learning
+switch, the contact gate, the noise estimate's memory, the overload budget and the checkpoint period) —
+are checked by an on-set-parameters callback with ``core.config.validate_value``, which refuses invalid
+values with the same message the offline tools give; the node hands an accepted change to its target.
 
 Start-up values come from ``--params-file`` / ``-p`` overrides; the whole set is validated once by
 :meth:`EstimatorConfig.from_flat` (cross-parameter rules such as matching locked joint/position lengths).

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from semiparam_ros.core.fourier import FourierTrajectory
-from semiparam_ros.core.kinds import OutputKind
+from semiparam_ros.core.kinds import InputKind, OutputKind
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, is_physically_consistent
 from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 from semiparam_ros.sim.contacts import (
@@ -522,7 +522,7 @@ class JointTorqueMeasurement:
     end_effector: str
     friction: JointFriction
     noise_std: np.ndarray
-    output: str = "joint_torques"
+    output: OutputKind = OutputKind.JOINT_TORQUES
 
     def measure(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, t: np.ndarray, rigid: np.ndarray,
                 force: np.ndarray | None, rng: np.random.Generator) -> Measurement:
@@ -600,11 +600,11 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     info: dict[str, Any] = {
         "name": config.name,
         "robot": spec.as_dict(),
-        "output": "joint_torques",
+        "output": OutputKind.JOINT_TORQUES.value,
         "seed": int(config.seed),
         "duration_s": float(config.duration),
         "start_stamp_ns": int(config.start_ns),
-        "joint_states": {"rate_hz": float(config.rate), "count": int(count)},
+        InputKind.JOINT_STATES.value: {"rate_hz": float(config.rate), "count": int(count)},
         "joints": list(spec.joints),
         "trajectory": {
             "type": "multisine" if config.trajectory is None else "given (Fourier series)",

@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from semiparam_ros.core.kinds import OutputKind
+from semiparam_ros.core.kinds import InputKind, OutputKind
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.urdf import icub_urdf_path
 from semiparam_ros.sim.contacts import (
@@ -537,8 +537,8 @@ def simulate(config: ScenarioConfig, *, progress: Callable[[int], None] | None =
         "seed": int(config.seed),
         "duration_s": float(config.duration),
         "start_stamp_ns": int(config.start_ns),
-        "joint_states": {"rate_hz": float(config.joint_rate), "count": n_joint},
-        "wrench": {
+        InputKind.JOINT_STATES.value: {"rate_hz": float(config.joint_rate), "count": n_joint},
+        InputKind.WRENCH.value: {
             "rate_hz": float(config.wrench_rate),
             "count": n_wrench,
             "delay_s": float(config.delay),
@@ -601,7 +601,7 @@ class FTSensorMeasurement:
 
     kin: ArmKinematics
     effects: EffectParameters
-    output: str = "wrench"
+    output: OutputKind = OutputKind.WRENCH
 
     def measure(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, t: np.ndarray, rigid: np.ndarray,
                 force: np.ndarray | None, rng: np.random.Generator) -> Measurement:

@@ -233,7 +233,7 @@ class SamplePipeline:
         self,
         joints: Sequence[str],
         *,
-        output: str = "wrench",
+        output: OutputKind | str = OutputKind.WRENCH,
         frame_id: str | None = None,
         sync_tolerance: float = 0.005,
         acceleration: AccelerationConfig | None = None,
