@@ -41,7 +41,7 @@ from semiparam_ros.jobs.parallel import run_jobs
 from semiparam_ros.eval.bags.replay import evaluate_bags
 from docs.tools.replicates import replicate_summary, replicates_markdown
 from semiparam_ros.eval.protocol.report import protocol_report, write_json
-from semiparam_ros.report.evaluate import load_evaluation_config
+from semiparam_ros.report.evaluation import load_evaluation_config
 
 config_path, out, jobs = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
 rest = sys.argv[4:]

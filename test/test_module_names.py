@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "semiparam_ros"
 ROOMS = sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file())
 ABSOLUTE = re.compile(r"\bsemiparam_ros(?:\.[A-Za-z_]\w*)+")
-RELATIVE = re.compile(r"(?<=`)(?:" + "|".join(ROOMS) + r")(?:\.[a-z_]\w*)+(?=`)")
+RELATIVE = re.compile(r"(?<=`)(?:" + "|".join(ROOMS) + r")(?:\.[a-z_]\w*)+(?<!\.py)(?=`)")
 PATH = re.compile(r"(?<![\w./-])(?:semiparam_ros/)?(?:" + "|".join(ROOMS) + r")/[\w/]*\w\.py\b")
 TRIPLE_QUOTES = ('"""', "'" * 3)
 
@@ -84,5 +84,5 @@ def test_a_stale_name_is_found():
     assert _resolves("semiparam_ros.core.learners.rrls.RecursiveRLS")
     assert PATH.findall("see core/learners/rrls.py and service/serving.py") == [
         "core/learners/rrls.py"]  # service/ is no room of the package: not matched, not a path of it
-    found = RELATIVE.findall("``core.rrls`` and `eval.horizon`, not report.json")
+    found = RELATIVE.findall("``core.rrls`` and `eval.horizon`, not report.json nor `report.py`")
     assert found == ["core.rrls", "eval.horizon"]

@@ -5,8 +5,8 @@
 1. ``load_model(ckpt).predict`` at N = 1000 states: one call with (N, n) arrays vs N calls with (n,)
    arrays, side by side, median of ``--repeats`` (7-joint Panda, D = 500, the consistent SP default).
    Target: ≥ 20× faster per state.
-2. ``learn`` (:func:`semiparam_ros.serving.learn.learn_bags`, the node's pipeline) with the defaults on a
-   simulated 1 kHz Panda recording (60 s) and on the three real 200 Hz KUKA logs: recorded time per wall
+2. ``learn`` (:func:`semiparam_ros.serving.bag_learning.learn_bags`, the node's pipeline) with the defaults
+   on a simulated 1 kHz Panda recording (60 s) and on the three real 200 Hz KUKA logs: recorded time per wall
    time. Target: a 1 kHz log ≥ 3× faster than real time on 2 cores.
 
 Prints tables and writes ``bench/results/bench_serving.json``.
@@ -27,7 +27,7 @@ from threadpoolctl import threadpool_info
 
 from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 

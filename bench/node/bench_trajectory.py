@@ -28,8 +28,8 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config
 from semiparam_ros.ros import conversions as cv
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.feedforward import FeedForward
-from semiparam_ros.serving.learn import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 

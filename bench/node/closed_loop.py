@@ -28,7 +28,7 @@ import numpy as np
 from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.stream.messages import JointStateData
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import LearnedModel
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.closed_loop import ArmPlant, desired_trajectory, pd_gains, run_loop

@@ -27,7 +27,7 @@ from semiparam_ros.core.config import load_config
 from semiparam_ros.core.estimator.build import build_pipeline
 from semiparam_ros.core.rigid_body.identification import consistent_parameters
 from semiparam_ros.io.bags import iter_samples
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import LearnedModel
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording

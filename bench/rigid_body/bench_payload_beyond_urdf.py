@@ -20,7 +20,7 @@ import tempfile
 import numpy as np
 
 from semiparam_ros.core.config import load_config
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import load_model
 from semiparam_ros.sim.arms import ArmScenarioConfig, ParameterPerturbation, simulate_arm
 from semiparam_ros.sim.writer import write_recording

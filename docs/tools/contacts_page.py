@@ -1,8 +1,8 @@
 """Fill the contacts page's template (``docs/templates/contacts.md.in``) with the contact reports' numbers.
 
 The words live in the template; this module computes its ``${name}`` placeholders from the
-:class:`~semiparam_ros.eval.bags.contacts.ContactReport` JSON files that ``scripts/contacts.sh`` writes
-(``contacts_<log>.json`` in the figures folder; ``<log>`` is ``icub_seed<k>`` for the iCub seeds and
+:class:`~semiparam_ros.eval.bags.contact_detection.ContactReport` JSON files that ``scripts/contacts.sh``
+writes (``contacts_<log>.json`` in the figures folder; ``<log>`` is ``icub_seed<k>`` for the iCub seeds and
 ``panda`` for the joint-torque arm). The acceptance criteria of issue 13 are evaluated here
 (:func:`acceptance`) and shown as yes/no; the template states no finding in words.
 
@@ -21,7 +21,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from semiparam_ros.atomic import atomic_write_text
-from semiparam_ros.eval.bags.contacts import ContactReport
+from semiparam_ros.eval.bags.contact_detection import ContactReport
 from semiparam_ros.report.tables import contacts_table, fmt
 
 __all__ = ["acceptance", "contacts_values", "load_contact_reports", "render_contacts", "write_contacts"]

@@ -5,9 +5,9 @@
 """
 
 __all__ = [
-    "errors",
     "evaluate",
     "excite",
+    "exit_codes",
     "export_urdf",
     "learn",
     "learn_fleet",

@@ -18,7 +18,7 @@ contact detection per episode, the error after the contacts vs before, payload a
 
     evaluate contacts bags/generated/icub_contacts --json results/contacts.json --plot results/contacts.png
 
-Argument parsing only; the work is done by :mod:`semiparam_ros.report.evaluate`.
+Argument parsing only; the work is done by :mod:`semiparam_ros.report.evaluation`.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import yaml
 
-from semiparam_ros.cli.errors import error_exit
+from semiparam_ros.cli.exit_codes import error_exit
 
 __all__ = ["add_config_arguments", "build_parser", "main", "parse_overrides"]
 
@@ -174,7 +174,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     from semiparam_ros.eval.bags.replay import Topics
     from semiparam_ros.eval.protocol.horizon import DEFAULT_HORIZONS  # heavy imports after argument checks
     from semiparam_ros.eval.protocol.options import ProtocolOptions
-    from semiparam_ros.report.evaluate import ReportPaths, evaluate_contacts, evaluate_paper, evaluate_payload
+    from semiparam_ros.report.evaluation import (
+        ReportPaths,
+        evaluate_contacts,
+        evaluate_paper,
+        evaluate_payload,
+    )
 
     try:
         cfg = load_evaluation_config(args.config, parse_overrides(args.overrides))

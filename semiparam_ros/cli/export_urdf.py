@@ -17,7 +17,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from semiparam_ros.cli.errors import error_exit
+from semiparam_ros.cli.exit_codes import error_exit
 
 __all__ = ["build_parser", "main"]
 

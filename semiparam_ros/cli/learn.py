@@ -5,7 +5,7 @@
     learn bag1 bag2 --config config/kuka_lwr4.yaml --checkpoint kuka.npz
     learn new_bag --config config/kuka_lwr4.yaml --init kuka.npz --checkpoint kuka2.npz --json report.json
 
-The bags go through the node's own pipeline and estimator (:mod:`semiparam_ros.serving.learn`), so the
+The bags go through the node's own pipeline and estimator (:mod:`semiparam_ros.serving.bag_learning`), so the
 checkpoint is the one the node would have written after hearing them live; the node warm starts from it
 (``checkpoint.path``) and :func:`semiparam_ros.load_model` reads it. Argument parsing only.
 """
@@ -18,8 +18,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from semiparam_ros.cli.errors import error_exit
 from semiparam_ros.cli.evaluate import parse_overrides
+from semiparam_ros.cli.exit_codes import error_exit
 
 __all__ = ["build_parser", "main"]
 
@@ -42,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _progress_printer() -> object:
-    from semiparam_ros.serving.learn import LearnProgress
+    from semiparam_ros.serving.bag_learning import LearnProgress
 
     tty = sys.stderr.isatty()
 
@@ -63,7 +63,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``learn``; returns the exit status (0 done, 2 invalid input, 1 an I/O failure)."""
     args = build_parser().parse_args(argv)
     from semiparam_ros.core.config import load_config
-    from semiparam_ros.serving.learn import learn_bags
+    from semiparam_ros.serving.bag_learning import learn_bags
 
     try:
         config = load_config(args.config).with_overrides(parse_overrides(args.overrides))

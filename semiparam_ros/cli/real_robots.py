@@ -19,8 +19,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from semiparam_ros.cli.errors import error_exit
 from semiparam_ros.cli.evaluate import parse_overrides
+from semiparam_ros.cli.exit_codes import error_exit
 from semiparam_ros.eval.protocol.options import DEFAULT_SPLITS
 
 __all__ = ["build_parser", "main"]

@@ -18,7 +18,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from semiparam_ros.cli.errors import error_exit
+from semiparam_ros.cli.exit_codes import error_exit
 
 __all__ = ["build_parser", "main"]
 

@@ -20,8 +20,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from semiparam_ros.cli.errors import error_exit
 from semiparam_ros.cli.evaluate import add_config_arguments, parse_overrides
+from semiparam_ros.cli.exit_codes import error_exit
 from semiparam_ros.eval.protocol.options import DEFAULT_WINDOW_S
 
 __all__ = ["build_parser", "main"]

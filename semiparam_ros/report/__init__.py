@@ -1,7 +1,7 @@
 """Reports a user runs on their bags: the paper's protocol, real logs, tables, figures and pages."""
 
 __all__ = [
-    "evaluate",
+    "evaluation",
     "figures",
     "per_sample",
     "real_robot",

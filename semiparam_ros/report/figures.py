@@ -28,7 +28,12 @@ import numpy as np
 from semiparam_ros.atomic import atomic_savefig
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.kinds import OutputKind
-from semiparam_ros.eval.bags.contacts import ContactReport, ContactRun, GroundTruthEpisodes, external_truth
+from semiparam_ros.eval.bags.contact_detection import (
+    ContactReport,
+    ContactRun,
+    GroundTruthEpisodes,
+    external_truth,
+)
 from semiparam_ros.eval.protocol.options import Variant
 from semiparam_ros.eval.protocol.report import AdaptationReport, ProtocolReport
 
@@ -184,7 +189,7 @@ def plot_contacts(report: ContactReport, truth: GroundTruthEpisodes, runs: Mappi
     Args:
         report: The contact report (units, pickup).
         truth: The true episodes.
-        runs: ``{"on": ..., "off": ...}`` of :func:`~semiparam_ros.eval.bags.contacts.run_contacts`.
+        runs: ``{"on": ..., "off": ...}`` of :func:`~semiparam_ros.eval.bags.contact_detection.run_contacts`.
         path: PNG destination.
         bag: The bag, to read the true external effect (optional).
         config: Its configuration (needed with ``bag``).

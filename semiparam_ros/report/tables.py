@@ -10,7 +10,7 @@ import math
 from collections.abc import Sequence
 
 from semiparam_ros.core.kinds import OutputKind
-from semiparam_ros.eval.bags.contacts import ContactReport
+from semiparam_ros.eval.bags.contact_detection import ContactReport
 from semiparam_ros.eval.protocol.compare import Comparison, format_p
 from semiparam_ros.eval.protocol.metrics import GROUP_UNITS
 from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S
@@ -223,7 +223,7 @@ def contacts_table(report: ContactReport) -> str:
     """Gate on and off: detection per episode summarized, error after vs before the contacts, payload.
 
     Args:
-        report: A :class:`~semiparam_ros.eval.bags.contacts.ContactReport`.
+        report: A :class:`~semiparam_ros.eval.bags.contact_detection.ContactReport`.
 
     Returns:
         Markdown: one summary table (a row per gate setting) and one row per episode.

@@ -7,14 +7,14 @@ Plain Python between the learners and the node or the command line (never rclpy)
 :mod:`~semiparam_ros.serving.model_service` (what the node serves beside its predictions),
 :mod:`~semiparam_ros.serving.feedforward` (desired states and trajectories),
 :mod:`~semiparam_ros.serving.checkpoint_writer`, :mod:`~semiparam_ros.serving.projection` (the consistent
-parameters in a worker process) and :mod:`~semiparam_ros.serving.learn` (bags into a checkpoint).
+parameters in a worker process) and :mod:`~semiparam_ros.serving.bag_learning` (bags into a checkpoint).
 """
 
 __all__ = [
     "assembly",
+    "bag_learning",
     "checkpoint_writer",
     "feedforward",
-    "learn",
     "learned_model",
     "learning_loop",
     "model_service",

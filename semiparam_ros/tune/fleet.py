@@ -1,7 +1,8 @@
 """One checkpoint per robot of a fleet, learned in parallel, with a summary (``learn-fleet``).
 
 ``ROOT`` holds one folder per robot, each holding that robot's bags (rosbag2 folders or ``.mcap`` files).
-Every robot is one job: its bags are learned in name order by :func:`~semiparam_ros.serving.learn.learn_bags`
+Every robot is one job: its bags are learned in name order by
+:func:`~semiparam_ros.serving.bag_learning.learn_bags`
 (exactly what ``learn BAG… --config C`` does), except the last one when there are two or more, which is
 held out: the learned model, frozen, predicts its states as served (``LearnedModel.predict``) and the
 summary reports that error. The configuration of robot ``r`` is the file ``config_pattern`` names with
@@ -36,7 +37,7 @@ from semiparam_ros.core.config import load_config
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.bags.replay import Topics, load_samples
 from semiparam_ros.jobs.parallel import run_jobs
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import LearnedModel
 from semiparam_ros.tune.held_out import served_error
 

@@ -4,7 +4,8 @@ The hold-out of :mod:`semiparam_ros.tune.selection` scores the end of the traini
 a little later. A default that must hold on a robot's next task is chosen on *other* motion — other bags,
 other robots of a fleet. Here each grid point is a job that
 
-1. learns the training bags with the node's estimator (:func:`~semiparam_ros.serving.learn.learn_bags`: the
+1. learns the training bags with the node's estimator
+   (:func:`~semiparam_ros.serving.bag_learning.learn_bags`: the
    same pipeline, contact gate and adaptation as ``learn`` and the node), and
 2. scores the learned model on every validation bag at the ages of the evaluation
    (:mod:`semiparam_ros.eval.protocol.horizon`): one step, 0.1 s, 1 s and 10 s through the delay line, and
@@ -31,7 +32,7 @@ from semiparam_ros.eval.protocol.horizon import evaluate_horizons
 from semiparam_ros.eval.protocol.metrics import OutputSpec, component_rmse
 from semiparam_ros.eval.protocol.prequential import SampleArrays, progress_enabled
 from semiparam_ros.jobs.parallel import run_jobs
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import LearnedModel
 from semiparam_ros.tune.selection import (
     TUNED_KEYS,

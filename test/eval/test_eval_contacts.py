@@ -16,7 +16,12 @@ import yaml
 from helpers import REPO
 
 from semiparam_ros.core.config import load_evaluation_config
-from semiparam_ros.eval.bags.contacts import ContactReport, contact_report, read_episodes, run_contacts
+from semiparam_ros.eval.bags.contact_detection import (
+    ContactReport,
+    contact_report,
+    read_episodes,
+    run_contacts,
+)
 from semiparam_ros.plain_json import to_plain, write_json
 
 OVERRIDES = {"nonparametric.n_features": 100}

@@ -700,7 +700,7 @@ def test_six_joint_torques_are_evaluated_per_joint_not_as_a_wrench(ur5_bags, tmp
     """robot.output decides the groups: six joint torques are one "torque" group over the joints with
     per-joint RMSE [N·m] and nMSE, never force/torque halves; checked against a direct computation."""
     from semiparam_ros.eval.bags.replay import evaluate_bags
-    from semiparam_ros.report.evaluate import evaluation_text
+    from semiparam_ros.report.evaluation import evaluation_text
     from semiparam_ros.report.figures import plot_protocol
 
     config = ur5_config()

@@ -11,7 +11,7 @@ from semiparam_ros.eval.bags.replay import load_samples
 from semiparam_ros.eval.models.served import ServedModel, learn_served
 from semiparam_ros.eval.protocol.prequential import SampleArrays
 from semiparam_ros.report.real_robot import _models
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import load_model
 
 needs_kuka = pytest.mark.skipif(not (KUKA / "measurements_1").is_dir(), reason=f"{KUKA} is absent")

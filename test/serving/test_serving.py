@@ -24,7 +24,7 @@ from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import JointStateData
 from semiparam_ros.errors import CheckpointError, RejectedSampleError
 from semiparam_ros.io.bags import read_messages
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, arm_regressor, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 

@@ -24,7 +24,7 @@ from semiparam_ros import load_model
 from semiparam_ros.core.config import load_config, write_config
 from semiparam_ros.eval.bags.replay import Topics, evaluate_bags, load_samples
 from semiparam_ros.jobs.cluster import connect, run_on_cluster
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording
 from semiparam_ros.tune.fleet import learn_fleet

@@ -2,11 +2,11 @@
 
 :mod:`~semiparam_ros.eval.bags.replay` reads a bag through the node's pipeline into
 :class:`~semiparam_ros.eval.protocol.prequential.SampleArrays` and runs the protocol on a training and a
-test bag; :mod:`~semiparam_ros.eval.bags.contacts` replays a bag through the estimator with its contact
-gate and scores detection against the simulator's ground truth.
+test bag; :mod:`~semiparam_ros.eval.bags.contact_detection` replays a bag through the estimator with its
+contact gate and scores detection against the simulator's ground truth.
 """
 
 __all__ = [
-    "contacts",
+    "contact_detection",
     "replay",
 ]

@@ -17,7 +17,7 @@ from semiparam_ros.core.rigid_body.identification import (
     full_column_rms,
 )
 from semiparam_ros.core.rigid_body.urdf import RegressorSpec
-from semiparam_ros.serving.learn import learn_bags
+from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import LearnedModel
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.writer import write_recording

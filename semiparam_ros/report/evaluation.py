@@ -15,7 +15,7 @@ from typing import Any
 from semiparam_ros.atomic import atomic_write_text
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.kinds import OutputKind
-from semiparam_ros.eval.bags.contacts import contact_report, run_contacts
+from semiparam_ros.eval.bags.contact_detection import contact_report, run_contacts
 from semiparam_ros.eval.bags.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags
 from semiparam_ros.eval.protocol.horizon import horizon_figure, horizon_markdown
 from semiparam_ros.eval.protocol.options import DEFAULT_WINDOW_S, ProtocolOptions
@@ -203,7 +203,7 @@ def evaluate_contacts(bag: Path, config: EstimatorConfig, *, topics: Topics | No
         paths: Where to write (``plot``: the episodes and the gate's verdicts).
 
     Returns:
-        The text to print (:mod:`semiparam_ros.eval.bags.contacts`).
+        The text to print (:mod:`semiparam_ros.eval.bags.contact_detection`).
 
     Raises:
         ValueError: On invalid configuration or bag, or a bag without contact episodes.
