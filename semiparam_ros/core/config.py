@@ -373,6 +373,20 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "learning goes on; 0 = the live model (it changes at every sample, which makes the "
                   "commanded torque jitter: docs/feedforward.md)",
                   min=0.0, max=1e6),
+    ParameterSpec("feedforward.exclude", "string_array", [],
+                  "terms left out of every feed-forward output (~/feedforward, ~/feedforward_commands, "
+                  "~/trajectory_with_effort, ~/follow_joint_trajectory): a subset of gravity, friction, "
+                  "for a torque-controlled arm that compensates them itself (Franka FCI, KUKA FRI, UR "
+                  "direct torque: docs/controllers.md); the predictive std is unchanged"),
+    ParameterSpec("feedforward.exclude_source", "string", "model",
+                  "whose gravity feedforward.exclude leaves out: 'model' = the learned rigid body's (the "
+                  "one the prediction uses), 'urdf' = the URDF's CAD gravity, when the robot compensates "
+                  "with its own CAD model (the learned difference then stays in the command)",
+                  choices=("model", "urdf")),
+    ParameterSpec("feedforward.controller_action", "string",
+                  "joint_trajectory_controller/follow_joint_trajectory",
+                  "control_msgs/FollowJointTrajectory action that ~/follow_joint_trajectory forwards goals "
+                  "to, with every point's effort filled (relative names resolve in the node's namespace)"),
     # run time
     ParameterSpec("learning_enabled", "bool", True, "learn online (false = predict only)",
                   runtime="estimator"),

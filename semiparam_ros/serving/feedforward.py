@@ -47,7 +47,7 @@ import numpy as np
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.validation import MAX_ABS_INPUT
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
-from semiparam_ros.serving.learned_model import LearnedModel
+from semiparam_ros.serving.learned_model import EXCLUDABLE, EXCLUDE_SOURCES, LearnedModel
 
 __all__ = ["DROP_REASONS", "TRAJECTORY_DROP_REASONS", "DesiredState", "FeedForward", "FeedForwardCommand",
            "TrajectoryEffort", "TrajectoryPoint", "controller_derivatives"]
@@ -189,14 +189,22 @@ class FeedForward:
         joints: Output order (a controller's joint list); default the model's joints. Every name must
             be a joint of the model.
         max_std: σ [N·m] above which the rigid-body part is used instead; 0 disables the check.
+        exclude: Terms left out of every answer (``gravity``, ``friction``: a robot that compensates
+            them itself; ``feedforward.exclude``), from the model's own rigid body or the URDF's
+            (``exclude_source``; :meth:`LearnedModel.excluded`). σ is unchanged.
+        exclude_source: ``model`` or ``urdf`` (``feedforward.exclude_source``).
+        effort_limits: |τ| allowed per model joint [N·m] (the URDF's ``<limit effort>``; inf: none): an
+            answer beyond it is clamped and counted (``clamped``, ``clamped_points``). None: no limit.
 
     Raises:
         ConfigurationError: A model that does not output joint torques, an unknown or repeated output
-            joint, or a negative/non-finite ``max_std``.
+            joint, a negative/non-finite ``max_std``, an unknown term or source, or limits of another
+            length or not > 0.
     """
 
     def __init__(self, model: LearnedModel, *, joints: Sequence[str] | None = None,
-                 max_std: float = 0.0) -> None:
+                 max_std: float = 0.0, exclude: Sequence[str] = (), exclude_source: str = "model",
+                 effort_limits: Sequence[float] | np.ndarray | None = None) -> None:
         if model.output != OutputKind.JOINT_TORQUES:
             raise ConfigurationError("feed-forward needs robot.output: joint_torques (a wrench model "
                                      "predicts a sensor reading, not actuator torques)")
@@ -213,13 +221,26 @@ class FeedForward:
             raise ConfigurationError(f"feedforward.max_std must be a finite number >= 0 N·m, got "
                                      f"{max_std!r}")
         self.max_std = float(max_std)
+        if not set(exclude) <= set(EXCLUDABLE) or exclude_source not in EXCLUDE_SOURCES:
+            raise ConfigurationError(f"feedforward.exclude must be a subset of {list(EXCLUDABLE)} and "
+                                     f"feedforward.exclude_source one of {list(EXCLUDE_SOURCES)}, got "
+                                     f"{list(exclude)} and {exclude_source!r}")
+        self.exclude, self.exclude_source = tuple(exclude), str(exclude_source)
+        n = len(self._model_joints)
+        limits = np.full(n, np.inf) if effort_limits is None else np.asarray(effort_limits, dtype=np.float64)
+        if limits.shape != (n,) or bool(np.any(~(limits > 0.0))):
+            raise ConfigurationError(f"effort limits must be {n} values > 0 N·m (inf: none), got {limits!r}")
+        #: |τ| allowed per joint of :attr:`joints` [N·m].
+        self.effort_limits = limits[self._out_index]
+        self._limits = limits  # in the model's joint order
         self._index_cache: dict[tuple[str, ...], np.ndarray] = {}
         self.counts: dict[str, int] = {"published": 0, "fallback.not_ready": 0, "fallback.std": 0,
-                                       "missing_velocities": 0, "missing_accelerations": 0,
+                                       "missing_velocities": 0, "missing_accelerations": 0, "clamped": 0,
                                        **{f"drops.{r}": 0 for r in DROP_REASONS}}
         self.last_error: str | None = None
         #: Trajectories answered, points that fell back to the rigid-body part, drops by reason.
         self.trajectory_counts: dict[str, int] = {"published": 0, "points": 0, "fallback_points": 0,
+                                                  "clamped_points": 0,
                                                   "interpolated_velocities": 0,
                                                   "interpolated_accelerations": 0,
                                                   **{f"drops.{r}": 0 for r in TRAJECTORY_DROP_REASONS}}
@@ -315,7 +336,8 @@ class FeedForward:
         stamp, p, v, a = point
         q, dq, ddq = p[index], v[index], a[index]
         try:
-            parts = self.model.predict_parts(q, dq, ddq)
+            parts = self.model.predict_parts(q, dq, ddq, exclude=self.exclude,
+                                             exclude_source=self.exclude_source)
         except RejectedSampleError as err:  # e.g. a regressor overflow at an absurd state
             self._drop("non_finite", f"the model refused the state: {err}")
             return None
@@ -328,6 +350,9 @@ class FeedForward:
         if not np.isfinite(tau).all():
             self._drop("non_finite", "the model's prediction is not finite")
             return None
+        if bool(np.any(np.abs(tau) > self._limits)):
+            tau = np.clip(tau, -self._limits, self._limits)
+            self.counts["clamped"] += 1
         if reason is not None:
             self.counts[f"fallback.{reason}"] += 1
         self.counts["published"] += 1
@@ -401,7 +426,8 @@ class FeedForward:
         V, A = controller_derivatives(1e-9 * times.astype(np.float64), P, V if V.shape[1] else None,
                                       A if A.shape[1] and V.shape[1] else None)
         try:
-            parts = self.model.predict_parts(P[:, index], V[:, index], A[:, index])
+            parts = self.model.predict_parts(P[:, index], V[:, index], A[:, index], exclude=self.exclude,
+                                             exclude_source=self.exclude_source)
         except RejectedSampleError as err:
             self._trajectory_drop("non_finite", f"the model refused a point: {err}")
             return None
@@ -416,6 +442,10 @@ class FeedForward:
         if not np.isfinite(tau).all():
             self._trajectory_drop("non_finite", "the model's prediction is not finite")
             return None
+        beyond = np.any(np.abs(tau) > self._limits, axis=1)
+        if beyond.any():
+            tau = np.clip(tau, -self._limits, self._limits)
+            counts["clamped_points"] += int(beyond.sum())
         effort = np.empty_like(tau)
         effort[:, index] = tau  # back to the trajectory's joint order
         counts["published"] += 1

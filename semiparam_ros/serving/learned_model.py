@@ -39,6 +39,7 @@ Example:
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -59,7 +60,12 @@ from semiparam_ros.core.rigid_body.payload import PayloadEstimate
 from semiparam_ros.core.validation import check_finite_array
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
-__all__ = ["LearnedModel", "ModelPrediction", "load_model"]
+__all__ = ["EXCLUDABLE", "EXCLUDE_SOURCES", "LearnedModel", "ModelPrediction", "load_model"]
+
+#: Terms a feed-forward may leave out for a robot that compensates them itself.
+EXCLUDABLE = ("gravity", "friction")
+#: Whose gravity is left out: the model's own, or the URDF's CAD model (the robot's compensation).
+EXCLUDE_SOURCES = ("model", "urdf")
 
 
 @dataclass(frozen=True)
@@ -117,6 +123,8 @@ class LearnedModel:
                  if name.startswith("offset_") or name.rsplit(".", 1)[-1] in regressor.extra_kinds]
         self._inertial = np.ones(len(base_names), dtype=bool)
         self._inertial[extra] = False
+        friction = {f"{j}.{kind}" for j in regressor.joint_names for kind in ("viscous", "coulomb")}
+        self._friction = np.array([name in friction for name in base_names], dtype=bool)
         self._cad_full = regressor.urdf_parameters()
 
     def snapshot(self) -> LearnedModel:
@@ -307,20 +315,25 @@ class LearnedModel:
         raise RejectedSampleError(f"q, dq, ddq must have shape ({n},) or (N, {n}) for joints "
                                   f"{list(self.joints)}, got {shape}")
 
-    def _model_rows(self, X: np.ndarray, consistent: bool | None = None) -> Prediction:
-        """Return the model (no fast correction) at each row of X with its relative variance, all (N, t)."""
-        model = self._model()
+    def _served_rigid(self, model: Model, consistent: bool | None) -> np.ndarray | None:
+        """Return the rigid body (learner units) a prediction is asked to use, or None for the model's own."""
         traits = traits_of(model)
-        rigid = None
         if consistent is None:  # the configuration's choice, where it can be had without solving here
             consistent = (bool(self.config["parametric.consistent"])
                           and (self._attached is not None or self._solve) and traits.takes_rigid)
         if consistent:
             if not traits.takes_rigid:
                 raise ValueError("consistent=True needs the consistent SP (the default) or the P learner")
-            rigid = self.estimator.column_scale * self.consistent().base
-        elif traits.kind == "P" and cast(ParametricModel, model).rigid_override is not None:
-            rigid = model.parameters  # asked for the learned π̂, not the projection the live P predicts with
+            return self.estimator.column_scale * self.consistent().base
+        if traits.kind == "P" and cast(ParametricModel, model).rigid_override is not None:
+            return model.parameters  # asked for the learned π̂, not the projection the live P predicts with
+        return None
+
+    def _model_rows(self, X: np.ndarray, consistent: bool | None = None) -> Prediction:
+        """Return the model (no fast correction) at each row of X with its relative variance, all (N, t)."""
+        model = self._model()
+        traits = traits_of(model)
+        rigid = self._served_rigid(model, consistent)
         if traits.combination == "consistent":
             model = cast(ConsistentSemiparametricModel, model)
             if X.shape[0] == 1:
@@ -334,14 +347,34 @@ class LearnedModel:
         return Prediction(np.array([p.parametric for p in preds]), np.array([p.residual for p in preds]),
                           np.array([p.total for p in preds]), np.array([p.variance for p in preds]))
 
+    def rigid_parameters(self, *, consistent: bool | None = None) -> np.ndarray:
+        """Return the base parameters (physical units) of the rigid-body part :meth:`predict` uses.
+
+        The physically consistent projection where the prediction uses it (``consistent``, as in
+        :meth:`predict_parts`), the consistent SP's reference θ_ref, else the learned π̂: so that
+        :meth:`gravity` and the excluded terms of :meth:`predict` are those of the prediction.
+
+        Raises:
+            ValueError: For a model without a rigid-body part (``NP``).
+        """
+        model = self._model()
+        traits = traits_of(model)
+        if traits.kind == "NP":
+            raise ValueError("this needs a rigid-body part: the model is nonparametric only")
+        rigid = self._served_rigid(model, consistent)
+        if rigid is None:
+            rigid = (cast(ConsistentSemiparametricModel, model).reference_parameters
+                     if traits.combination == "consistent" else model.parameters)
+        return np.asarray(rigid, dtype=np.float64) / self.estimator.column_scale
+
     def _std(self, variance: np.ndarray) -> np.ndarray:
         s2 = self._noise_s2()
         if s2 is None:
             return np.full(variance.shape, np.inf)
         return np.sqrt(s2 * (1.0 + np.fmax(variance, 0.0)))
 
-    def predict_parts(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None
-                      ) -> ModelPrediction:
+    def predict_parts(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None,
+                      exclude: Sequence[str] = (), exclude_source: str = "model") -> ModelPrediction:
         """Return the model and its parts at one state or N states.
 
         Args:
@@ -353,6 +386,9 @@ class LearnedModel:
                 (real KUKA, frozen on a faster motion: 2.7× lower error; docs/identification.md). None:
                 ``parametric.consistent`` of the configuration (on by default; a model that may not
                 solve here — the node's served copy — uses it once its worker's solution is attached).
+            exclude: Terms left out of the total and the rigid-body part (:meth:`excluded`): ``gravity``
+                and/or ``friction``, for a robot that compensates them itself. σ is unchanged.
+            exclude_source: Whose gravity is left out: ``model`` or ``urdf`` (:meth:`excluded`).
 
         Returns:
             Total, rigid-body part, residual and σ, each (t,) or (N, t).
@@ -365,12 +401,17 @@ class LearnedModel:
         assert pred.variance is not None  # every path returns it
         std = self._std(np.asarray(pred.variance))
         total, rigid, residual = pred.total, pred.parametric, pred.residual
+        if exclude:
+            n = self._n
+            left_out = self.excluded(X[:, :n], X[:, n:2 * n], exclude, source=exclude_source,
+                                     consistent=consistent)
+            total, rigid = total - left_out, rigid - left_out
         if single:
             return ModelPrediction(total[0].copy(), rigid[0].copy(), residual[0].copy(), std[0].copy())
         return ModelPrediction(total, rigid, residual, std)
 
-    def predict(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
+    def predict(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None,
+                exclude: Sequence[str] = (), exclude_source: str = "model") -> tuple[np.ndarray, np.ndarray]:
         """``(τ, σ)``: the model at one state (n,) → (t,), or N states (N, n) → (N, t).
 
         Many states in one call are far cheaper per state than single calls (one matrix product and one
@@ -381,24 +422,29 @@ class LearnedModel:
             dq: Velocities [rad/s], same shape.
             ddq: Accelerations [rad/s²], same shape.
             consistent: Use the physically consistent rigid-body parameters (see :meth:`predict_parts`).
+            exclude: Terms left out: ``gravity`` and/or ``friction`` (see :meth:`predict_parts`).
+            exclude_source: Whose gravity is left out: ``model`` or ``urdf``.
 
         Returns:
-            The prediction [N·m] and its standard deviation [N·m].
+            The prediction [N·m] and its standard deviation [N·m] (σ is the model's, whatever is left out).
 
         Raises:
             RejectedSampleError: Wrong shapes, NaN/inf or absurdly large values.
         """
-        parts = self.predict_parts(q, dq, ddq, consistent=consistent)
+        parts = self.predict_parts(q, dq, ddq, consistent=consistent, exclude=exclude,
+                                   exclude_source=exclude_source)
         return parts.total, parts.std
 
-    def gravity(self, q: Any) -> np.ndarray:
-        """Gravity torques (or the gravity wrench at the sensor) of the identified inertial parameters.
+    def gravity(self, q: Any, *, consistent: bool | None = None) -> np.ndarray:
+        """Gravity torques (or the gravity wrench at the sensor) of the rigid body :meth:`predict` uses.
 
-        ``Φ(q, 0, 0) π̂`` with the friction, offset and armature columns left out: what holds the arm
-        still at q (no residual, no offsets).
+        ``Φ(q, 0, 0) π`` with the friction, offset and armature columns left out — what holds the arm still
+        at q (no residual, no offsets) — with π the parameters of the prediction's rigid-body part
+        (:meth:`rigid_parameters`: the consistent projection by default).
 
         Args:
             q: Positions (n,) or (N, n) [rad].
+            consistent: As in :meth:`predict_parts`.
 
         Returns:
             (t,) or (N, t) [N·m].
@@ -407,13 +453,61 @@ class LearnedModel:
             RejectedSampleError: Wrong shape or non-finite q.
             ValueError: For a model without a rigid-body part (``NP``).
         """
-        params = self.parameters
-        if params is None:
-            raise ValueError("gravity() needs a rigid-body part: this model is nonparametric only")
+        params = self.rigid_parameters(consistent=consistent)
         qa = check_finite_array("q", q)
         zeros = np.zeros_like(qa)
         Phi = self.estimator.regressor.base_regressor(qa, zeros, zeros)
         return np.asarray(Phi[..., self._inertial] @ params[self._inertial])
+
+    def friction(self, dq: Any, *, consistent: bool | None = None) -> np.ndarray:
+        """Joint friction torques of the rigid body :meth:`predict` uses: viscous and Coulomb, at q̇ [N·m].
+
+        Zero for a model without friction columns (``parametric.friction: false``, a wrench).
+
+        Args:
+            dq: Velocities (n,) or (N, n) [rad/s].
+            consistent: As in :meth:`predict_parts`.
+
+        Raises:
+            RejectedSampleError: Wrong shape or non-finite q̇.
+            ValueError: For a model without a rigid-body part (``NP``).
+        """
+        params = self.rigid_parameters(consistent=consistent)
+        dqa = check_finite_array("dq", dq)
+        if not self._friction.any():
+            return np.zeros((*dqa.shape[:-1], len(self.output_names)))
+        zeros = np.zeros_like(dqa)
+        Phi = self.estimator.regressor.base_regressor(zeros, dqa, zeros)
+        return np.asarray(Phi[..., self._friction] @ params[self._friction])
+
+    def excluded(self, q: Any, dq: Any, exclude: Sequence[str], *, source: str = "model",
+                 consistent: bool | None = None) -> np.ndarray:
+        """Return the terms ``predict(..., exclude=...)`` leaves out, summed [N·m].
+
+        Args:
+            q: Positions (n,) or (N, n) [rad].
+            dq: Velocities, same shape [rad/s].
+            exclude: A subset of :data:`EXCLUDABLE` (``gravity``, ``friction``).
+            source: ``model``: the model's own terms (the rigid body of the prediction); ``urdf``: the
+                URDF's CAD gravity (a robot that compensates gravity with its own CAD model; the learned
+                difference then stays in the command). Friction is always the model's.
+            consistent: As in :meth:`predict_parts`.
+
+        Raises:
+            ValueError: An unknown term or source, or a model without a rigid-body part.
+        """
+        unknown = sorted(set(exclude) - set(EXCLUDABLE))
+        if unknown or source not in EXCLUDE_SOURCES:
+            raise ValueError(f"exclude must be a subset of {EXCLUDABLE} and source one of {EXCLUDE_SOURCES}; "
+                             f"got {list(exclude)}, {source!r}")
+        qa = check_finite_array("q", q)
+        out = np.zeros((*qa.shape[:-1], len(self.output_names)))
+        if "gravity" in exclude:
+            out += self.cad(qa, np.zeros_like(qa), np.zeros_like(qa)) if source == "urdf" else \
+                self.gravity(qa, consistent=consistent)
+        if "friction" in exclude:
+            out += self.friction(dq, consistent=consistent)
+        return out
 
     def cad(self, q: Any, dq: Any, ddq: Any) -> np.ndarray:
         """Return the CAD model: RNEA with the URDF's inertial parameters, no friction or offsets [N·m].

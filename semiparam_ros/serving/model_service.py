@@ -49,6 +49,13 @@ _EXCITATION_PERIOD_S = 10.0  # the excitation report is recomputed at most this 
 _MAX_LATENCIES = 100_000  # feed-forward ages kept per diagnostics period at most
 
 
+def _limits(urdf_limits: np.ndarray) -> np.ndarray:
+    """Return the URDF's ``<limit effort>`` per joint [N·m], ``inf`` where it gives none (read as 0)."""
+    limits = np.asarray(urdf_limits, dtype=np.float64).copy()
+    limits[~(np.isfinite(limits) & (limits > 0.0))] = np.inf
+    return limits
+
+
 class ModelService:
     """The learned model at any state, for controllers and identification.
 
@@ -70,7 +77,10 @@ class ModelService:
         self.projection: ProjectionWorker | None = None
         if config.output_kind == OutputKind.JOINT_TORQUES:
             self.feedforward = FeedForward(self.serving, joints=config["feedforward.joints"] or None,
-                                           max_std=config["feedforward.max_std"])
+                                           max_std=config["feedforward.max_std"],
+                                           exclude=config["feedforward.exclude"],
+                                           exclude_source=config["feedforward.exclude_source"],
+                                           effort_limits=_limits(est.regressor.effort_limits()))
             if config["parametric.consistent"]:
                 self.projection = ProjectionWorker(config.to_flat(), est.regressor.urdf_xml)
         #: Ages of the answered desired states this diagnostics period [ms] (stamp → answer).

@@ -73,8 +73,10 @@ def test_fresh_model_is_the_cad_model_rnea_and_gravity(tmp_path):
         np.testing.assert_allclose(total[i], rnea, rtol=0, atol=1e-9 * scale)
         np.testing.assert_allclose(model.cad(q[i], dq[i], ddq[i]), rnea, rtol=0, atol=1e-9 * scale)
         gravity = pin.computeGeneralizedGravity(pmodel, data, q[i])
-        np.testing.assert_allclose(model.gravity(q[i]), gravity, rtol=0,
+        np.testing.assert_allclose(model.gravity(q[i], consistent=False), gravity, rtol=0,
                                    atol=1e-9 * (1 + np.abs(gravity).max()))
+        # the default is the gravity of the rigid body predict uses: the projection of the CAD values
+        assert np.abs(model.gravity(q[i]) - gravity).max() <= 1e-3 * (1 + np.abs(gravity).max())
     np.testing.assert_array_equal(parts.residual, 0.0)
     assert np.isinf(std).all()  # no noise estimate yet: honest +inf
     assert not model.ready and model.n_samples_learned == 0
@@ -258,3 +260,36 @@ def test_excited_marks_the_states_the_training_data_cover(panda, tmp_path):
     OnlineEstimator(panda["config"]).save(tmp_path / "fresh.npz")
     fresh = load_model(tmp_path / "fresh.npz")
     assert not fresh.excited(rec.q[idx], rec.dq[idx], rec.ddq[idx]).any()
+
+
+def test_left_out_terms_are_those_of_the_prediction(panda):
+    """``exclude=("gravity",)`` subtracts the gravity of the very rigid body the prediction uses (the
+    consistent projection by default): the rigid-body part at rest minus ``gravity(q)`` is the same at
+    every posture (the joints' constant offsets), and friction is the closed form of the identified
+    viscous and Coulomb parameters. σ is unchanged by leaving terms out."""
+    model = load_model(panda["ckpt"])
+    rng = np.random.default_rng(3)
+    q, dq, ddq = _states(rng, 7, 30)
+    zeros = np.zeros_like(q)
+    rest = model.predict_parts(q, zeros, zeros).rigid_body
+    offsets = rest - model.gravity(q)
+    np.testing.assert_allclose(offsets, np.broadcast_to(offsets[0], offsets.shape), rtol=0,
+                               atol=1e-9 * (1 + np.abs(rest).max()))
+    total, std = model.predict(q, dq, ddq)
+    for exclude, minus in ((("gravity",), model.gravity(q)), (("friction",), model.friction(dq)),
+                           (("gravity", "friction"), model.gravity(q) + model.friction(dq))):
+        left, left_std = model.predict(q, dq, ddq, exclude=exclude)
+        np.testing.assert_allclose(left, total - minus, rtol=0, atol=1e-9 * (1 + np.abs(total).max()))
+        np.testing.assert_array_equal(left_std, std)
+    names = model.parameter_names
+    pi = model.rigid_parameters()
+    cv = model.config["parametric.coulomb_velocity"]
+    viscous = np.array([pi[names.index(f"{j}.viscous")] for j in model.joints])
+    coulomb = np.array([pi[names.index(f"{j}.coulomb")] for j in model.joints])
+    np.testing.assert_allclose(model.friction(dq), viscous * dq + coulomb * np.tanh(dq / cv), rtol=1e-12,
+                               atol=1e-12)
+    cad_left, _ = model.predict(q, dq, ddq, exclude=("gravity",), exclude_source="urdf")
+    np.testing.assert_allclose(cad_left, total - model.cad(q, zeros, zeros), rtol=0,
+                               atol=1e-9 * (1 + np.abs(total).max()))
+    with pytest.raises(ValueError):
+        model.predict(q, dq, ddq, exclude=("inertia",))

@@ -861,6 +861,11 @@ class ConsistentSemiparametricModel(TwoStageModel):
         """The rigid-body parameters set by :meth:`use_rigid` (learner units), or None (the learned ones)."""
         return None if self._rigid is None else self._rigid.copy()
 
+    @property
+    def reference_parameters(self) -> np.ndarray:
+        """θ_ref (learner units): the rigid body the model's own predictions use (``rigid=None``)."""
+        return self._reference.copy()
+
     def predict_model_many(self, X: Any, rigid: np.ndarray | None = None) -> Prediction:
         """:meth:`predict_model` of N inputs at once (arrays of shape (N, t); ``variance`` included).
 
