@@ -398,8 +398,14 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("queue_size", "integer", 1000,
                   "bounded input queue of the node; the oldest message is dropped and counted beyond it",
                   min=1, max=10**6),
+    ParameterSpec("checkpoint.enabled", "bool", True,
+                  "keep what is learned: write checkpoints (periodically, on ~/save and at shutdown) and "
+                  "warm start from them; false = everything learned is lost when the node stops"),
     ParameterSpec("checkpoint.path", "string", "",
-                  "checkpoint file (.npz); empty disables checkpoints; ~ is expanded"),
+                  "checkpoint file (.npz; ~ is expanded); empty = one file per node under $ROS_HOME "
+                  "(~/.ros when unset): semiparam_ros/<namespace>/<node>.npz, loaded only when it was "
+                  "learned on the same URDF, joints, output and learner structure (otherwise moved aside, "
+                  "never overwritten); a path given here is refused instead when it does not fit"),
     ParameterSpec("checkpoint.period", "double", 60.0,
                   "period of automatic checkpoints [s]; 0 disables them", min=0.0, max=1e7,
                   runtime="checkpoints"),

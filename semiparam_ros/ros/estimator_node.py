@@ -115,7 +115,7 @@ class EstimatorNode(Node):
         cfg = self.config
         output, self._joints = cfg.output_kind, tuple(cfg["robot.joints"])
         self._frame_id = cfg["robot.frame_id"]
-        self._ckpt_path = checkpoint_path(cfg)
+        self._ckpt_path, default_ckpt = checkpoint_path(cfg, self.get_fully_qualified_name())
         spec = str(cfg["robot.urdf"])
         try:
             if urdf_xml is None and spec.startswith(TOPIC_SCHEME):
@@ -123,7 +123,8 @@ class EstimatorNode(Node):
                                                 float(cfg["robot.description_timeout"]))
         except DescriptionTimeoutError as err:
             raise StartupError(str(err)) from err
-        parts = assemble(cfg, urdf_xml, source=f"published on {spec}", checkpoint=self._ckpt_path)
+        parts = assemble(cfg, urdf_xml, source=f"published on {spec}", checkpoint=self._ckpt_path,
+                         default_checkpoint=default_ckpt)
         for note in parts.notes:
             self.get_logger().info(note)
         self.loop, self._service = parts.loop, parts.model

@@ -8,7 +8,7 @@ Everything that can go wrong here is a start-up error that names its fix.
 >>> cfg = EstimatorConfig.defaults().with_overrides({"nonparametric.n_features": 8})
 >>> parts = assemble(cfg, checkpoint=None)
 >>> parts.notes
-['cold start: checkpoint.path is empty (no checkpoints)']
+['cold start: checkpoint.enabled is false (nothing learned is kept)']
 >>> parts.loop.estimator.learning_enabled, parts.model.feedforward is None  # an F/T sensor: no feed-forward
 (True, True)
 """
@@ -22,7 +22,7 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import build_regressor
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.errors import CheckpointError, ConfigurationError, StartupError
-from semiparam_ros.serving.checkpoint_writer import warm_start
+from semiparam_ros.serving.checkpoint_writer import default_checkpoint_path, warm_start
 from semiparam_ros.serving.learning_loop import LearningLoop, warm_up_kernels
 from semiparam_ros.serving.model_service import ModelService
 
@@ -44,14 +44,25 @@ class Assembly:
     notes: list[str]
 
 
-def checkpoint_path(config: EstimatorConfig) -> Path | None:
-    """Return the checkpoint file ``checkpoint.path`` names (``~`` expanded), or None when it is empty."""
+def checkpoint_path(config: EstimatorConfig, node_name: str) -> tuple[Path | None, bool]:
+    """Return the node's checkpoint file and whether it is the default one.
+
+    ``checkpoint.path`` (``~`` expanded) when given; else the default file under ``$ROS_HOME``
+    (:func:`~semiparam_ros.serving.checkpoint_writer.default_checkpoint_path`); None when
+    ``checkpoint.enabled`` is false.
+
+    Args:
+        config: The configuration.
+        node_name: The node's fully qualified name.
+    """
+    if not config["checkpoint.enabled"]:
+        return None, False
     text = str(config["checkpoint.path"])
-    return Path(text).expanduser() if text else None
+    return (Path(text).expanduser(), False) if text else (default_checkpoint_path(node_name), True)
 
 
 def assemble(config: EstimatorConfig, urdf_xml: str | None = None, *, source: str = "the URDF given",
-             checkpoint: Path | None) -> Assembly:
+             checkpoint: Path | None, default_checkpoint: bool = False) -> Assembly:
     """Build the estimator of ``config``, warm start it and put the loop and the model service around it.
 
     The compiled kernels are run once on a throw-away copy (:func:`warm_up_kernels`), so the first real
@@ -62,6 +73,8 @@ def assemble(config: EstimatorConfig, urdf_xml: str | None = None, *, source: st
         urdf_xml: The URDF text when it did not come from ``robot.urdf`` (a topic); None reads that.
         source: Where ``urdf_xml`` came from (for error messages).
         checkpoint: The checkpoint to warm start from (``checkpoint.load_on_start``), or None.
+        default_checkpoint: ``checkpoint`` is the default file: one that does not fit is moved aside
+            (:func:`~semiparam_ros.serving.checkpoint_writer.warm_start`).
 
     Returns:
         The assembled parts.
@@ -76,7 +89,8 @@ def assemble(config: EstimatorConfig, urdf_xml: str | None = None, *, source: st
         raise StartupError(f"cannot build the estimator: {err}") from err
     warm_up_kernels(config, estimator)
     try:
-        notes = warm_start(estimator, checkpoint, load=bool(config["checkpoint.load_on_start"]))
+        notes = warm_start(estimator, checkpoint, load=bool(config["checkpoint.load_on_start"]),
+                           default=default_checkpoint)
     except CheckpointError as err:
         raise StartupError(str(err)) from err
     estimator.learning_enabled = bool(config["learning_enabled"])

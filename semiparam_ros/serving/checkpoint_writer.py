@@ -18,6 +18,7 @@ True
 from __future__ import annotations
 
 import concurrent.futures
+import os
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -27,14 +28,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from semiparam_ros.atomic import remove_stale_temporaries
-from semiparam_ros.core.checkpoint import atomic_save_npz
+from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
 from semiparam_ros.errors import CheckpointError
 
 if TYPE_CHECKING:
     from semiparam_ros.core.config import EstimatorConfig
     from semiparam_ros.core.estimator.online import OnlineEstimator
 
-__all__ = ["CheckpointWriter", "Snapshot", "warm_start"]
+__all__ = ["CheckpointWriter", "Snapshot", "default_checkpoint_path", "move_aside", "warm_start"]
 
 #: ``() -> (state, version, samples learned)``, called in the writer's thread; it takes the learner's lock.
 Snapshot = Callable[[], tuple[Mapping[str, np.ndarray], int, int]]
@@ -103,7 +104,7 @@ class CheckpointWriter:
     def save(self, timeout_s: float) -> tuple[bool, str]:
         """Write now and wait at most ``timeout_s`` [s] for the file; returns ``(ok, message)``."""
         if self.path is None:
-            return False, "checkpoint.path is empty: checkpoints are disabled"
+            return False, "checkpoint.enabled is false: no checkpoint is kept"
         future: concurrent.futures.Future[tuple[bool, str]] = concurrent.futures.Future()
         with self._lock:
             self._requests.append(future)
@@ -148,7 +149,7 @@ class CheckpointWriter:
             if periodic or period <= 0:
                 last_periodic = now
             if self.path is None:
-                result = (False, "checkpoint.path is empty: checkpoints are disabled")
+                result = (False, "checkpoint.enabled is false: no checkpoint is kept")
             elif requests or ((stopping or periodic or reset_pending) and self._changed()):
                 result = self._write(self.path)
             else:
@@ -173,23 +174,27 @@ class CheckpointWriter:
         return result
 
 
-def warm_start(estimator: OnlineEstimator, path: Path | None, *, load: bool) -> list[str]:
+def warm_start(estimator: OnlineEstimator, path: Path | None, *, load: bool, default: bool = False
+               ) -> list[str]:
     """Remove stale temporaries of the checkpoint at ``path``, then load it into ``estimator`` if ``load``.
 
     Args:
         estimator: The estimator to warm start (unchanged on a cold start).
-        path: The checkpoint (``checkpoint.path``); None: no checkpoints.
+        path: The checkpoint; None: no checkpoints (``checkpoint.enabled`` false).
         load: ``checkpoint.load_on_start``.
+        default: ``path`` is the default file under ``$ROS_HOME`` (``checkpoint.path`` empty): a file that
+            was not learned on this very URDF text and structure, or that cannot be loaded, is moved aside
+            (never deleted or overwritten) and the start is cold, instead of refused.
 
     Returns:
         What happened, one line each (the removed temporaries, then why the start is cold or warm).
 
     Raises:
-        CheckpointError: The checkpoint exists but cannot be loaded (corrupt, another structure or robot,
-            absurd values); the message says how to proceed.
+        CheckpointError: A configured checkpoint exists but cannot be loaded (corrupt, another structure
+            or robot, absurd values); the message says how to proceed.
     """
     if path is None:
-        return ["cold start: checkpoint.path is empty (no checkpoints)"]
+        return ["cold start: checkpoint.enabled is false (nothing learned is kept)"]
     notes = [f"removed {stale}, left by an interrupted checkpoint write"
              for stale in remove_stale_temporaries(path)]
     if not load:
@@ -197,10 +202,56 @@ def warm_start(estimator: OnlineEstimator, path: Path | None, *, load: bool) -> 
     if not path.exists():
         return [*notes, f"cold start: no checkpoint at {path} yet (it will be written there)"]
     try:
-        estimator.load(path)
+        state = load_npz(path)
+        if default:
+            _check_same_robot(state, estimator, path)
+        estimator.load_state(state, path)
     except CheckpointError as err:
+        if default:
+            aside = move_aside(path)
+            return [*notes, f"cold start: the checkpoint at {path} does not fit this node ({err}); moved "
+                            f"aside to {aside}"]
         raise CheckpointError(f"cannot warm start from checkpoint {path}: {err}\nDelete or move it, point "
                               "checkpoint.path elsewhere, or set checkpoint.load_on_start:=false to "
                               "overwrite it.") from err
     return [*notes, *estimator.migration_notes,
             f"warm start from {path} ({estimator.n_samples_learned} samples learned)"]
+
+
+def _check_same_robot(state: dict[str, np.ndarray], estimator: OnlineEstimator, path: Path) -> None:
+    """Refuse a checkpoint of another URDF text (the fingerprint covers joints, output and structure)."""
+    urdf = state.get("meta.urdf")
+    if urdf is None or str(np.asarray(urdf)) != estimator.regressor.urdf_xml:
+        raise CheckpointError(f"{path}: learned on another URDF")
+
+
+def default_checkpoint_path(node_name: str) -> Path:
+    """Return the default checkpoint of a node: ``$ROS_HOME/semiparam_ros/<namespace>/<node>.npz``.
+
+    ``ROS_HOME`` is ``~/.ros`` when unset (as ROS 2 itself).
+
+    Args:
+        node_name: The node's fully qualified name (``/arm/estimator``).
+
+    >>> import os
+    >>> os.environ["ROS_HOME"] = "/tmp/home"
+    >>> str(default_checkpoint_path("/arm/estimator"))
+    '/tmp/home/semiparam_ros/arm/estimator.npz'
+    """
+    home = Path(os.environ.get("ROS_HOME") or Path.home() / ".ros").expanduser()
+    parts = [p for p in node_name.split("/") if p] or ["estimator"]
+    return home.joinpath("semiparam_ros", *parts[:-1], f"{parts[-1]}.npz")
+
+
+def move_aside(path: Path) -> Path:
+    """Rename a checkpoint to ``<stem>.aside-<UTC time>[-k].npz`` beside it (never over another file)."""
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    for k in range(1000):
+        aside = path.with_name(f"{path.stem}.aside-{stamp}{f'-{k}' if k else ''}{path.suffix}")
+        if not aside.exists():
+            try:
+                path.rename(aside)
+            except OSError as err:
+                raise CheckpointError(f"{path}: cannot move it aside: {err}") from err
+            return aside
+    raise CheckpointError(f"{path}: cannot move it aside (1000 files beside it already)")

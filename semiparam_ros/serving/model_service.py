@@ -292,7 +292,7 @@ class ModelService:
         if estimate is None:
             return False, "no consistent estimate yet (the worker solves every parametric.consistent_period)"
         if path is None:
-            return False, "checkpoint.path is empty: the URDF is written next to the checkpoint"
+            return False, "checkpoint.enabled is false: the URDF is written next to the checkpoint"
         try:
             atomic_write_text(path, export_urdf(self.loop.estimator.regressor, estimate))
         except OSError as err:

@@ -84,6 +84,7 @@ def make_ros_env(tmp_path: Path, monkeypatch: Any) -> RosEnv:
         "ROS_DOMAIN_ID": str(domain),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
         "ROS_LOG_DIR": str(log_dir),
+        "ROS_HOME": str(tmp_path / "ros_home"),  # a node's default checkpoint lives there
         "RCUTILS_LOGGING_BUFFERED_STREAM": "0",
         "PYTHONUNBUFFERED": "1",
     }
@@ -104,7 +105,7 @@ def in_process_node(tmp_path: Path, monkeypatch: Any, **overrides: Any) -> Itera
     env = make_ros_env(tmp_path, monkeypatch)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=env.domain_id)
-    values = {"checkpoint.path": "", **overrides}
+    values = {"checkpoint.enabled": False, **overrides}
     node = EstimatorNode(context=context, cli_args=["--ros-args", "--params-file", str(CONFIG)],
                          parameter_overrides=[Parameter(name, value=value) for name, value in values.items()])
     try:

@@ -171,3 +171,28 @@ def test_save_answers_under_either_executor(ros_env, tmp_path, tmp_path_factory,
     finally:
         client.close()
         node.stop()
+
+
+def test_learning_is_kept_by_default_under_ros_home(ros_env, tmp_path, tmp_path_factory):
+    """No checkpoint.path: ~/save succeeds, the file lies under $ROS_HOME (one per fully qualified node name)
+    after SIGINT, and the next start warm-starts from it."""
+    bag = source_bag(tmp_path_factory.mktemp("bags"))
+    messages = load_raw(bag, TOPICS, limit=200)
+    offline = offline_replay(bag, 200, {"nonparametric.standardizer_warmup": 50})
+    home = tmp_path / "ros_home"
+    ckpt = home / "semiparam_ros" / "estimator.npz"
+    params = [*RELIABLE_INPUTS, "checkpoint.period:=0.0", "nonparametric.standardizer_warmup:=50"]
+    node = NodeProcess(ros_env, params, tag="default")
+    client = TestClient(ros_env)
+    try:
+        learn_and_save(client, node, messages, len(offline.order), ckpt)
+    finally:
+        client.close()
+    assert node.stop() == 0, node.output()
+    assert checkpoint_samples(ckpt) == len(offline.order)
+    again = NodeProcess(ros_env, params, tag="again")
+    try:
+        assert wait_until(lambda: "warm start from" in again.output(), 60.0), again.output()
+        assert str(ckpt) in again.output()
+    finally:
+        again.stop()

@@ -165,7 +165,7 @@ def test_disabled_checkpoints_answer_at_once():
     _, parts = _writer_parts(loop)
     writer = CheckpointWriter(None, period_s=1.0, **parts)
     writer.start()
-    assert writer.save(timeout_s=1.0) == (False, "checkpoint.path is empty: checkpoints are disabled")
+    assert writer.save(timeout_s=1.0) == (False, "checkpoint.enabled is false: no checkpoint is kept")
     assert writer.stop(save=True)
 
 
@@ -191,7 +191,8 @@ def test_warm_start_loads_says_why_cold_and_refuses_a_broken_file(tmp_path):
         loop.step(msg)
     path = tmp_path / "model.npz"
     est = OnlineEstimator(loop.estimator.config)
-    assert warm_start(est, None, load=True) == ["cold start: checkpoint.path is empty (no checkpoints)"]
+    assert warm_start(est, None, load=True) == [
+        "cold start: checkpoint.enabled is false (nothing learned is kept)"]
     assert "no checkpoint at" in warm_start(est, path, load=True)[-1]
     writer = CheckpointWriter(path, period_s=0.0, snapshot=loop.snapshot)
     writer.start()
@@ -263,3 +264,38 @@ def test_the_live_estimator_predicts_with_each_new_consistent_solution():
         np.testing.assert_allclose(pred.parametric, Phi @ rigid, rtol=1e-10, atol=1e-10)
     finally:
         service.close()
+
+
+def test_a_default_checkpoint_of_another_robot_is_moved_aside_and_a_configured_one_refused(tmp_path):
+    """At the default path a checkpoint that does not fit (another URDF text, another structure, a corrupt
+    file) is never loaded nor overwritten: it is moved aside and the start is cold, saying so. The same
+    file given as checkpoint.path is refused with the way out."""
+    from semiparam_ros.core.config import EstimatorConfig
+    from semiparam_ros.errors import CheckpointError
+    from semiparam_ros.serving.checkpoint_writer import default_checkpoint_path
+
+    cfg = EstimatorConfig.defaults().with_overrides({"nonparametric.n_features": 8})
+    other = OnlineEstimator(cfg.with_overrides({"nonparametric.n_features": 16}))  # another structure
+    path = default_checkpoint_path("/arm/estimator")
+    assert path.parent.parent.name == "semiparam_ros"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    other.save(path)
+    written = path.read_bytes()
+    with pytest.raises(CheckpointError, match="load_on_start"):
+        warm_start(OnlineEstimator(cfg), path, load=True)  # configured: refused, file untouched
+    assert path.read_bytes() == written
+    notes = warm_start(OnlineEstimator(cfg), path, load=True, default=True)
+    assert "moved aside" in notes[-1] and not path.exists()
+    aside = [p for p in path.parent.iterdir() if ".aside-" in p.name]
+    assert len(aside) == 1 and aside[0].read_bytes() == written
+    mine = OnlineEstimator(cfg)
+    mine.save(path)
+    assert "warm start from" in warm_start(OnlineEstimator(cfg), path, load=True, default=True)[-1]
+    # the same structure learned on another URDF text: moved aside too (a second one never overwrites)
+    state = dict(np.load(path))
+    state["meta.urdf"] = np.array(str(state["meta.urdf"]).replace("<robot", "<robot ", 1))
+    with path.open("wb") as fh:
+        np.savez(fh, **state)
+    notes = warm_start(OnlineEstimator(cfg), path, load=True, default=True)
+    assert "another URDF" in notes[-1]
+    assert len([p for p in path.parent.iterdir() if ".aside-" in p.name]) == 2
