@@ -88,6 +88,7 @@ class EstimatorNode(Node):
         super().__init__(node_name, **kwargs)
         self._active = True  # whether inputs are taken and outputs published (lifecycle: while active)
         self._checkpoints: CheckpointWriter | None = None
+        self.feedforward: FeedForwardEndpoints | None = None
         self._service: ModelService | None = None
         self._save: SaveService | None = None
         #: Whether the final checkpoint (at shutdown) was written, or none was due; ``main`` exits 1 if not.
@@ -141,7 +142,8 @@ class EstimatorNode(Node):
                                    loop=self.loop, stats=self._stats, warn=self._warn,
                                    n_joints=len(self._joints))
         self.feedforward = None if self._service.feedforward is None else FeedForwardEndpoints(
-            self, self._service, self.outputs, self._warn, lambda: self._active)
+            self, self._service, self._warn, lambda: self._active,
+            controller_action=str(cfg["feedforward.controller_action"]))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(Trigger, "~/payload/tare", self._on_payload_tare)
         self.add_on_set_parameters_callback(make_parameter_validator(lambda: self.config))
@@ -189,9 +191,8 @@ class EstimatorNode(Node):
         """Run the loop on queued input: at most a batch, so inputs, services and timers get turns."""
         if self.loop.queue:
             cpu = time.thread_time()  # a system call (≈ 1 µs): once per batch, not per message
-            serve = None if self.feedforward is None else self.feedforward.serve_waiting
-            try:  # a controller waiting goes first (serve), then one input at a time
-                n = self.loop.drain(_BATCH, before_each=serve, on_step=self._publish_step)
+            try:  # (a controller is answered by the feed-forward thread meanwhile)
+                n = self.loop.drain(_BATCH, on_step=self._publish_step)
             except Exception as err:  # bad input never gets here (dropped and counted): this is a bug
                 self.get_logger().fatal(f"programming error in the estimator: {err!r}")
                 raise
@@ -324,12 +325,16 @@ class EstimatorNode(Node):
             self._checkpoints = None
 
     def _stop_save_service(self) -> None:
+        """Stop the helper nodes' threads: ``~/save`` and the feed-forward endpoints."""
         if self._save is not None:
             self._save.close()
             self._save = None
+        if self.feedforward is not None:
+            self.feedforward.close()
+            self.feedforward = None
 
     def destroy_node(self) -> None:
-        """Stop the ``~/save`` service thread and its helper node, then destroy the node."""
+        """Stop the helper nodes' threads (``~/save``, feed-forward), then destroy the node."""
         self._stop_save_service()
         super().destroy_node()
 

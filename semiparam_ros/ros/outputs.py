@@ -1,4 +1,4 @@
-"""The node's publishers: per-sample predictions and their parts, feed-forward answers, identification.
+"""The node's publishers: per-sample predictions and their parts, identification, diagnostics.
 
 Topics and QoS are documented in docs/node.md. A per-sample output is published only while it has a
 subscriber (nobody else can tell), as CDR bytes patched per sample
@@ -18,13 +18,11 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-from trajectory_msgs.msg import JointTrajectory
 
 from semiparam_ros.core.estimator.online import StepResult
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate
 from semiparam_ros.ros import conversions as cv
-from semiparam_ros.serving.feedforward import FeedForwardCommand
 
 __all__ = ["PARAMETERS_QOS", "Outputs"]
 
@@ -32,7 +30,6 @@ __all__ = ["PARAMETERS_QOS", "Outputs"]
 PARAMETERS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _OUTPUT_QOS = 100
-_FF_QOS = 10  # the feed-forward answers: reliable (a JointGroupEffortController's ~/commands), shallow
 
 
 class Outputs:
@@ -62,10 +59,6 @@ class Outputs:
             lambda stamp, tau: cv.joint_torques_msg(stamp, joints, tau), len(joints))
         if not self.wrench:
             self.gravity = pub(JointState, "~/gravity_torques")
-            self.ff_commands = pub(Float64MultiArray, "~/feedforward_commands", _FF_QOS)
-            self.ff = pub(JointState, "~/feedforward", _FF_QOS)
-            self.ff_std = pub(JointState, "~/feedforward/std", _FF_QOS)
-            self.trajectory = pub(JointTrajectory, "~/trajectory_with_effort", _FF_QOS)
         self.parameters = pub(Float64MultiArray, "~/inertial_parameters", PARAMETERS_QOS)
         self.payload = pub(InertiaStamped, "~/payload", PARAMETERS_QOS)
         self.payload_std = pub(InertiaStamped, "~/payload/std", PARAMETERS_QOS)
@@ -100,13 +93,6 @@ class Outputs:
                            (self.std, result.std)):
             if value is not None and pub.get_subscription_count():
                 pub.publish(fill(stamp, value))
-
-    def publish_feedforward(self, command: FeedForwardCommand, joints: tuple[str, ...]) -> None:
-        """Publish a feed-forward answer on the three feed-forward topics that have subscribers."""
-        commands, state, std = cv.feedforward_msgs(command, joints)
-        for pub, out in ((self.ff_commands, commands), (self.ff, state), (self.ff_std, std)):
-            if pub.get_subscription_count():
-                pub.publish(out)
 
     def publish_payload(self, estimate: PayloadEstimate, stamp_ns: int) -> None:
         """Publish the payload and its standard deviations (latched)."""

@@ -22,6 +22,7 @@ False
 
 from __future__ import annotations
 
+import threading
 import time
 from typing import TYPE_CHECKING
 
@@ -85,6 +86,11 @@ class ModelService:
                 self.projection = ProjectionWorker(config.to_flat(), est.regressor.urdf_xml)
         #: Ages of the answered desired states this diagnostics period [ms] (stamp → answer).
         self.latency_ms: list[float] = []
+        #: Events of the FollowJointTrajectory proxy: forwarded, rejected_invalid, rejected_no_controller, …
+        self.action_counts: dict[str, int] = {
+            "forwarded": 0, "rejected_invalid": 0, "rejected_no_controller": 0, "controller_rejected": 0,
+            "aborted": 0}
+        self._stats_lock = threading.Lock()  # the answers are counted in the feed-forward thread
         self._projection_version = -1
         self._applied = 0  # the worker's solutions the live estimator predicts with (its count)
         self._submitted_learned = 0  # samples the estimator had learned at the last submission
@@ -189,23 +195,41 @@ class ModelService:
             return None
 
     def answer(self, desired: DesiredState, now_ns: int) -> FeedForwardCommand | None:
-        """Return the feed-forward command at ``desired`` (None: dropped, see ``feedforward.last_error``)."""
+        """Return the feed-forward command at ``desired`` (None: dropped, see ``feedforward.last_error``).
+
+        Served from the copy of the model (:meth:`refresh`) without the learning loop's lock, from any
+        one thread: an answer never waits for a learning step. With ``feedforward.refresh_period: 0`` the
+        live model answers, under the lock.
+        """
         ff = self.feedforward
         assert ff is not None, "the feed-forward is served in joint-torque mode only"
+        if ff.model is not self.serving:
+            return ff.compute(desired, now_ns)
         with self.loop.lock:
             return ff.compute(desired, now_ns)
 
     def trajectory(self, desired: DesiredState) -> TrajectoryEffort | None:
-        """Return every point's effort of a trajectory (None: dropped, see ``feedforward.last_error``)."""
+        """Return every point's effort of a trajectory (None: dropped, see ``feedforward.last_error``).
+
+        Served as :meth:`answer` is (the copy, without the learning loop's lock).
+        """
         ff = self.feedforward
         assert ff is not None, "the feed-forward is served in joint-torque mode only"
+        if ff.model is not self.serving:
+            return ff.trajectory(desired)
         with self.loop.lock:
             return ff.trajectory(desired)
 
     def record_age(self, age_ms: float) -> None:
         """Record the age [ms] of an answered desired state (stamp → answer), for this period's statistics."""
-        if len(self.latency_ms) < _MAX_LATENCIES:
-            self.latency_ms.append(age_ms)
+        with self._stats_lock:
+            if len(self.latency_ms) < _MAX_LATENCIES:
+                self.latency_ms.append(age_ms)
+
+    def count_action(self, what: str) -> None:
+        """Count an event of the ``FollowJointTrajectory`` proxy (``action.<what>`` in diagnostics)."""
+        with self._stats_lock:
+            self.action_counts[what] = self.action_counts.get(what, 0) + 1
 
     def gravity(self, q: np.ndarray) -> np.ndarray:
         """Gravity torques [N·m] of the identified rigid body at ``q`` [rad]."""
@@ -276,7 +300,9 @@ class ModelService:
             stats["payload.determined"] = not self._payload_missing
             stats["payload.missing"] = self._payload_missing
         stats["feedforward.last_error"] = ff.last_error or ""
-        latency, self.latency_ms = self.latency_ms, []
+        with self._stats_lock:
+            latency, self.latency_ms = self.latency_ms, []
+            stats.update({f"action.{key}": count for key, count in self.action_counts.items()})
         if latency:
             p50, p99 = np.percentile(latency, (50, 99))
             stats["feedforward.age_p50_ms"] = float(p50)

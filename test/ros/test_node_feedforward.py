@@ -162,7 +162,7 @@ def test_feedforward_gravity_and_parts_over_dds(ros_env, checkpoint, tmp_path):
     for cmd in commands.snapshot():
         assert np.isfinite(cmd.data).all() and len(cmd.data) == 7
     for g in gravity.snapshot():
-        np.testing.assert_allclose(g.effort, model.gravity(_posture(g)), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(g.effort, model.gravity(_posture(g), consistent=False), rtol=0, atol=1e-9)
     assert diag["feedforward.drops.unknown_joint"] == "1"
     assert diag["feedforward.drops.non_finite"] == "1" and diag["feedforward.drops.wrong_length"] == "1"
     assert int(diag["feedforward.missing_velocities"]) >= 1
@@ -371,8 +371,11 @@ def _multi_point(names, t, p, v=None, a=None):
 def test_trajectory_with_effort_over_dds(ros_env, checkpoint, tmp_path):
     """~/trajectory → ~/trajectory_with_effort: each point's effort is load_model(...).predict at the point
     (missing accelerations from the controller's cubic, missing velocities from its linear segments), in the
-    message's joint order; bad trajectories are counted by reason and never published."""
+    message's joint order, clamped to the URDF's effort limits (counted); bad trajectories are counted by
+    reason and never published."""
     model = load_model(checkpoint)
+    limits = model.estimator.regressor.effort_limits()  # the Panda's URDF gives every joint one
+    clamped = 0
     joints = model.joints
     ckpt = tmp_path / "copy.npz"
     ckpt.write_bytes(checkpoint.read_bytes())
@@ -429,7 +432,9 @@ def test_trajectory_with_effort_over_dds(ros_env, checkpoint, tmp_path):
         elif kind == "linear":
             vk = np.vstack([np.diff(pk, axis=0) / np.diff(t)[:, None], np.zeros((1, 7))])
             ak = np.zeros_like(pk)
-        expected = model.predict(pk, vk, ak, consistent=False)[0]
+        unclamped = model.predict(pk, vk, ak, consistent=False)[0]
+        clamped += int(np.any(np.abs(unclamped) > limits, axis=1).sum())
+        expected = np.clip(unclamped, -limits, limits)
         effort = np.array([pt.effort for pt in msg.points])
         assert list(msg.joint_names) == names and len(msg.points) == m
         scale = 1 + np.abs(expected).max()
@@ -438,3 +443,4 @@ def test_trajectory_with_effort_over_dds(ros_env, checkpoint, tmp_path):
         assert all(len(pt.accelerations) == (7 if kind == "full" else 0) for pt in msg.points)
     assert diag["trajectory.published"] == str(len(good)) and diag["trajectory.points"] == str(len(good) * m)
     assert diag["trajectory.fallback_points"] == "0"
+    assert diag["trajectory.clamped_points"] == str(clamped) and clamped > 0
