@@ -20,6 +20,7 @@ VALID_KEYS = frozenset({
     "pinocchio", "python3-numpy", "python3-scipy", "python3-numba", "python3-yaml", "python3-matplotlib",
     "python3-tqdm", "python3-joblib", "python3-rosbags-pip", "python3-pytest", "python3-hypothesis",
     "python3-sklearn", "python3-psutil", "python3-cvxpy-pip",
+    "control_msgs", "action_msgs",  # both in jazzy/distribution.yaml (ros-controls/control_msgs, rcl_interfaces)
 })
 #: Import name → rosdep key.
 KEY_OF = {
@@ -31,7 +32,7 @@ KEY_OF = {
     "yaml": "python3-yaml", "matplotlib": "python3-matplotlib", "tqdm": "python3-tqdm",
     "joblib": "python3-joblib", "rosbags": "python3-rosbags-pip", "pytest": "python3-pytest",
     "hypothesis": "python3-hypothesis", "sklearn": "python3-sklearn", "cvxpy": "python3-cvxpy-pip",
-    "psutil": "python3-psutil",
+    "psutil": "python3-psutil", "control_msgs": "control_msgs", "action_msgs": "action_msgs",
 }
 #: Import name → pip distribution, for libraries without a rosdep key.
 PIP_ONLY = {"threadpoolctl": "threadpoolctl", "zstandard": "zstandard", "lz4": "lz4",
