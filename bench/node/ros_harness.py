@@ -16,7 +16,7 @@ def private_domain(tmp: Path, salt: int, offset: int = 0) -> tuple[int, dict[str
     """Return ``(domain id, environment for the node subprocess)``; this process joins the domain too."""
     domain = 1 + (os.getpid() * salt + offset) % 100
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
+               ROS_LOG_DIR=str(tmp / "ros_log"), ROS_HOME=str(tmp / "ros_home"), PYTHONUNBUFFERED="1")
     os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR")})
     return domain, env
 

@@ -41,7 +41,7 @@ from semiparam_ros.errors import DescriptionTimeoutError, StartupError
 from semiparam_ros.ros.callbacks import quiet_at_shutdown
 from semiparam_ros.ros.description import wait_for_description
 from semiparam_ros.ros.diagnostics import NodeStatistics, diagnostic_array, estimator_statistics
-from semiparam_ros.ros.feedforward_endpoints import FeedForwardEndpoints
+from semiparam_ros.ros.feedforward_endpoints import FeedForwardEndpoints, endpoint_names
 from semiparam_ros.ros.inputs import INPUT_QOS, InputStreams, ThrottledWarnings
 from semiparam_ros.ros.outputs import PARAMETERS_QOS, Outputs
 from semiparam_ros.ros.parameter_files import parameter_files, unmatched_files_message
@@ -141,9 +141,10 @@ class EstimatorNode(Node):
                                    {k: functools.partial(self._on_input, k) for k in InputKind},
                                    loop=self.loop, stats=self._stats, warn=self._warn,
                                    n_joints=len(self._joints))
-        self.feedforward = None if self._service.feedforward is None else FeedForwardEndpoints(
-            self, self._service, self._warn, lambda: self._active,
-            controller_action=str(cfg["feedforward.controller_action"]))
+        if self._service.feedforward is not None:
+            names = endpoint_names(self, str(cfg["feedforward.controller_action"]))
+            self.feedforward = FeedForwardEndpoints(self, names, self._service, self._warn,
+                                                    lambda: self._active)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(Trigger, "~/payload/tare", self._on_payload_tare)
         self.add_on_set_parameters_callback(make_parameter_validator(lambda: self.config))
@@ -191,8 +192,9 @@ class EstimatorNode(Node):
         """Run the loop on queued input: at most a batch, so inputs, services and timers get turns."""
         if self.loop.queue:
             cpu = time.thread_time()  # a system call (≈ 1 µs): once per batch, not per message
-            try:  # (a controller is answered by the feed-forward thread meanwhile)
-                n = self.loop.drain(_BATCH, on_step=self._publish_step)
+            serve = None if self.feedforward is None else self.feedforward.serve_waiting
+            try:  # a controller waiting goes first (serve), then one input at a time
+                n = self.loop.drain(_BATCH, before_each=serve, on_step=self._publish_step)
             except Exception as err:  # bad input never gets here (dropped and counted): this is a bug
                 self.get_logger().fatal(f"programming error in the estimator: {err!r}")
                 raise

@@ -1,4 +1,4 @@
-"""The node's feed-forward endpoints, served from a thread of their own.
+"""The node's feed-forward endpoints, answered from the served copy of the model.
 
 Per-cycle desired states, trajectories to fill with efforts and the ``FollowJointTrajectory`` proxy in
 front of a controller:
@@ -10,10 +10,11 @@ front of a controller:
   each goal, every point's effort filled as ``~/trajectory`` fills it, to the controller's action
   (``feedforward.controller_action``), and relays its feedback, result, cancellation and preemption.
 
-These run on a hidden helper node (``_<name>_feedforward``, the main node's resolved names, no parameter
-services) spun by an executor in a thread of their own, so an answer never waits behind a learning step
-and learning is not starved by answers; they read the served copy of the model
-(:class:`~semiparam_ros.serving.model_service.ModelService`), not the live learner. The model and its
+The per-cycle topics are the node's own (its executor answers a waiting desired state before the next
+queued sample is learned); the action proxy, which awaits the controller, runs on a hidden helper node
+(``_<name>_feedforward``, the node's resolved names, no parameter services) spun in a thread of its own.
+All read the served copy of the model (:class:`~semiparam_ros.serving.model_service.ModelService`) without
+the learning loop's lock. The model and its
 bookkeeping live in the service; this module converts, hands on and publishes. Topics and QoS:
 docs/node.md; how to wire a controller: docs/controllers.md.
 """
@@ -38,10 +39,11 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from semiparam_ros.ros import conversions as cv
-from semiparam_ros.ros.inputs import ThrottledWarnings
+from semiparam_ros.ros.callbacks import quiet_at_shutdown
+from semiparam_ros.ros.inputs import GONE, ThrottledWarnings, take
 from semiparam_ros.serving.model_service import ModelService
 
-__all__ = ["FeedForwardEndpoints"]
+__all__ = ["FeedForwardEndpoints", "endpoint_names"]
 
 #: Desired states: only the latest matters; best effort accepts reliable and best-effort publishers.
 _DESIRED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -53,76 +55,108 @@ _ANSWER_QOS = 10  # the feed-forward answers: reliable (a JointGroupEffortContro
 _SPIN_TIMEOUT_S = 0.05
 
 
-class FeedForwardEndpoints:
-    """Feed-forward topics and the trajectory action of ``node``, served by a helper node in its own thread.
+def endpoint_names(node: Node, controller_action: str) -> dict[str, str]:
+    """Return the endpoints' names, resolved with the estimator node's name, namespace and remappings.
 
     Args:
-        node: The estimator node (its name, namespace, context, clock and remappings).
-        service: The model service (``service.feedforward`` is not None: joint-torque output).
-        warn: Throttled warnings of the node.
-        active: Whether the node takes input now (a lifecycle node: while active).
+        node: The estimator node.
         controller_action: ``feedforward.controller_action`` (relative names resolve in the node's namespace).
+
+    Returns:
+        Resolved names by key (``desired_state``, ``trajectory``, ``feedforward_commands``, ``feedforward``,
+        ``feedforward_std``, ``trajectory_with_effort``, ``follow_joint_trajectory``, ``controller_action``),
+        and the helper node's name and namespace (``helper``, ``namespace``).
+    """
+    topics = {"desired_state": "~/desired_state", "trajectory": "~/trajectory",
+              "feedforward_commands": "~/feedforward_commands", "feedforward": "~/feedforward",
+              "feedforward_std": "~/feedforward/std", "trajectory_with_effort": "~/trajectory_with_effort",
+              "follow_joint_trajectory": "~/follow_joint_trajectory", "controller_action": controller_action}
+    names = {key: node.resolve_topic_name(topic) for key, topic in topics.items()}
+    names.update(helper=f"_{node.get_name()}_feedforward", namespace=node.get_namespace())
+    return names
+
+
+class FeedForwardEndpoints:
+    """Feed-forward topics of ``node`` and the trajectory action, served from the served copy of the model.
+
+    The per-cycle topics (``~/desired_state``, ``~/trajectory``) are the node's own subscriptions, taken by
+    its executor — a waiting desired state is answered before the next queued sample is learned
+    (:meth:`serve_waiting`). The ``FollowJointTrajectory`` proxy awaits the controller's answers: it runs
+    on a helper node (``_<name>_feedforward``) spun in a thread of its own.
+
+    Args:
+        node: The estimator node (topics, clock, logger).
+        names: The endpoints' resolved names (:func:`endpoint_names` of the node).
+        service: The model service (``service.feedforward`` is not None: joint-torque output).
+        warn: Throttled warnings.
+        active: Whether the node takes input now (a lifecycle node: while active).
         join_timeout_s: How long :meth:`close` waits for the thread.
     """
 
-    def __init__(self, node: Node, service: ModelService, warn: ThrottledWarnings, active: Callable[[], bool],
-                 *, controller_action: str, join_timeout_s: float = 5.0) -> None:
+    def __init__(self, node: Node, names: dict[str, str], service: ModelService, warn: ThrottledWarnings,
+                 active: Callable[[], bool], *, join_timeout_s: float = 5.0) -> None:
         assert service.feedforward is not None, "the feed-forward is served in joint-torque mode only"
         self._service, self._ff, self._warn, self._active = service, service.feedforward, warn, active
         self._join_timeout_s = join_timeout_s
+        self._node = node
         self._logger = node.get_logger()
         self._clock = node.get_clock()
-        helper = Node(f"_{node.get_name()}_feedforward", namespace=node.get_namespace(), context=node.context,
+
+        def pub(msg_type: type, key: str) -> Any:  # no event handlers: each is one more waitable
+            return node.create_publisher(msg_type, names[key], _ANSWER_QOS,
+                                         event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+
+        self._commands = pub(Float64MultiArray, "feedforward_commands")
+        self._state = pub(JointState, "feedforward")
+        self._std = pub(JointState, "feedforward_std")
+        self._filled = pub(JointTrajectory, "trajectory_with_effort")
+        self.desired = node.create_subscription(JointTrajectory, names["desired_state"],
+                                                self.on_desired_state, _DESIRED_QOS)
+        self.trajectory = node.create_subscription(JointTrajectory, names["trajectory"], self.on_trajectory,
+                                                   _TRAJECTORY_QOS)
+        #: The controller's action (resolved) that ``~/follow_joint_trajectory`` forwards to.
+        self.controller_action = names["controller_action"]
+        helper = Node(names["helper"], namespace=names["namespace"], context=node.context,
                       use_global_arguments=False, start_parameter_services=False, enable_rosout=False)
         self._helper = helper
-        name = node.resolve_topic_name
-
-        def pub(msg_type: type, topic: str) -> Any:  # no event handlers: each is one more waitable
-            return helper.create_publisher(msg_type, name(topic), _ANSWER_QOS,
-                                           event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
-
-        self._commands = pub(Float64MultiArray, "~/feedforward_commands")
-        self._state = pub(JointState, "~/feedforward")
-        self._std = pub(JointState, "~/feedforward/std")
-        self._filled = pub(JointTrajectory, "~/trajectory_with_effort")
-        self.desired = helper.create_subscription(JointTrajectory, name("~/desired_state"),
-                                                  self.on_desired_state, _DESIRED_QOS)
-        self.trajectory = helper.create_subscription(JointTrajectory, name("~/trajectory"),
-                                                     self.on_trajectory, _TRAJECTORY_QOS)
-        #: The controller's action (resolved) that ``~/follow_joint_trajectory`` forwards to.
-        self.controller_action = name(controller_action)
         self._controller = ActionClient(helper, FollowJointTrajectory, self.controller_action)
         self._goals: dict[bytes, Any] = {}  # our goal id → the controller's goal handle
-        self._action = ActionServer(helper, FollowJointTrajectory, name("~/follow_joint_trajectory"),
+        self._action = ActionServer(helper, FollowJointTrajectory, names["follow_joint_trajectory"],
                                     execute_callback=self._execute, goal_callback=self._on_goal,
                                     cancel_callback=self._on_cancel)
-        self._executor: SingleThreadedExecutor | None = SingleThreadedExecutor(context=node.context)
+        self._executor = SingleThreadedExecutor(context=node.context)  # it awaits the proxy's coroutines
         self._executor.add_node(helper)
-        self._thread = threading.Thread(target=self._spin, name="estimator-feedforward", daemon=True)
+        self._closed = False
+        self._thread = threading.Thread(target=self._spin, name="estimator-trajectory-action", daemon=True)
         self._thread.start()
 
     @property
     def context(self) -> Any:
         """The rclpy context (callbacks end quietly once it is shut down)."""
-        return self._helper.context
+        return self._node.context
 
     def _now_ns(self) -> int:
         return int(self._clock.now().nanoseconds)
 
     def _spin(self) -> None:
-        executor = self._executor
-        while executor is not None and self._helper.context.ok():
+        while not self._closed and self._helper.context.ok():
             try:
-                executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
+                self._executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
             except ExternalShutdownException:
                 return
             except Exception:  # a publish the shutdown interrupted ends the thread quietly
-                if self._helper.context.ok():
+                if self._helper.context.ok() and not self._closed:
                     raise
                 return
-            executor = self._executor
 
     # ------------------------------------------------------------------ per-cycle desired states
+    def serve_waiting(self) -> None:
+        """Answer a desired state already waiting in DDS (the node calls this before learning a sample)."""
+        taken = take(self.desired)
+        if taken is not None and taken is not GONE:
+            self.on_desired_state(taken)
+
+    @quiet_at_shutdown
     def on_desired_state(self, msg: JointTrajectory) -> None:
         """Answer a desired state at once with the served model's torques."""
         if not self._active():
@@ -156,6 +190,7 @@ class FeedForwardEndpoints:
                                                       "(model not ready or σ above feedforward.max_std)")
         return cv.fill_trajectory_effort(copy.deepcopy(msg), filled.effort)
 
+    @quiet_at_shutdown
     def on_trajectory(self, msg: JointTrajectory) -> None:
         """Publish the trajectory with every point's effort from the served model."""
         if self._active():
@@ -226,12 +261,12 @@ class FeedForwardEndpoints:
         return result
 
     def close(self) -> None:
-        """Stop the thread, then destroy the action server, client and helper node (idempotent)."""
-        executor, self._executor = self._executor, None
-        if executor is None:
+        """Stop the action's thread, then destroy the action server, client and helper node (idempotent)."""
+        if self._closed:
             return
+        self._closed = True
         self._thread.join(timeout=self._join_timeout_s)
-        executor.shutdown(timeout_sec=1.0)
+        self._executor.shutdown(timeout_sec=1.0)
         self._action.destroy()
         self._controller.destroy()
         self._helper.destroy_node()
