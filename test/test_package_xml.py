@@ -20,7 +20,7 @@ VALID_KEYS = frozenset({
     "pinocchio", "python3-numpy", "python3-scipy", "python3-numba", "python3-yaml", "python3-matplotlib",
     "python3-tqdm", "python3-joblib", "python3-rosbags-pip", "python3-pytest", "python3-hypothesis",
     "python3-sklearn", "python3-psutil", "python3-cvxpy-pip",
-    "control_msgs", "action_msgs",  # both in jazzy/distribution.yaml (ros-controls/control_msgs, rcl_interfaces)
+    "control_msgs", "action_msgs",  # jazzy/distribution.yaml: ros-controls/control_msgs, rcl_interfaces
 })
 #: Import name → rosdep key.
 KEY_OF = {
