@@ -11,8 +11,6 @@ parameter file (``robot.output: joint_torques``) compares equal to its member, a
 True
 >>> OutputKind.WRENCH.n_outputs(7), OutputKind.JOINT_TORQUES.n_outputs(7)
 (6, 7)
->>> OutputKind.JOINT_TORQUES.input_kinds
-(<InputKind.JOINT_STATES: 'joint_states'>,)
 """
 
 from __future__ import annotations
@@ -61,18 +59,6 @@ class OutputKind(enum.StrEnum):
     def n_outputs(self, n_joints: int) -> int:
         """Width of the output: 6 for a wrench, one per joint for joint torques."""
         return WRENCH_WIDTH if self is OutputKind.WRENCH else int(n_joints)
-
-    @property
-    def is_wrench(self) -> bool:
-        """Whether the output is an F/T sensor's wrench."""
-        return self is OutputKind.WRENCH
-
-    @property
-    def input_kinds(self) -> tuple[InputKind, ...]:
-        """The input streams a sample of this kind needs (joint states, and the wrench for a sensor)."""
-        if self is OutputKind.WRENCH:
-            return (InputKind.JOINT_STATES, InputKind.WRENCH)
-        return (InputKind.JOINT_STATES,)
 
     @property
     def label(self) -> str:

@@ -200,7 +200,11 @@ class FeedForwardEndpoints:
 
     # ------------------------------------------------------------------ the FollowJointTrajectory proxy
     def _on_goal(self, goal: FollowJointTrajectory.Goal) -> GoalResponse:
-        """Reject a goal the model cannot fill (its reason logged and counted) or with no controller."""
+        """Fill an accepted goal's efforts; reject one the model cannot fill, or any without a controller.
+
+        The efforts are written into the goal itself: rclpy hands :meth:`_execute` the same message
+        (``goal_handle.request``), so each goal is filled, and counted, once.
+        """
         if not self._active():
             self._logger.warning("follow_joint_trajectory goal rejected: the node is not active")
             return GoalResponse.REJECT
@@ -209,10 +213,12 @@ class FeedForwardEndpoints:
             self._logger.error(f"follow_joint_trajectory goal rejected: the controller action "
                                f"{self.controller_action} is not available (feedforward.controller_action)")
             return GoalResponse.REJECT
-        if self._filled_trajectory(goal.trajectory) is None:  # validated here; filled again when executed
+        filled = self._filled_trajectory(goal.trajectory)
+        if filled is None:
             self._service.count_action("rejected_invalid")
             self._logger.error(f"follow_joint_trajectory goal rejected: {self._ff.last_error}")
             return GoalResponse.REJECT
+        goal.trajectory = filled
         return GoalResponse.ACCEPT
 
     def _on_cancel(self, goal_handle: ServerGoalHandle) -> CancelResponse:
@@ -223,18 +229,10 @@ class FeedForwardEndpoints:
         return CancelResponse.ACCEPT
 
     async def _execute(self, goal_handle: ServerGoalHandle) -> FollowJointTrajectory.Result:
-        """Forward the goal with its efforts to the controller; relay feedback and the final result."""
-        goal = copy.deepcopy(goal_handle.request)
-        filled = self._filled_trajectory(goal.trajectory)
+        """Forward the goal (filled at acceptance) to the controller; relay feedback and the result."""
         result = FollowJointTrajectory.Result()
-        if filled is None:  # the model changed between acceptance and execution and refused a point
-            result.error_code, result.error_string = FollowJointTrajectory.Result.INVALID_GOAL, str(
-                self._ff.last_error)
-            goal_handle.abort()
-            return result
-        goal.trajectory = filled
         controller_goal = await self._controller.send_goal_async(
-            goal, feedback_callback=lambda fb: goal_handle.publish_feedback(fb.feedback))
+            goal_handle.request, feedback_callback=lambda fb: goal_handle.publish_feedback(fb.feedback))
         if controller_goal is None or not controller_goal.accepted:
             self._service.count_action("controller_rejected")
             result.error_code = FollowJointTrajectory.Result.INVALID_GOAL

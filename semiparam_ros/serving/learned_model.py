@@ -453,8 +453,9 @@ class LearnedModel:
             RejectedSampleError: Wrong shape or non-finite q.
             ValueError: For a model without a rigid-body part (``NP``).
         """
-        params = self.rigid_parameters(consistent=consistent)
-        qa = check_finite_array("q", q)
+        return self._gravity(check_finite_array("q", q), self.rigid_parameters(consistent=consistent))
+
+    def _gravity(self, qa: np.ndarray, params: np.ndarray) -> np.ndarray:
         zeros = np.zeros_like(qa)
         Phi = self.estimator.regressor.base_regressor(qa, zeros, zeros)
         return np.asarray(Phi[..., self._inertial] @ params[self._inertial])
@@ -473,7 +474,9 @@ class LearnedModel:
             ValueError: For a model without a rigid-body part (``NP``).
         """
         params = self.rigid_parameters(consistent=consistent)
-        dqa = check_finite_array("dq", dq)
+        return self._friction_torques(check_finite_array("dq", dq), params)
+
+    def _friction_torques(self, dqa: np.ndarray, params: np.ndarray) -> np.ndarray:
         if not self._friction.any():
             return np.zeros((*dqa.shape[:-1], len(self.output_names)))
         zeros = np.zeros_like(dqa)
@@ -502,11 +505,15 @@ class LearnedModel:
                              f"got {list(exclude)}, {source!r}")
         qa = check_finite_array("q", q)
         out = np.zeros((*qa.shape[:-1], len(self.output_names)))
-        if "gravity" in exclude:
-            out += self.cad(qa, np.zeros_like(qa), np.zeros_like(qa)) if source == "urdf" else \
-                self.gravity(qa, consistent=consistent)
-        if "friction" in exclude:
-            out += self.friction(dq, consistent=consistent)
+        if "gravity" in exclude and source == "urdf":
+            out += self.cad(qa, np.zeros_like(qa), np.zeros_like(qa))
+        model_terms = [t for t in exclude if t == "friction" or source == "model"]
+        if model_terms:  # the prediction's rigid body, read once for both terms
+            params = self.rigid_parameters(consistent=consistent)
+            if "gravity" in model_terms:
+                out += self._gravity(qa, params)
+            if "friction" in model_terms:
+                out += self._friction_torques(check_finite_array("dq", dq), params)
         return out
 
     def cad(self, q: Any, dq: Any, ddq: Any) -> np.ndarray:

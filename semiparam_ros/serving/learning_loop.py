@@ -125,7 +125,7 @@ class LearningLoop:
         return Stepped(results, new_drops)
 
     def drain(self, max_inputs: int, *, before_each: Callable[[], None] | None = None,
-              on_step: OnStep | None = None, deadline: float | None = None) -> int:
+              on_step: OnStep | None = None, deadline: float | None = None, learn_late: bool = False) -> int:
         """Step the queued inputs in arrival order: at most ``max_inputs``, and until ``deadline``.
 
         The one place inputs leave the queue. Each input is learned unless it is :meth:`late` (overload
@@ -136,6 +136,7 @@ class LearningLoop:
             before_each: Called before each input (the node answers a waiting controller first).
             on_step: Called after each input with ``(input, stepped, t_recv)``.
             deadline: A ``time.monotonic()`` [s] after which no further input is started.
+            learn_late: Learn every input however late (shutdown), instead of the overload policy.
 
         Returns:
             The number of inputs stepped.
@@ -148,7 +149,7 @@ class LearningLoop:
             if before_each is not None:
                 before_each()
             _, data, t_recv = self.queue.popleft()
-            stepped = self.step(data, skip_learning=self.late(t_recv))
+            stepped = self.step(data, skip_learning=not learn_late and self.late(t_recv))
             if on_step is not None:
                 on_step(data, stepped, t_recv)
             n += 1
@@ -179,11 +180,7 @@ class LearningLoop:
 
     def learn_remaining(self, budget_s: float) -> int:
         """Learn the queued inputs without publishing, within ``budget_s`` [s]; returns how many ran."""
-        max_delay, self.max_delay_s = self.max_delay_s, 0.0  # nothing is late any more: learn it all
-        try:
-            return self.drain(len(self.queue), deadline=time.monotonic() + budget_s)
-        finally:
-            self.max_delay_s = max_delay
+        return self.drain(len(self.queue), deadline=time.monotonic() + budget_s, learn_late=True)
 
     def snapshot(self) -> tuple[dict[str, np.ndarray], int, int]:
         """Copy the checkpoint state under the lock: ``(state, version, samples learned)``."""

@@ -63,14 +63,12 @@ class ModelService:
     Args:
         loop: The learning loop (its lock guards the estimator; its version says when learning changed it).
         config: The estimator's configuration (``feedforward.*``, ``parametric.consistent*``).
-        projection: Solve the consistent projection in a worker process (``parametric.consistent``); False
-            where a consistent solution is handed in (the feed-forward process).
 
     Raises:
         ConfigurationError: An invalid ``feedforward.joints`` or ``feedforward.max_std``.
     """
 
-    def __init__(self, loop: LearningLoop, config: EstimatorConfig, *, projection: bool = True) -> None:
+    def __init__(self, loop: LearningLoop, config: EstimatorConfig) -> None:
         self.loop = loop
         self.config = config
         est = loop.estimator
@@ -84,7 +82,7 @@ class ModelService:
                                            exclude=config["feedforward.exclude"],
                                            exclude_source=config["feedforward.exclude_source"],
                                            effort_limits=_limits(est.regressor.effort_limits()))
-            if config["parametric.consistent"] and projection:
+            if config["parametric.consistent"]:
                 self.projection = ProjectionWorker(config.to_flat(), est.regressor.urdf_xml)
         #: Ages of the answered desired states this diagnostics period [ms] (stamp → answer).
         self.latency_ms: list[float] = []
@@ -97,8 +95,6 @@ class ModelService:
         self._applied = 0  # the worker's solutions the live estimator predicts with (its count)
         self._submitted_learned = 0  # samples the estimator had learned at the last submission
         self._ff_key = (-1, -1)
-        #: Bumped whenever :meth:`refresh` serves a new copy of the model.
-        self.served_version = 0
         self._links_published = 0
         self._payload_key: int | None = None
         self._payload_missing: str | None = None  # of the last payload published (None: none yet)
@@ -173,7 +169,6 @@ class ModelService:
                 served.attach_consistent(worker.latest)
             ff.model = served
             self._ff_key = (self.loop.version, key[1])
-            self.served_version += 1
         if worker is not None and worker.latest is not None and self._links_published != key[1]:
             self._links_published = key[1]
             return worker.latest

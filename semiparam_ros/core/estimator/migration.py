@@ -48,7 +48,7 @@ def migrate(state: dict[str, np.ndarray], version: int, target: int,
         version: Its ``meta.version``.
         target: The version to reach (the current one).
         fresh: Returns the checkpoint arrays of a new model of the same configuration (called at most
-            once, only when a step needs it).
+            once, and only for a checkpoint older than ``target``).
         path: Where the arrays came from, for messages.
 
     Returns:
