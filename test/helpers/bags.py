@@ -57,3 +57,19 @@ def ur5_config():
         "robot.urdf": UR5_URDF, "robot.joints": list(UR5_JOINTS), "robot.locked_joints": [],
         "robot.locked_positions": [], "robot.output": "joint_torques", "nonparametric.n_features": 100,
         "nonparametric.standardizer_warmup": 100, "parametric.friction": False, "parametric.offsets": False})
+
+
+def learned_panda_checkpoint(root: Path, name: str, *, seed: int, n_features: int) -> Path:
+    """A checkpoint of config/panda.yaml (D = ``n_features``) learned by ``learn`` from 20 s of a simulated
+    Panda at 200 Hz (known truth): what a node warm-starts from in the feed-forward tests."""
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.serving.bag_learning import learn_bags
+    from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
+    from semiparam_ros.sim.writer import write_recording
+
+    rec = simulate_arm(ArmScenarioConfig(name=name, robot="panda", duration=20.0, rate=200.0, seed=seed))
+    bag = write_recording(rec, root / name)
+    config = load_config(REPO / "config" / "panda.yaml")
+    config = config.with_overrides({"nonparametric.n_features": n_features})
+    learn_bags([bag], config, checkpoint=root / "panda.npz")
+    return root / "panda.npz"

@@ -20,6 +20,7 @@ from action_msgs.msg import GoalStatus
 from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
 from diagnostic_msgs.msg import DiagnosticArray
+from helpers.bags import learned_panda_checkpoint
 from helpers.ros import REPO, NodeProcess, TestClient, diagnostic_values, make_ros_env, wait_until
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -28,10 +29,6 @@ from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from semiparam_ros import load_model
-from semiparam_ros.core.config import load_config
-from semiparam_ros.serving.bag_learning import learn_bags
-from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
-from semiparam_ros.sim.writer import write_recording
 
 pytestmark = pytest.mark.ros
 
@@ -43,12 +40,7 @@ CONTROLLER = "/joint_trajectory_controller/follow_joint_trajectory"
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
     root = tmp_path_factory.mktemp("action_node")
-    rec = simulate_arm(ArmScenarioConfig(name="panda_action", robot="panda", duration=20.0, rate=200.0,
-                                         seed=1))
-    bag = write_recording(rec, root / "panda_action")
-    config = load_config(PANDA).with_overrides({"nonparametric.n_features": D})
-    learn_bags([bag], config, checkpoint=root / "panda.npz")
-    return root / "panda.npz"
+    return learned_panda_checkpoint(root, "panda_action", seed=1, n_features=D)
 
 
 class FakeController:

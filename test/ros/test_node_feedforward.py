@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray
+from helpers.bags import learned_panda_checkpoint
 from helpers.ros import REPO, NodeProcess, TestClient, diagnostic_values, make_ros_env
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -22,11 +23,8 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from semiparam_ros import load_model
-from semiparam_ros.core.config import load_config
-from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
 from semiparam_ros.sim.closed_loop import ArmPlant, desired_trajectory, pd_gains, run_loop
-from semiparam_ros.sim.writer import write_recording
 
 pytestmark = pytest.mark.ros
 
@@ -36,12 +34,7 @@ D = 100
 
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
-    root = tmp_path_factory.mktemp("ff_node")
-    rec = simulate_arm(ArmScenarioConfig(name="panda_ff", robot="panda", duration=20.0, rate=200.0, seed=0))
-    bag = write_recording(rec, root / "panda_ff")
-    config = load_config(PANDA).with_overrides({"nonparametric.n_features": D})
-    learn_bags([bag], config, checkpoint=root / "panda.npz")
-    return root / "panda.npz"
+    return learned_panda_checkpoint(tmp_path_factory.mktemp("ff_node"), "panda_ff", seed=0, n_features=D)
 
 
 @pytest.fixture
