@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import semiparam_ros
-from semiparam_ros.core.config import PARAMETERS, EstimatorConfig, structural_values
+from semiparam_ros.core.config import ICUB_RIGHT_ARM, PARAMETERS, EstimatorConfig, structural_values
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.contract import Learner
 from semiparam_ros.errors import CheckpointError
@@ -50,7 +50,7 @@ def test_no_module_uses_another_modules_private_members():
 @pytest.mark.parametrize("combination", ["cascade", "consistent", "joint"])
 @pytest.mark.parametrize("kind", ["P", "NP", "SP"])
 def test_every_learner_satisfies_the_learner_protocol(kind, combination):
-    cfg = EstimatorConfig.defaults().with_overrides({
+    cfg = EstimatorConfig.from_flat(ICUB_RIGHT_ARM).with_overrides({
         "semiparametric.combination": combination, "nonparametric.n_features": 8,
         "parametric.forgetting": 1.0, "nonparametric.forgetting": 1.0})
     model = OnlineEstimator(cfg, kind=kind).model
@@ -62,7 +62,7 @@ def test_every_learner_satisfies_the_learner_protocol(kind, combination):
 
 
 def test_fingerprint_names_exactly_the_structural_parameters_that_apply(tmp_path):
-    cfg = EstimatorConfig.defaults().with_overrides({"nonparametric.n_features": 20})
+    cfg = EstimatorConfig.from_flat(ICUB_RIGHT_ARM).with_overrides({"nonparametric.n_features": 20})
     values = structural_values(cfg, "SP")
     flagged = {s.name for s in PARAMETERS if s.structural}
     assert set(values) <= flagged and "nonparametric.n_features" in values

@@ -33,7 +33,7 @@ from collections.abc import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
 from semiparam_ros.core.estimator.build import build_model, build_regressor
 
 RESULTS = pathlib.Path(__file__).resolve().parent / "results" / "bench_models.json"
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     calls, repeats = (100, 3) if args.quick else (300, 15)
     sizes = (250, 500) if args.quick else (250, 500, 1000)
-    base = EstimatorConfig.defaults()
+    base = EstimatorConfig.from_flat(ICUB_RIGHT_ARM)
     regressor = build_regressor(base)
     n = 400 + calls * repeats + 10
     X, Y = stream(n)

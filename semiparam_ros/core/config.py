@@ -36,6 +36,8 @@ from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = [
+    "ICUB_RIGHT_ARM",
+    "INFERRED_OUTPUT",
     "PARAMETERS",
     "RUNTIME_TARGETS",
     "EstimatorConfig",
@@ -117,33 +119,55 @@ class ParameterSpec:
         return text
 
 
-_ICUB_JOINTS = ("r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow")
+#: Value of ``robot.output`` that leaves it to ``robot.ft_sensor``: the wrench when a sensor is named,
+#: else the joint torques (:attr:`EstimatorConfig.output_kind`).
+INFERRED_OUTPUT = ""
+
+#: The ``robot.*`` values of the paper's iCub right arm (``config/icub_right_arm.yaml``: the F/T sensor in
+#: the upper arm, the wrist locked), for examples and the demo; no parameter defaults to them.
+ICUB_RIGHT_ARM: Mapping[str, Any] = MappingProxyType({
+    "robot.urdf": "example-robot-data://robots/icub_description/robots/icub.urdf",
+    "robot.joints": ["r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow"],
+    "robot.locked_joints": ["r_wrist_prosup", "r_wrist_pitch", "r_wrist_yaw"],
+    "robot.locked_positions": [0.0, 0.0, 0.0],
+    "robot.ft_sensor": "r_arm_ft_sensor",
+    "robot.output": "wrench",
+    "robot.frame_id": "r_arm_ft_sensor",
+})
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
     # robot
     ParameterSpec("robot.urdf", "string", "",
-                  "URDF: a file path, package://<package>/<path> (the ament index, then the pip prefixes), "
-                  "example-robot-data://<path>, or topic:<name> (the node waits for robot_state_publisher's "
-                  "transient-local std_msgs/String, e.g. topic:/robot_description); empty = the iCub URDF "
-                  "of example-robot-data"),
+                  "required: the robot's URDF, a file path, package://<package>/<path> (the ament index, "
+                  "then the pip prefixes), example-robot-data://<path>, or topic:<name> (the node waits for "
+                  "robot_state_publisher's transient-local std_msgs/String, e.g. topic:/robot_description); "
+                  "the node and learn stop when it is empty"),
     ParameterSpec("robot.description_timeout", "double", 0.0,
                   "with robot.urdf: 'topic:<name>', how long the node waits for the URDF on that topic at "
                   "start-up [s]; 0 = as long as it takes", min=0.0, max=1e6),
-    ParameterSpec("robot.joints", "string_array", list(_ICUB_JOINTS),
-                  "moving joints used for learning, in this order (q [rad], dq [rad/s], ddq [rad/s^2])",
-                  structural=True),
+    ParameterSpec("robot.joints", "string_array", [],
+                  "required: moving joints used for learning, in this order (q [rad], dq [rad/s], ddq "
+                  "[rad/s^2]); names of the URDF and of JointState.name; the node and learn stop when it is "
+                  "empty", structural=True),
     ParameterSpec("robot.locked_joints", "string_array", [],
                   "names of other joints given a fixed position (all others are locked at 0 rad)",
                   structural=True),
     ParameterSpec("robot.locked_positions", "double_array", [],
                   "positions of robot.locked_joints [rad], same length", structural=True),
-    ParameterSpec("robot.ft_sensor", "string", "r_arm_ft_sensor",
-                  "fixed URDF joint of the six-axis F/T sensor (output = wrench)", structural=True),
-    ParameterSpec("robot.output", "string", "wrench",
-                  "learned quantity: the F/T sensor wrench, or the joint torques from JointState.effort",
-                  choices=tuple(k.value for k in OutputKind), structural=True),
-    ParameterSpec("robot.frame_id", "string", "r_arm_ft_sensor",
+    ParameterSpec("robot.ft_sensor", "string", "",
+                  "fixed URDF joint of a six-axis F/T sensor whose WrenchStamped is learned; empty = no "
+                  "sensor (the joint torques of JointState.effort are learned)", structural=True),
+    ParameterSpec("robot.output", "string", INFERRED_OUTPUT,
+                  "learned quantity: 'joint_torques' (JointState.effort) or 'wrench' (the F/T sensor's "
+                  "WrenchStamped); empty = inferred: wrench when robot.ft_sensor names a sensor, else "
+                  "joint_torques",
+                  choices=(INFERRED_OUTPUT, *(k.value for k in OutputKind)), structural=True),
+    ParameterSpec("robot.frame_id", "string", "",
                   "expected frame_id of the WrenchStamped input; empty accepts any"),
+    ParameterSpec("robot.effort_scale", "double_array", [],
+                  "N·m per unit of JointState.effort, one per robot.joints joint, applied on input (a driver "
+                  "that reports motor currents: the torque constant times the gear ratio); empty = all 1 "
+                  "(efforts are joint torques in N·m)", min=-1e6, max=1e6),
     ParameterSpec("robot.gravity", "double_array", [0.0, 0.0, -9.81],
                   "gravity in the robot base frame [m/s^2]", min=-100.0, max=100.0, length=3),
     # topics
@@ -445,8 +469,8 @@ def unknown_parameter_message(name: str) -> str:
     """Say that ``name`` is no parameter and name the closest ones (a misspelling is the usual cause).
 
     Example:
-        >>> unknown_parameter_message("adaptaton.time_constant").split(": ")[1]
-        "did you mean 'adaptation.time_constant' or 'uncertainty.noise_time_constant'? (every parameter"
+        >>> unknown_parameter_message("adaptaton.time_constant").split("?")[0]
+        "unknown parameter 'adaptaton.time_constant': did you mean 'adaptation.time_constant' or ..."
     """
     import difflib
 
@@ -461,7 +485,7 @@ def describe_parameters() -> str:
 
     Example:
         >>> print(describe_parameters().splitlines()[0])
-        robot.urdf (string, default ''): URDF file path; empty = the iCub URDF of example-robot-data
+        robot.urdf (string, default ''): required: the robot's URDF, a file path, ...
     """
     lines = []
     for spec in PARAMETERS:
@@ -560,8 +584,6 @@ class EstimatorConfig:
         if missing:
             raise ConfigurationError(f"missing parameters: {', '.join(missing)}")
         joints = checked["robot.joints"]
-        if not joints:
-            raise ConfigurationError("parameter 'robot.joints' must name at least one joint")
         if len(set(joints)) != len(joints):
             raise ConfigurationError(f"parameter 'robot.joints' has duplicate names: {joints}")
         if len(checked["robot.locked_joints"]) != len(checked["robot.locked_positions"]):
@@ -570,6 +592,15 @@ class EstimatorConfig:
         overlap = set(joints) & set(checked["robot.locked_joints"])
         if overlap:
             raise ConfigurationError(f"joints both learned and locked: {sorted(overlap)}")
+        if checked["robot.output"] == INFERRED_OUTPUT:
+            checked["robot.output"] = (OutputKind.WRENCH if checked["robot.ft_sensor"]
+                                       else OutputKind.JOINT_TORQUES).value
+        scale = checked["robot.effort_scale"]
+        if scale and len(scale) != len(joints):
+            raise ConfigurationError(f"parameter 'robot.effort_scale' must have one value per joint of "
+                                     f"robot.joints ({len(joints)}), got {len(scale)}")
+        if any(v == 0.0 for v in scale):
+            raise ConfigurationError("parameter 'robot.effort_scale' must not hold 0 (N·m per reported unit)")
         if checked["robot.output"] == OutputKind.WRENCH and not checked["robot.ft_sensor"]:
             raise ConfigurationError("parameter 'robot.ft_sensor' must name the F/T sensor joint when "
                                      "robot.output is 'wrench'")
@@ -665,6 +696,29 @@ class EstimatorConfig:
     def locked(self) -> dict[str, float]:
         """Return the positions of the locked joints [rad] by name."""
         return dict(zip(self["robot.locked_joints"], self["robot.locked_positions"], strict=True))
+
+    def require_robot(self, urdf: bool = True) -> None:
+        """Check that the robot is named: ``robot.joints`` (and ``robot.urdf`` when ``urdf``) set.
+
+        No parameter defaults to a robot; the node, ``learn`` and every tool that builds the rigid body call
+        this first.
+
+        Raises:
+            ConfigurationError: Naming the missing parameters and where they are set.
+
+        >>> EstimatorConfig.defaults().require_robot()
+        Traceback (most recent call last):
+        ...
+        semiparam_ros.errors.ConfigurationError: robot.urdf and robot.joints are not set: ...
+        """
+        missing = [name for name, needed in (("robot.urdf", urdf), ("robot.joints", True))
+                   if needed and not self[name]]
+        if missing:
+            raise ConfigurationError(
+                f"{' and '.join(missing)} {'is' if len(missing) == 1 else 'are'} not set: name your robot's "
+                "URDF (a file path, package://…, example-robot-data://… or topic:/robot_description) and its "
+                "moving joints in a parameter file keyed '/**:', as config/template.yaml does (the paper's "
+                "iCub: config/icub_right_arm.yaml)")
 
     def urdf_path(self) -> Path:
         """Return the URDF path that ``robot.urdf`` names (``urdf.resolve_urdf``)."""

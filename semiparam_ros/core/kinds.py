@@ -61,6 +61,17 @@ class OutputKind(enum.StrEnum):
         return WRENCH_WIDTH if self is OutputKind.WRENCH else int(n_joints)
 
     @property
+    def inputs(self) -> tuple[InputKind, ...]:
+        """The input streams this output needs: joint states, and the sensor's wrenches for a wrench.
+
+        >>> [k.value for k in OutputKind.JOINT_TORQUES.inputs]
+        ['joint_states']
+        """
+        if self is OutputKind.WRENCH:
+            return (InputKind.JOINT_STATES, InputKind.WRENCH)
+        return (InputKind.JOINT_STATES,)
+
+    @property
     def label(self) -> str:
         """Human name for titles: ``wrench`` or ``joint torques``."""
         return self.value.replace("_", " ")

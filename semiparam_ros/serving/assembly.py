@@ -4,8 +4,8 @@ Plain Python (no rclpy): :class:`~semiparam_ros.ros.estimator_node.EstimatorNode
 once it has the URDF (from a file, or from a topic it waited on) and wires ROS entities to what comes back.
 Everything that can go wrong here is a start-up error that names its fix.
 
->>> from semiparam_ros.core.config import EstimatorConfig
->>> cfg = EstimatorConfig.defaults().with_overrides({"nonparametric.n_features": 8})
+>>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
+>>> cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "nonparametric.n_features": 8})
 >>> parts = assemble(cfg, checkpoint=None)
 >>> parts.notes
 ['cold start: checkpoint.enabled is false (nothing learned is kept)']

@@ -20,10 +20,10 @@ Missing velocities or accelerations (empty arrays) count as zero with a counted 
 
 Example:
     >>> import numpy as np
-    >>> from semiparam_ros.core.config import EstimatorConfig
+    >>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
     >>> from semiparam_ros.core.estimator.online import OnlineEstimator
     >>> from semiparam_ros.serving.learned_model import LearnedModel
-    >>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": OutputKind.JOINT_TORQUES})
+    >>> cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "robot.output": OutputKind.JOINT_TORQUES})
     >>> est = OnlineEstimator(cfg)
     >>> ff = FeedForward(LearnedModel(est))
     >>> names = ff.joints[::-1]  # any order: the names say which value is which
@@ -238,6 +238,8 @@ class FeedForward:
                                        "missing_velocities": 0, "missing_accelerations": 0, "clamped": 0,
                                        **{f"drops.{r}": 0 for r in DROP_REASONS}}
         self.last_error: str | None = None
+        #: The drop reason of :attr:`last_error` (a key of :data:`TRAJECTORY_DROP_REASONS`), or None.
+        self.last_reason: str | None = None
         #: Trajectories answered, points that fell back to the rigid-body part, drops by reason.
         self.trajectory_counts: dict[str, int] = {"published": 0, "points": 0, "fallback_points": 0,
                                                   "clamped_points": 0,
@@ -257,7 +259,7 @@ class FeedForward:
 
     def _drop(self, reason: str, message: str) -> None:
         self.counts[f"drops.{reason}"] += 1
-        self.last_error = message
+        self.last_error, self.last_reason = message, reason
 
     def _index(self, names: tuple[str, ...], drop: Callable[[str, str], None] | None = None
                ) -> np.ndarray | None:
@@ -362,7 +364,7 @@ class FeedForward:
 
     def _trajectory_drop(self, reason: str, message: str) -> None:
         self.trajectory_counts[f"drops.{reason}"] += 1
-        self.last_error = message
+        self.last_error, self.last_reason = message, reason
 
     def trajectory(self, desired: DesiredState) -> TrajectoryEffort | None:
         """Return the efforts of every point of a trajectory, or None when it is dropped (counted).
@@ -380,10 +382,10 @@ class FeedForward:
             ``trajectory_counts['drops.<reason>']``).
 
         >>> import numpy as np
-        >>> from semiparam_ros.core.config import EstimatorConfig
+        >>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
         >>> from semiparam_ros.core.estimator.online import OnlineEstimator
         >>> from semiparam_ros.serving.learned_model import LearnedModel
-        >>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": OutputKind.JOINT_TORQUES})
+        >>> cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "robot.output": OutputKind.JOINT_TORQUES})
         >>> est = OnlineEstimator(cfg)
         >>> ff = FeedForward(LearnedModel(est))
         >>> points = tuple(TrajectoryPoint(k * 10**8, np.full(4, 0.1 * k), np.zeros(4)) for k in range(3))

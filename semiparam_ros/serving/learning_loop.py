@@ -11,8 +11,9 @@ from the last full prediction and not learned (``learning_skipped``); the deferr
 sample runs in an idle turn (:meth:`LearningLoop.apply_pending`). The longest piece of work a prediction
 waits for is then one triangular solve or one update, never both.
 
->>> from semiparam_ros.core.config import EstimatorConfig
->>> loop = LearningLoop(OnlineEstimator(EstimatorConfig.defaults()), queue_size=2, max_delay_s=0.0)
+>>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
+>>> est = OnlineEstimator(EstimatorConfig.from_flat(ICUB_RIGHT_ARM))
+>>> loop = LearningLoop(est, queue_size=2, max_delay_s=0.0)
 >>> [loop.enqueue(InputKind.WRENCH, None, t) for t in (0.0, 1.0, 2.0)]  # the third one drops the oldest
 [False, False, True]
 >>> [t for _, _, t in loop.queue]

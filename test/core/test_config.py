@@ -7,12 +7,17 @@ import yaml
 from helpers import REPO
 
 from semiparam_ros.core.config import (
+    ICUB_RIGHT_ARM,
     PARAMETERS,
     EstimatorConfig,
     load_config,
+    structural_values,
     validate_value,
     write_config,
 )
+from semiparam_ros.core.estimator.build import build_regressor
+from semiparam_ros.core.kinds import OutputKind
+from semiparam_ros.errors import ConfigurationError
 
 ROOT = REPO
 ICUB = ROOT / "config" / "icub_right_arm.yaml"
@@ -38,7 +43,46 @@ def test_shipped_config_sets_every_parameter_and_is_valid():
 def test_defaults_are_valid_and_in_range():
     config = EstimatorConfig.defaults()
     for spec in PARAMETERS:
-        assert validate_value(spec.name, spec.default) == config[spec.name]
+        if spec.name != "robot.output":  # inferred: below
+            assert validate_value(spec.name, spec.default) == config[spec.name]
+
+
+def test_no_parameter_defaults_to_a_robot():
+    """The robot is the user's: no joint, sensor, frame or URDF by default, and the tools say so."""
+    config = EstimatorConfig.defaults()
+    assert config["robot.joints"] == [] and config["robot.urdf"] == ""
+    assert config["robot.ft_sensor"] == "" and config["robot.frame_id"] == ""
+    with pytest.raises(ConfigurationError, match=r"robot\.urdf and robot\.joints are not set.*template"):
+        config.require_robot()
+    named = config.with_overrides({"robot.joints": ["j1"]})
+    named.require_robot(urdf=False)
+    with pytest.raises(ConfigurationError, match=r"^robot\.urdf is not set"):
+        named.require_robot()
+    with pytest.raises(ConfigurationError, match=r"robot\.urdf is not set"):
+        build_regressor(named)
+
+
+def test_the_output_is_inferred_from_the_sensor():
+    """No robot.output: joint torques, unless an F/T sensor is named; an explicit value wins."""
+    assert EstimatorConfig.defaults().output_kind == OutputKind.JOINT_TORQUES
+    sensed = EstimatorConfig.from_flat({"robot.ft_sensor": "r_arm_ft_sensor"})
+    assert sensed.output_kind == OutputKind.WRENCH and sensed.n_outputs == 6
+    explicit = EstimatorConfig.from_flat({"robot.ft_sensor": "s", "robot.output": "joint_torques",
+                                          "robot.joints": ["a", "b"]})
+    assert explicit.output_kind == OutputKind.JOINT_TORQUES and explicit.n_outputs == 2
+    # the resolved value is what a checkpoint's fingerprint names (written before inference existed)
+    assert structural_values(sensed, "P")["robot.output"] == "wrench"
+    shipped = load_config(ICUB)
+    assert {name: shipped[name] for name in ICUB_RIGHT_ARM} == dict(ICUB_RIGHT_ARM)
+
+
+def test_effort_scale_is_one_per_joint_and_never_zero():
+    base = EstimatorConfig.from_flat({"robot.joints": ["a", "b"]})
+    assert base.with_overrides({"robot.effort_scale": [2.0, -0.5]})["robot.effort_scale"] == [2.0, -0.5]
+    with pytest.raises(ConfigurationError, match="one value per joint"):
+        base.with_overrides({"robot.effort_scale": [2.0]})
+    with pytest.raises(ConfigurationError, match="must not hold 0"):
+        base.with_overrides({"robot.effort_scale": [2.0, 0.0]})
 
 
 def test_write_then_load_round_trip(tmp_path):
@@ -58,7 +102,7 @@ def test_write_then_load_round_trip(tmp_path):
         ("nonparametric.n_features", 2.5, "must be an integer"),
         ("nonparametric.sigma", float("nan"), "must be finite"),
         ("nonparametric.forgetting", 1.5, "<= 1"),
-        ("robot.output", "joint_angles", "one of 'wrench', 'joint_torques'"),
+        ("robot.output", "joint_angles", "one of '', 'wrench', 'joint_torques'"),
         ("robot.gravity", [0.0, -9.81], "must have 3 values"),
         ("learning_enabled", "yes", "true or false"),
         ("robot.joints", "r_elbow", "must be a list"),
@@ -77,7 +121,7 @@ def test_invalid_values_are_refused_with_the_parameter_named(name, value, fragme
 
 
 def test_cross_parameter_rules():
-    base = EstimatorConfig.defaults()
+    base = EstimatorConfig.from_flat(ICUB_RIGHT_ARM)
     with pytest.raises(ValueError, match="duplicate"):
         base.with_overrides({"robot.joints": ["r_elbow", "r_elbow"]})
     with pytest.raises(ValueError, match="same length"):

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from helpers import REPO
-from semiparam_ros.core.config import EstimatorConfig, load_config
+from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig, load_config
 from semiparam_ros.core.estimator.build import build_regressor
 from semiparam_ros.core.estimator.online import OnlineEstimator, StepResult
 from semiparam_ros.core.stream.messages import JointStateData, WrenchData
@@ -118,7 +118,7 @@ class Stream:
 
 @functools.cache
 def _stream(n_steps: int, *, with_residual: bool, noise: float, wrench_offset_ns: int, seed: int) -> Stream:
-    regressor = build_regressor(EstimatorConfig.defaults())
+    regressor = build_regressor(EstimatorConfig.from_flat(ICUB_RIGHT_ARM))
     traj = make_trajectory(regressor, seed)
     rng = np.random.default_rng(seed + 1000)
     k = np.arange(1, n_steps + 1)

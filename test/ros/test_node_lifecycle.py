@@ -15,6 +15,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from semiparam_ros.core.config import ICUB_RIGHT_ARM
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 
@@ -66,7 +67,7 @@ def test_lifecycle_transitions(tmp_path, monkeypatch):
         latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         desc = client.node.create_publisher(String, "/robot_description", latched)
-        desc.publish(String(data=resolve_urdf("").read_text()))
+        desc.publish(String(data=resolve_urdf(ICUB_RIGHT_ARM["robot.urdf"]).read_text()))
         deadline = time.monotonic() + 30
         while not _transition(client, Transition.TRANSITION_CONFIGURE):
             assert time.monotonic() < deadline, node.output()

@@ -15,7 +15,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from semiparam_ros.core.config import PARAMETERS, EstimatorConfig, parameter_spec
+from semiparam_ros.core.config import ICUB_RIGHT_ARM, PARAMETERS, EstimatorConfig, parameter_spec
 from semiparam_ros.core.stream.messages import joint_state_from_msg
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.ros.conversions import (
@@ -151,7 +151,7 @@ def test_descriptor_matches_the_table(spec):
 
 
 def test_runtime_validator():
-    config = EstimatorConfig.defaults()
+    config = EstimatorConfig.from_flat(ICUB_RIGHT_ARM)
     validate = make_parameter_validator(lambda: config)
     assert set(runtime_parameter_names()) == {p.name for p in PARAMETERS if not p.read_only}
     assert "learning_enabled" in runtime_parameter_names()

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.serving.learning_loop import warm_up_kernels
 
@@ -15,7 +15,7 @@ from semiparam_ros.serving.learning_loop import warm_up_kernels
 @pytest.mark.parametrize("output", ["wrench", "joint_torques"])
 @pytest.mark.parametrize("method", ["savgol", "kalman"])
 def test_warm_up_steps_through_the_acceleration_estimators_warm_up(method, output):
-    cfg = EstimatorConfig.defaults().with_overrides({"acceleration.method": method, "robot.output": output})
+    cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "acceleration.method": method, "robot.output": output})
     est = OnlineEstimator(cfg)
     # at least three synthetic samples went through the step; none was learned by the real estimator
     assert warm_up_kernels(cfg, est) >= 3

@@ -10,6 +10,7 @@ from helpers.ros import REPO, NodeProcess, TestClient, make_ros_env
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
+from semiparam_ros.core.config import ICUB_RIGHT_ARM
 from semiparam_ros.core.rigid_body.urdf import example_robot_data_path, resolve_urdf
 from semiparam_ros.errors import ConfigurationError
 
@@ -75,7 +76,7 @@ def test_description_without_the_joints_or_none_at_all_stops_the_node(tmp_path, 
     env = make_ros_env(tmp_path, monkeypatch)
     client = TestClient(env)
     try:
-        _latch(client, resolve_urdf("").read_text())  # the iCub: no panda joints
+        _latch(client, resolve_urdf(ICUB_RIGHT_ARM["robot.urdf"]).read_text())  # the iCub: no panda joints
         node = NodeProcess(env, ["robot.urdf:=topic:/robot_description"],
                            params_file=REPO / "config" / "panda.yaml", tag="wrong")
         assert node.wait(timeout=120) == 2

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from helpers.streams import assert_same_state, feed, rich_stream, snapshot
 
-from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.stream.messages import WrenchData
 from semiparam_ros.errors import CheckpointError
@@ -26,7 +26,7 @@ def _kind(msg) -> str:
 
 
 def _loop(max_delay_s: float = 0.0, queue_size: int = 100_000, **overrides) -> LearningLoop:
-    cfg = EstimatorConfig.defaults().with_overrides({"nonparametric.n_features": 50, **overrides})
+    cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "nonparametric.n_features": 50, **overrides})
     return LearningLoop(OnlineEstimator(cfg), queue_size=queue_size, max_delay_s=max_delay_s)
 
 
@@ -274,7 +274,7 @@ def test_a_default_checkpoint_of_another_robot_is_moved_aside_and_a_configured_o
     from semiparam_ros.errors import CheckpointError
     from semiparam_ros.serving.checkpoint_writer import default_checkpoint_path
 
-    cfg = EstimatorConfig.defaults().with_overrides({"nonparametric.n_features": 8})
+    cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "nonparametric.n_features": 8})
     other = OnlineEstimator(cfg.with_overrides({"nonparametric.n_features": 16}))  # another structure
     path = default_checkpoint_path("/arm/estimator")
     assert path.parent.parent.name == "semiparam_ros"

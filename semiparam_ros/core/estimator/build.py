@@ -57,8 +57,10 @@ def build_regressor(config: EstimatorConfig, urdf_xml: str | None = None,
 
     Raises:
         FileNotFoundError: If ``robot.urdf`` names no file (and no ``urdf_xml`` is given).
-        ConfigurationError: If the URDF, joints or sensor are invalid.
+        ConfigurationError: If the URDF or the joints are not set (:meth:`EstimatorConfig.require_robot`), or
+            the URDF, joints or sensor are invalid.
     """
+    config.require_robot(urdf=urdf_xml is None)
     output = config.output_kind
     if urdf_xml is None:
         path = config.urdf_path()
@@ -181,6 +183,7 @@ def build_pipeline(config: EstimatorConfig) -> SamplePipeline:
         max_abs_output=bound("limits.max_abs_output"),
         glitch_ratio=config["limits.glitch_ratio"],
         glitch_time_constant=config["limits.glitch_time_constant"],
+        effort_scale=config["robot.effort_scale"] or None,
     )
 
 

@@ -39,6 +39,7 @@ from semiparam_ros.core.estimator.state import (
     read_period,
     read_version,
 )
+from semiparam_ros.core.estimator.units import EffortUnitsCheck
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.learners._step_kernels import joined_within
 from semiparam_ros.core.learners.contract import Prediction, RigidBodyUser
@@ -103,9 +104,9 @@ class OnlineEstimator:
         kind: Learner to run; the node runs ``"SP"``, whose prediction carries all three parts.
 
     Example:
-        >>> from semiparam_ros.core.config import EstimatorConfig
+        >>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
         >>> from semiparam_ros.core.stream.messages import JointStateData
-        >>> est = OnlineEstimator(EstimatorConfig.defaults())  # iCub right arm, F/T sensor wrench
+        >>> est = OnlineEstimator(EstimatorConfig.from_flat(ICUB_RIGHT_ARM))  # iCub arm, F/T wrench
         >>> est.regressor.n_base
         17
         >>> est.process(JointStateData(10**9, ("r_elbow",), [0.1]))  # joints missing
@@ -147,6 +148,12 @@ class OnlineEstimator:
         self.inline_projection = False
         self._projected_at: int | None = None  # stamp [ns] the schedule counts from (None: next sample)
         self._projected_learned = 0  # n_samples_learned at the last solution
+        #: Whether the first seconds of measured efforts look like the URDF's torques in N·m (joint torques
+        #: only; fed by :meth:`process`): see :mod:`~semiparam_ros.core.estimator.units`.
+        self.units_check = (EffortUnitsCheck(self.regressor, config["robot.joints"])
+                            if config.output_kind == OutputKind.JOINT_TORQUES else None)
+        #: Warnings about the input for the user, appended once each (the node logs and clears them).
+        self.warnings: list[str] = []
 
     # ------------------------------------------------------------------ streaming
     def process(self, msg: InputMessage, *, skip_learning: bool = False) -> list[StepResult]:
@@ -171,7 +178,12 @@ class OnlineEstimator:
         # Streaming counts that as a drop rather than abort the message and lose the other samples it
         # completed. Any other exception is a bug and propagates, with the counters untouched.
         results: list[StepResult] = []
+        check = self.units_check
         for sample in samples:
+            if check is not None and not check.done and check.add(sample.stamp_ns, sample.q, sample.dq,
+                                                                   sample.ddq, sample.y):
+                if check.findings:
+                    self.warnings.append(check.message())
             try:
                 results.append(self.step(sample, skip_learning=skip_learning))
             except RejectedSampleError:

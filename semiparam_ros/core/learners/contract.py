@@ -28,11 +28,11 @@ caller already validated (finite, the right shape), so a combination validates o
 
 Units: ``x = [q, q̇, q̈]`` (rad, rad/s, rad/s²); ``y`` a wrench (N, N·m, sensor frame) or joint torques (N·m).
 
->>> from semiparam_ros.core.config import EstimatorConfig
+>>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
 >>> from semiparam_ros.core.estimator.online import OnlineEstimator
->>> model = OnlineEstimator(EstimatorConfig.defaults()).model
+>>> model = OnlineEstimator(EstimatorConfig.from_flat(ICUB_RIGHT_ARM)).model
 >>> isinstance(model, Learner), [rls.n_features for rls in model.adaptive_stages()]
-(True, [32, 500])
+(True, [17, 500])
 """
 
 from __future__ import annotations

@@ -732,10 +732,10 @@ class RigidBodyRegressor:
             RejectedSampleError: If X is not (N, 3n).
 
         Example:
-            >>> from semiparam_ros.core.config import EstimatorConfig
+            >>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
             >>> from semiparam_ros.core.estimator.build import build_regressor
-            >>> reg = build_regressor(EstimatorConfig.defaults().with_overrides(
-            ...     {"robot.output": OutputKind.JOINT_TORQUES}))
+            >>> reg = build_regressor(EstimatorConfig.from_flat(
+            ...     {**ICUB_RIGHT_ARM, "robot.output": OutputKind.JOINT_TORQUES}))
             >>> X = np.random.default_rng(0).uniform(-1.0, 1.0, (5, 3 * reg.n_joints))
             >>> many = reg.base_regressor_of_inputs(X)
             >>> many.shape == (5, reg.n_outputs, reg.n_base)

@@ -35,6 +35,7 @@ arm can hit itself or its surroundings inside them must narrow them (``Excitatio
 
 Example:
     >>> import numpy as np
+    >>> from semiparam_ros.core.kinds import OutputKind
     >>> from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
     >>> from semiparam_ros.core.rigid_body.urdf import example_robot_data_path
     >>> urdf = example_robot_data_path("robots/ur_description/urdf/ur5_robot.urdf")

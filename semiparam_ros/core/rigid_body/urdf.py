@@ -371,7 +371,7 @@ def resolve_urdf(spec: str) -> pathlib.Path:
     """Return the URDF file that a ``robot.urdf`` value names.
 
     Args:
-        spec: ``""`` for the iCub URDF of example-robot-data; ``"package://<package>/<path>"`` for a file
+        spec: ``"package://<package>/<path>"`` for a file
             of a ROS package (:func:`package_file`: the ament index, then the pip prefixes);
             ``"example-robot-data://<relative>"`` for a file of example-robot-data (the ROS package if
             installed, else the wheel; e.g. ``example-robot-data://robots/panda_description/urdf/
@@ -383,10 +383,12 @@ def resolve_urdf(spec: str) -> pathlib.Path:
 
     Raises:
         FileNotFoundError: If a package or example-robot-data file is named and not found.
-        ConfigurationError: For a ``topic:`` value (offline tools need a file).
+        ConfigurationError: For an empty value (no robot is assumed) or a ``topic:`` value (offline tools
+            need a file).
     """
     if not spec:
-        return icub_urdf_path()
+        raise ConfigurationError("robot.urdf is not set: name your robot's URDF (a file path, package://…, "
+                                 "example-robot-data://…)")
     if spec.startswith(TOPIC_SCHEME):
         raise ConfigurationError(f"robot.urdf = {spec!r} names a topic: only the node can read it; give "
                                  "offline tools the URDF file (e.g. ros2 param get /robot_state_publisher "

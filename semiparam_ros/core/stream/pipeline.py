@@ -206,6 +206,9 @@ class SamplePipeline:
         glitch_ratio: Increment ratio beyond which a joint state is a glitch (> 0; ``None`` or 0 = no
             glitch check).
         glitch_time_constant: Memory of the running mean increments (s, > 0).
+        effort_scale: N·m per reported effort unit, one per joint of ``joints`` (finite, non-zero),
+            multiplying ``JointState.effort`` before anything else reads it (a driver reporting motor
+            currents); ``None`` = efforts are N·m.
 
     Attributes:
         drops: Reason → count, every reason of :data:`DROP_REASONS` present (zeros included).
@@ -245,6 +248,7 @@ class SamplePipeline:
         max_abs_output: float | None = 1e4,
         glitch_ratio: float | None = 50.0,
         glitch_time_constant: float = 0.05,
+        effort_scale: Sequence[float] | None = None,
     ) -> None:
         if isinstance(joints, str):
             raise ConfigurationError("joints must be a sequence of joint names, not a single string")
@@ -254,6 +258,13 @@ class SamplePipeline:
         if len(set(joints)) != len(joints):
             raise ConfigurationError(f"joints must be unique, got {joints}")
         output = OutputKind.parse(output)
+        self._effort_scale: np.ndarray | None = None
+        if effort_scale is not None and len(effort_scale):
+            scale = np.asarray(effort_scale, dtype=np.float64)
+            if scale.shape != (len(joints),) or not np.isfinite(scale).all() or (scale == 0.0).any():
+                raise ConfigurationError(f"effort_scale must hold one finite, non-zero value per joint "
+                                         f"({len(joints)}), got {list(effort_scale)}")
+            self._effort_scale = scale
         check_range("sync_tolerance (s)", sync_tolerance, 0.0)
         check_range("buffer_s (s)", buffer_s, 0.0, lo_inclusive=False)
         if int(max_buffer) < 1:
@@ -433,6 +444,8 @@ class SamplePipeline:
         q = msg.position[index]
         dq = msg.velocity[index]
         effort = msg.effort[index] if torques else None
+        if effort is not None and self._effort_scale is not None:
+            effort = effort * self._effort_scale  # reported units → N·m
         # one pass per array: NaN, inf and implausible values all fail the bound; sort out which on failure
         if not (
             _within(q, self._max_q)

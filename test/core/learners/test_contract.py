@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
 from semiparam_ros.core.estimator.build import build_model, build_regressor, learner_variants, traits_of
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.contract import Learner, PeriodSettings
@@ -26,18 +26,18 @@ def config(combination: str, **overrides: object) -> EstimatorConfig:
             "adaptation.time_constant": TAU_S, "nonparametric.standardizer_warmup_s": WARMUP_S,
             "nonparametric.standardizer_warmup": 0, "gate.enabled": False}
     if combination == "joint":  # the joint fit needs one forgetting factor for both stages
-        base["nonparametric.forgetting"] = EstimatorConfig.defaults()["parametric.forgetting"]
-    return EstimatorConfig.defaults().with_overrides({**base, **overrides})
+        base["nonparametric.forgetting"] = EstimatorConfig.from_flat(ICUB_RIGHT_ARM)["parametric.forgetting"]
+    return EstimatorConfig.from_flat(ICUB_RIGHT_ARM).with_overrides({**base, **overrides})
 
 
 @pytest.fixture(scope="module")
 def regressor():
-    return build_regressor(EstimatorConfig.defaults())
+    return build_regressor(EstimatorConfig.from_flat(ICUB_RIGHT_ARM))
 
 
 def stream(n: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
     rng = np.random.default_rng(seed)
-    n_joints = len(EstimatorConfig.defaults()["robot.joints"])
+    n_joints = len(EstimatorConfig.from_flat(ICUB_RIGHT_ARM)["robot.joints"])
     return [(rng.uniform(-1, 1, 3 * n_joints), rng.normal(0, 2, 6)) for _ in range(n)]
 
 

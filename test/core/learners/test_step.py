@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners import _step_kernels as kernels
 from semiparam_ros.core.learners.cascade import SemiparametricModel
@@ -213,7 +213,7 @@ def test_gated_estimator_step_equals_predict_then_learn_one(kind):
     if kind == "SPJ":
         overrides.update({"semiparametric.combination": "joint", "nonparametric.forgetting": 1.0,
                           "parametric.forgetting": 1.0})
-    cfg = EstimatorConfig.defaults().with_overrides(overrides)
+    cfg = EstimatorConfig.from_flat(ICUB_RIGHT_ARM).with_overrides(overrides)
     model_kind = "SP" if kind == "SPJ" else kind
     est = OnlineEstimator(cfg, kind=model_kind)
     ref = OnlineEstimator(cfg, regressor=est.regressor, kind=model_kind)

@@ -191,7 +191,7 @@ def test_checkpoint_keeps_the_prior_and_refuses_another_prior(tmp_path):
 # ---------------------------------------------------------------- shipped parameter files
 def test_template_lists_every_parameter_with_its_default(tmp_path):
     """Uncommenting config/template.yaml's '# key: value' lines gives a file that sets every parameter, to its
-    default (the F/T names are blanked there: a joint-torque arm has no sensor)."""
+    default (but the robot's URDF and joints, which have none)."""
     import re
 
     from semiparam_ros.core.config import PARAMETERS
@@ -211,7 +211,7 @@ def test_template_lists_every_parameter_with_its_default(tmp_path):
 
     flat = flatten(yaml.safe_load((tmp_path / "t.yaml").read_text())["/**"]["ros__parameters"])
     assert set(flat) == {p.name for p in PARAMETERS}
-    blank = {"robot.ft_sensor", "robot.frame_id", "robot.urdf", "robot.joints", "robot.output"}
+    blank = {"robot.urdf", "robot.joints"}
     for p in PARAMETERS:
         if p.name not in blank:
             assert flat[p.name] == p.default, p.name

@@ -15,7 +15,7 @@ import pytest
 import scipy.linalg as sla
 import scipy.signal as ss
 
-from semiparam_ros.core.config import EstimatorConfig
+from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
 from semiparam_ros.core.estimator.build import build_pipeline
 from semiparam_ros.core.stream.acceleration import (
     KALMAN_PRIOR_VARIANCE,
@@ -287,7 +287,7 @@ def test_invalid_kalman_model_is_a_configuration_error():
 
 
 def test_parameter_table_builds_the_kalman_pipeline():
-    cfg = EstimatorConfig.defaults().with_overrides({"acceleration.method": "kalman",
+    cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "acceleration.method": "kalman",
                                                      "acceleration.bandwidth_hz": 12.0})
     pipe = build_pipeline(cfg)
     assert pipe.acceleration.method == "kalman" and pipe.acceleration.bandwidth_hz == 12.0
@@ -333,7 +333,7 @@ def test_pipeline_emits_each_joint_torque_sample_with_its_own_joint_state():
     from semiparam_ros.core.stream.messages import JointStateData
     from semiparam_ros.core.stream.pipeline import DROP_ACCELERATION_WARMUP
 
-    cfg = EstimatorConfig.defaults().with_overrides({
+    cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM,
         "robot.output": "joint_torques", "acceleration.method": "kalman", "acceleration.bandwidth_hz": 8.0,
         "acceleration.kalman_model": "jerk"})
     pipe = build_pipeline(cfg)
@@ -362,12 +362,12 @@ def test_pipeline_emits_each_joint_torque_sample_with_its_own_joint_state():
 
 
 def test_parameter_table_selects_the_kalman_model():
-    cfg = EstimatorConfig.defaults().with_overrides({"acceleration.method": "kalman",
+    cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "acceleration.method": "kalman",
                                                      "acceleration.kalman_model": "jerk"})
     pipe = build_pipeline(cfg)
     assert pipe.acceleration.kalman_model == "jerk"
     assert pipe.estimator.settle_s == pytest.approx(KALMAN_SETTLE["jerk"] / (2 * math.pi * 6.0))
-    defaults = build_pipeline(EstimatorConfig.defaults().with_overrides({"acceleration.method": "kalman"}))
+    defaults = build_pipeline(EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "acceleration.method": "kalman"}))
     assert defaults.acceleration.kalman_model == "snap" and defaults.acceleration.bandwidth_hz == 6.0
     with pytest.raises(ConfigurationError, match=r"acceleration\.kalman_model"):
         cfg.with_overrides({"acceleration.kalman_model": "crackle"})

@@ -134,11 +134,11 @@ def test_set_forgetting_continues_the_closed_form_recursion():
 def test_gate_and_noise_state_survive_a_checkpoint(tmp_path):
     """After a restart from a checkpoint the gate is engaged at once and σ is the saved one: an outlier
     right after the warm start is a contact (gated), not a warm-up sample learned."""
-    from semiparam_ros.core.config import EstimatorConfig
+    from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
     from semiparam_ros.core.estimator.online import OnlineEstimator
     from semiparam_ros.core.stream.messages import JointStateData
 
-    config = EstimatorConfig.defaults().with_overrides({
+    config = EstimatorConfig.from_flat(ICUB_RIGHT_ARM).with_overrides({
         "robot.output": "joint_torques", "nonparametric.n_features": 20, "gate.warmup": 1.0})
     est = OnlineEstimator(config)
     joints = tuple(config["robot.joints"])
