@@ -37,12 +37,12 @@ from semiparam_ros.core.estimator.build import rmse_window_samples
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.kinds import InputKind, OutputKind
 from semiparam_ros.core.rigid_body.urdf import TOPIC_SCHEME
-from semiparam_ros.errors import DescriptionTimeoutError, StartupError
+from semiparam_ros.errors import ConfigurationError, DescriptionTimeoutError, StartupError
 from semiparam_ros.ros.callbacks import quiet_at_shutdown
 from semiparam_ros.ros.description import wait_for_description
 from semiparam_ros.ros.diagnostics import NodeStatistics, diagnostic_array, estimator_statistics
 from semiparam_ros.ros.feedforward_endpoints import FeedForwardEndpoints, endpoint_names
-from semiparam_ros.ros.inputs import INPUT_QOS, InputStreams, ThrottledWarnings
+from semiparam_ros.ros.inputs import INPUT_QOS, DropReporter, InputStreams, ThrottledWarnings
 from semiparam_ros.ros.outputs import PARAMETERS_QOS, Outputs
 from semiparam_ros.ros.parameter_files import parameter_files, unmatched_files_message
 from semiparam_ros.ros.parameters import ParameterError, declare_parameters, make_parameter_validator
@@ -59,10 +59,6 @@ _BATCH = 50  # queued messages processed per turn of the executor (≈ 10–20 m
 _SHUTDOWN_BUDGET_S = 10.0  # time allowed to learn the queue at shutdown (1000 messages take ≈ 0.2 s)
 _CATCH_UP_PERIOD_S = 1e-4  # the backlog timer fires at every executor turn while armed
 _SAVE_TIMEOUT_S = 5.0  # ~/save waits this long for the checkpoint thread, then replies failure
-
-_NO_URDF = ("robot.urdf is not set: give your robot's URDF (a file path, package://…, "
-            "example-robot-data://… or topic:/robot_description) in a parameter file keyed '/**:', as "
-            "config/template.yaml (the paper's iCub: config/icub_right_arm.yaml)")
 
 
 class EstimatorNode(Node):
@@ -99,8 +95,10 @@ class EstimatorNode(Node):
             if unmatched is not None:
                 raise StartupError(unmatched)
             self.config: EstimatorConfig = declare_parameters(self)
-            if not self.config["robot.urdf"]:
-                raise StartupError(_NO_URDF)
+            try:
+                self.config.require_robot()
+            except ConfigurationError as err:
+                raise StartupError(str(err)) from None
             if not deferred:
                 self._build()
         except BaseException as err:
@@ -134,11 +132,12 @@ class EstimatorNode(Node):
         self._stats = NodeStatistics(output, cfg.n_outputs, rmse_window_samples(cfg),
                                      rmse_window_final=bool(cfg["diagnostics.rmse_window"]))
         self._warn = ThrottledWarnings(self.get_logger(), _LOG_THROTTLE_S)
+        self._drops = DropReporter(self.get_logger(), self._warn)
         projection = self._service.projection
         self.outputs = Outputs(self, () if output == OutputKind.WRENCH else self._joints,
                                n_links=0 if projection is None else est.regressor.n_bodies)
-        self.inputs = InputStreams(self, {k: cfg[k.topic_parameter] for k in InputKind},
-                                   {k: functools.partial(self._on_input, k) for k in InputKind},
+        self.inputs = InputStreams(self, {k: cfg[k.topic_parameter] for k in output.inputs},
+                                   {k: functools.partial(self._on_input, k) for k in output.inputs},
                                    loop=self.loop, stats=self._stats, warn=self._warn,
                                    n_joints=len(self._joints))
         if self._service.feedforward is not None:
@@ -153,6 +152,7 @@ class EstimatorNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._diag_period, self._last_diag = float(cfg["diagnostics.period"]), -math.inf
         self.create_timer(self._diag_period, self._on_diagnostics_timer, clock=steady)
+        self.create_timer(1.0, self._check_inputs, clock=steady)
         if projection is not None:
             self.create_service(Trigger, "~/export_urdf", self._on_export_urdf)
             submit = self._service.submit_projection
@@ -172,7 +172,7 @@ class EstimatorNode(Node):
         self._checkpoints.start()
         self._save = SaveService(self, self._on_save, join_timeout_s=2 * _SAVE_TIMEOUT_S)
         self._publish_parameters(force=True)
-        inputs = [self.resolve_topic_name(cfg[k.topic_parameter]) for k in InputKind]
+        inputs = [self.resolve_topic_name(cfg[k.topic_parameter]) for k in output.inputs]
         self.get_logger().info(
             f"estimating {output} of joints {list(self._joints)}: {est.regressor.n_base} base "
             f"parameters, D = {cfg['nonparametric.n_features']} random features; learning "
@@ -225,7 +225,11 @@ class EstimatorNode(Node):
             self.outputs.publish_sample(result, frame, gravity)  # a failure: a bug too
         self._stats.add_step(stepped, est, t_recv)
         if stepped.new_drops:
-            self._warn("pipeline drops", lambda: f"dropped input messages: {est.drops}")
+            self._drops.report(est.drops)
+        if est.warnings:  # once each (the effort units check)
+            for text in est.warnings:
+                self.get_logger().warning(text)
+            est.warnings.clear()
 
     # ================================================================== services, parameters, timers
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -263,6 +267,14 @@ class EstimatorNode(Node):
         if "checkpoints" in targets and self._checkpoints is not None:
             self._checkpoints.apply_runtime_parameters(self.config)
         self.get_logger().info("parameters set: " + ", ".join(f"{k} = {v!r}" for k, v in known.items()))
+
+    @quiet_at_shutdown
+    def _check_inputs(self) -> None:
+        """Name a configured input topic that stays silent on the console (the graph's candidates too)."""
+        if self._active:
+            stats = self._stats
+            self.inputs.check_silence({InputKind.JOINT_STATES: stats.joint_states_received,
+                                       InputKind.WRENCH: stats.wrench_received})
 
     @quiet_at_shutdown
     def _on_diagnostics_timer(self) -> None:

@@ -165,7 +165,8 @@ class FeedForwardEndpoints:
         desired = service.take_desired(lambda: cv.desired_state_from_msg(msg), trajectory=False)
         command = None if desired is None else service.answer(desired, self._now_ns())
         if desired is None or command is None:
-            return self._warn("desired state", lambda: f"desired state dropped: {ff.last_error}")
+            return self._warn(f"desired state {ff.last_reason}",
+                              lambda: f"desired state dropped: {ff.last_error}")
         commands, state, std = cv.feedforward_msgs(command, ff.joints)
         for publisher, out in ((self._commands, commands), (self._state, state), (self._std, std)):
             if publisher.get_subscription_count():
@@ -182,7 +183,7 @@ class FeedForwardEndpoints:
         desired = service.take_desired(lambda: cv.desired_state_from_msg(msg), trajectory=True)
         filled = None if desired is None else service.trajectory(desired)
         if filled is None:
-            self._warn(f"trajectory {ff.last_error}", lambda: f"trajectory dropped: {ff.last_error}")
+            self._warn(f"trajectory {ff.last_reason}", lambda: f"trajectory dropped: {ff.last_error}")
             return None
         if filled.fallback.any():
             n, m = int(filled.fallback.sum()), len(filled.fallback)

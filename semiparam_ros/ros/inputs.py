@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from geometry_msgs.msg import WrenchStamped
@@ -21,12 +21,14 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 
 from semiparam_ros.core.kinds import InputKind
+from semiparam_ros.core.stream.pipeline import DROP_ACCELERATION_WARMUP
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.ros import conversions as cv
 from semiparam_ros.ros.diagnostics import NodeStatistics
 from semiparam_ros.serving.learning_loop import LearningLoop
 
-__all__ = ["GONE", "INPUT_QOS", "MAX_DRAIN", "InputStreams", "ThrottledWarnings", "take"]
+__all__ = ["EXPECTED_DROPS", "GONE", "INPUT_QOS", "MAX_DRAIN", "SILENCE_S", "DropReporter", "InputStreams",
+           "ThrottledWarnings", "take"]
 
 #: The ROS message type of each input stream.
 _MESSAGE_TYPES: dict[InputKind, Any] = {InputKind.JOINT_STATES: JointState, InputKind.WRENCH: WrenchStamped}
@@ -37,6 +39,11 @@ INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=R
 MAX_DRAIN = 64  # messages taken per subscription callback at most (bounds the executor's time away)
 _MIN_NAME_BOUND = 1024
 _MAX_LOST_PER_EVENT = 100_000  # a larger lost-message count in one event is a middleware counter glitch
+#: An input stream silent this long [s] (since start-up or its last message) is named on the console.
+SILENCE_S = 3.0
+#: The ROS type names of the input streams, as the graph reports them.
+_TYPE_NAMES = {InputKind.JOINT_STATES: "sensor_msgs/msg/JointState",
+               InputKind.WRENCH: "geometry_msgs/msg/WrenchStamped"}
 #: What :func:`take` returns for a subscription being destroyed.
 GONE: Any = object()
 
@@ -63,6 +70,42 @@ class ThrottledWarnings:
         self._logger.warning(text() if callable(text) else text)
 
 
+#: Drops that every start, restart or gap of the stream brings (logged once, at INFO).
+EXPECTED_DROPS = frozenset({DROP_ACCELERATION_WARMUP})
+
+
+class DropReporter:
+    """Say on the console why input is dropped: every reason at least once, each throttled on its own.
+
+    Args:
+        logger: The node's logger (INFO for the expected drops).
+        warn: Throttled warnings (one key per reason).
+    """
+
+    def __init__(self, logger: Any, warn: ThrottledWarnings) -> None:
+        self._logger, self._warn = logger, warn
+        self._seen: dict[str, int] = {}
+
+    def report(self, drops: Mapping[str, int]) -> list[str]:
+        """Log the reasons whose counts grew since the last call; return them (for tests)."""
+        grown = []
+        for reason, count in drops.items():
+            seen = self._seen.get(reason, 0)
+            self._seen[reason] = count  # a reset zeroes the counts: they grow again from there
+            if count <= seen:
+                continue
+            grown.append(reason)
+            if reason in EXPECTED_DROPS:
+                if seen == 0:
+                    self._logger.info(f"{count} joint states waited for the acceleration estimate's window "
+                                      "(expected at start-up and after a gap: drops.acceleration_warmup)")
+                continue
+            nonzero = ", ".join(f"{k} {v}" for k, v in drops.items() if v)
+            self._warn(f"drop {reason}", f"input dropped: {reason} ({count} so far; /diagnostics "
+                                         f"drops.{reason}); every non-zero count: {nonzero}")
+        return grown
+
+
 def take(sub: Any) -> Any:
     """Take one waiting message of a subscription as the executor does.
 
@@ -79,11 +122,11 @@ def take(sub: Any) -> Any:
 
 
 class InputStreams:
-    """Subscribe to joint states and wrenches and feed them, converted, to a :class:`LearningLoop`.
+    """Subscribe to the input streams and feed them, converted, to a :class:`LearningLoop`.
 
     Args:
         node: The node subscribing.
-        topics: Topic per input kind.
+        topics: Topic per input kind subscribed to (joint states, and wrenches for an F/T sensor).
         callbacks: The subscription callback per kind (the node's: it decides when to run the loop).
         loop: The learning loop the converted inputs are queued in.
         stats: Counts inputs and drops.
@@ -98,16 +141,64 @@ class InputStreams:
         self._max_names = max(_MIN_NAME_BOUND, 16 * n_joints)
         overrides = QoSOverridingOptions.with_default_policies()
         self.subscriptions: dict[InputKind, Any] = {}
-        for kind, msg_type in _MESSAGE_TYPES.items():
-            topic = topics[kind]
+        for kind, topic in topics.items():
+            msg_type = _MESSAGE_TYPES[kind]
             events = SubscriptionEventCallbacks(incompatible_qos=self._incompatible_qos_logger(topic),
                                                 message_lost=self.lost_counter(topic),
                                                 use_default_callbacks=False)
             self.subscriptions[kind] = node.create_subscription(
                 msg_type, topic, callbacks[kind], INPUT_QOS, qos_overriding_options=overrides,
                 event_callbacks=events, raw=True)
-        js, wr = ((k, self.subscriptions[k]) for k in (InputKind.JOINT_STATES, InputKind.WRENCH))
-        self._order = {InputKind.JOINT_STATES: (wr, js), InputKind.WRENCH: (js, wr)}
+        #: Messages received per stream at the last :meth:`check_silence`, and when that count last changed.
+        self._heard = {kind: (0, time.monotonic()) for kind in self.subscriptions}
+        self._silent: set[InputKind] = set()  # streams named silent since their last message
+        # the other stream first: the callback just took one of its own kind (see drain)
+        subs = self.subscriptions
+        self._order = {own: (*((k, subs[k]) for k in subs if k != own), (own, subs[own])) for own in subs}
+
+    def check_silence(self, received: dict[InputKind, int], now: float | None = None) -> list[str]:
+        """Warn once per silence about a stream that received nothing for :data:`SILENCE_S` seconds.
+
+        The warning names the topic as resolved and the topics of that message type the graph knows of
+        (the usual cause: the robot publishes elsewhere, e.g. ``/robot/joint_states``); a stream that
+        speaks again is watched afresh.
+
+        Args:
+            received: Messages received so far per stream (the node's statistics).
+            now: Monotonic time [s] (default: now).
+
+        Returns:
+            The warnings logged (for tests; empty when every stream speaks).
+        """
+        now = time.monotonic() if now is None else now
+        logged = []
+        for kind in self.subscriptions:
+            count = received.get(kind, 0)
+            last_count, since = self._heard[kind]
+            if count != last_count:
+                self._heard[kind] = (count, now)
+                self._silent.discard(kind)
+                continue
+            if kind in self._silent or now - since < SILENCE_S:
+                continue
+            self._silent.add(kind)
+            text = self.silence_message(kind, now - since, count)
+            self._node.get_logger().warning(text)
+            logged.append(text)
+        return logged
+
+    def silence_message(self, kind: InputKind, silent_s: float, count: int) -> str:
+        """Say that a stream is silent, and which topics of its type exist (the graph, now)."""
+        topic = self._node.resolve_topic_name(self.subscriptions[kind].topic_name)
+        type_name = _TYPE_NAMES[kind]
+        others = sorted(name for name, types in self._node.get_topic_names_and_types()
+                        if type_name in types and name != topic
+                        and self._node.count_publishers(name) > 0)
+        where = (f"topics of that type with publishers: {', '.join(others)}" if others
+                 else "no other topic of that type has a publisher")
+        since = "since start-up" if count == 0 else "since the last one"
+        return (f"no {type_name} on {topic} for {silent_s:.0f} s ({since}); {where}; set "
+                f"{kind.topic_parameter} (or remap) to the robot's topic")
 
     def intake(self, kind: InputKind, msg: bytes | Any) -> None:
         """Convert one input (serialised, as the subscriptions deliver it, or a message object); queue it."""

@@ -89,6 +89,15 @@ def parse_node_args(args: list[str]) -> argparse.Namespace:
     return parser.parse_args(args)
 
 
+#: What ``--print-defaults`` says before the parameters.
+PARAMETERS_HEADER = (
+    "# The estimator learns your robot's inverse dynamics from sensor_msgs/JointState on topics.joint_states "
+    "(the joint\n# torques of JointState.effort, in N·m), or, when robot.ft_sensor names an F/T sensor, "
+    "that sensor's\n# geometry_msgs/WrenchStamped on topics.wrench. It needs robot.urdf and robot.joints "
+    "(no robot is assumed);\n# everything else below has a rate- and robot-independent default. Template: "
+    "config/template.yaml.")
+
+
 def main(args: list[str] | None = None) -> int:
     """Run the estimator node until shut down (Ctrl-C, SIGTERM or context shutdown).
 
@@ -112,7 +121,11 @@ def main(args: list[str] | None = None) -> int:
               file=sys.stderr, flush=True)
         return 2
     if options.print_defaults:
-        print(describe_parameters())
+        try:
+            print(PARAMETERS_HEADER)
+            print(describe_parameters(), flush=True)
+        except BrokenPipeError:  # `estimator --print-defaults | head`: the reader had enough
+            sys.stderr.close()
         return 0
     files = parameter_files(argv)
     # rcl lets a '/**' block of a parameter file beat '-p': the command line is given back to win

@@ -153,5 +153,6 @@ def test_corrupted_bag_is_counted_and_survived(ros_env, tmp_path, tmp_path_facto
     for stamp, pred in offline.predictions.items():
         np.testing.assert_allclose(preds[stamp], pred.total, rtol=1e-9, atol=1e-9)
     out = node.output()
-    assert "dropped input messages" in out  # logged (throttled), not silent
-    assert out.count("dropped input messages") < 10
+    for reason, count in injected.items():  # every reason reaches the console, each throttled on its own
+        if count:
+            assert 1 <= out.count(f"input dropped: {reason} (") <= 3, reason
