@@ -5,9 +5,11 @@
     export_urdf --checkpoint kuka.npz --out kuka_identified.urdf
 
 Prints what the data determined (the information matrix's condition number and least-excited
-directions) and the consistent link masses; writes the robot's URDF with each identified link's
-``<inertial>`` and each joint's ``<dynamics damping friction>``. Argument parsing only
-(:mod:`semiparam_ros.core.rigid_body.identification`).
+directions) and, per link, which quantities came from the data and which from the URDF; writes the
+robot's URDF with each link's ``<inertial>`` and each joint's ``<dynamics damping friction>``, the same
+lines as a comment at its top. A link the data left implausible (a mass beyond 4× or below ¼ of the
+URDF's, a centre of mass far from its frame) keeps its URDF values and is named in a warning, as is a
+payload the distal link carries. Argument parsing only (:mod:`semiparam_ros.core.rigid_body.plausible`).
 """
 
 from __future__ import annotations
@@ -40,15 +42,17 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         model = load_model(args.checkpoint)
-        estimate = model.consistent()
+        links = model.plausible_links()
         print(model.excitation().text())
-        for i, body in enumerate(estimate.body_names):
-            mass, com, _ = estimate.link(i)
-            print(f"  {body}: {mass:.4g} kg, centre of mass {com.round(4).tolist()} m")
-        atomic_write_text(args.out, export_urdf(model.estimator.regressor, estimate))
+        for line in links.comments():
+            print(f"  {line}")
+        atomic_write_text(args.out, export_urdf(model.estimator.regressor, links.estimate, links.comments()))
     except (ValueError, OSError) as err:
         return error_exit("export_urdf", err)
-    print(f"wrote {args.out} (projection solved in {1e3 * estimate.solve_s:.0f} ms)")
+    warning = links.warning()
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
+    print(f"wrote {args.out} (projection solved in {1e3 * links.estimate.solve_s:.0f} ms)")
     return 0
 
 

@@ -20,9 +20,9 @@ about the joint axis (what RNEA returns).
 Example:
     >>> import tempfile, pathlib
     >>> import numpy as np
-    >>> from semiparam_ros.core.config import EstimatorConfig
+    >>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
     >>> from semiparam_ros.core.estimator.online import OnlineEstimator
-    >>> est = OnlineEstimator(EstimatorConfig.defaults())  # the iCub arm of example-robot-data, F/T wrench
+    >>> est = OnlineEstimator(EstimatorConfig.from_flat(ICUB_RIGHT_ARM))  # iCub arm, F/T wrench
     >>> path = pathlib.Path(tempfile.mkdtemp()) / "icub.npz"
     >>> est.save(path)
     >>> model = load_model(path)
@@ -57,6 +57,7 @@ from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.core.learners.uncertainty import predict_with_variance
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, ExcitationReport
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate
+from semiparam_ros.core.rigid_body.plausible import PlausibleLinks
 from semiparam_ros.core.validation import check_finite_array
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
@@ -165,6 +166,24 @@ class LearnedModel:
                                              self.estimator.column_scale, rls.lam)
             self._consistent = (key, estimate)
         return self._consistent[1]
+
+    def plausible_links(self) -> PlausibleLinks:
+        """Return the per-link inertials a user can load into a URDF (what ``export_urdf`` writes).
+
+        The consistent estimate, with every link the data left implausible (a mass far from the URDF's, a
+        centre of mass far from its frame) held at its URDF values and the rest re-fitted
+        (:mod:`semiparam_ros.core.rigid_body.plausible`); its ``warning()`` names them and any payload.
+
+        Raises:
+            ValueError: For a model without a rigid-body part (``NP``).
+            ConfigurationError: If the solver fails.
+        """
+        from semiparam_ros.core.rigid_body.plausible import plausible_links  # the projection: cvxpy
+
+        estimate = self.consistent()
+        par = self._rigid_learner()
+        return plausible_links(self.estimator.regressor, estimate, par.parameters, par.rls.R,
+                               self.estimator.column_scale, par.rls.lam)
 
     def payload(self) -> PayloadEstimate:
         """Return the payload the distal body carries: mass [kg], centre of mass [m], inertia [kg·m²].

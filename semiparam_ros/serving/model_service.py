@@ -8,9 +8,10 @@ re-solves every ``parametric.consistent_period``
 (:class:`~semiparam_ros.serving.projection.ProjectionWorker`: cvxpy holds the GIL, so never in the
 learning thread).
 
->>> from semiparam_ros.core.config import EstimatorConfig
+>>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
+>>> from semiparam_ros.core.estimator.online import OnlineEstimator
 >>> from semiparam_ros.serving.learning_loop import LearningLoop
->>> cfg = EstimatorConfig.defaults().with_overrides({"robot.output": OutputKind.JOINT_TORQUES,
+>>> cfg = EstimatorConfig.from_flat({**ICUB_RIGHT_ARM, "robot.output": OutputKind.JOINT_TORQUES,
 ...                                                  "parametric.consistent": False})
 >>> loop = LearningLoop(OnlineEstimator(cfg), queue_size=10, max_delay_s=0.0)
 >>> service = ModelService(loop, cfg)
@@ -169,9 +170,9 @@ class ModelService:
                 served.attach_consistent(worker.latest)
             ff.model = served
             self._ff_key = (self.loop.version, key[1])
-        if worker is not None and worker.latest is not None and self._links_published != key[1]:
+        if worker is not None and worker.latest_links is not None and self._links_published != key[1]:
             self._links_published = key[1]
-            return worker.latest
+            return worker.latest_links.estimate
         return None
 
     def take_desired(self, convert: Callable[[], DesiredState], *, trajectory: bool) -> DesiredState | None:
@@ -314,16 +315,18 @@ class ModelService:
     def export_urdf(self, path: Path | None) -> tuple[bool, str]:
         """Write the URDF with the newest consistent parameters to ``path``; returns ``(ok, message)``."""
         worker = self.projection
-        estimate = None if worker is None else worker.latest
-        if estimate is None:
+        links = None if worker is None else worker.latest_links
+        if links is None:
             return False, "no consistent estimate yet (the worker solves every parametric.consistent_period)"
         if path is None:
             return False, "checkpoint.enabled is false: the URDF is written next to the checkpoint"
         try:
-            atomic_write_text(path, export_urdf(self.loop.estimator.regressor, estimate))
+            atomic_write_text(path, export_urdf(self.loop.estimator.regressor, links.estimate,
+                                                links.comments()))
         except OSError as err:
             return False, f"cannot write {path}: {err}"
-        return True, f"wrote {path}"
+        warning = links.warning()
+        return True, f"wrote {path}" + (f"; {warning}" if warning else "")
 
     def close(self) -> None:
         """Stop the projection worker (if any)."""

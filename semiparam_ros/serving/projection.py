@@ -15,6 +15,7 @@ from semiparam_ros.core.rigid_body.identification import (
     consistent_parameters,
     prior_weights,
 )
+from semiparam_ros.core.rigid_body.plausible import PlausibleLinks, plausible_links
 
 __all__ = ["ProjectionWorker"]
 
@@ -32,9 +33,9 @@ class ProjectionWorker:
         urdf_xml: The URDF text the estimator's regressor was built from.
 
     Example:
-        >>> from semiparam_ros.core.config import EstimatorConfig
+        >>> from semiparam_ros.core.config import ICUB_RIGHT_ARM, EstimatorConfig
         >>> from semiparam_ros.core.estimator.online import OnlineEstimator
-        >>> est = OnlineEstimator(EstimatorConfig.defaults())
+        >>> est = OnlineEstimator(EstimatorConfig.from_flat(ICUB_RIGHT_ARM))
         >>> worker = ProjectionWorker(est.config.to_flat(), est.regressor.urdf_xml)
         >>> par = est.model.parametric
         >>> worker.submit(par.parameters, par.rls.R, est.column_scale, par.rls.lam)
@@ -60,6 +61,8 @@ class ProjectionWorker:
         self._closed = False
         #: The newest solution, or None.
         self.latest: ConsistentEstimate | None = None
+        #: The links of the newest solution a user can load (``~/link_inertias``, ``~/export_urdf``), or None.
+        self.latest_links: PlausibleLinks | None = None
         #: The newest failure's message, or None.
         self.error: str | None = None
         self._solved = 0
@@ -92,7 +95,7 @@ class ProjectionWorker:
                 return
             with self._done:
                 if kind == "ok":
-                    self.latest = payload
+                    self.latest, self.latest_links = payload
                     self.error = None
                     self._solved += 1
                 else:
@@ -133,8 +136,9 @@ def _worker_main(conn: object, config_flat: dict, urdf_xml: str) -> None:  # pra
             return
         theta, R, scale, lam = job
         try:
-            result: tuple[str, object] = ("ok", consistent_parameters(regressor, theta, R, scale, lam,
-                                                                      weights=weights))
+            estimate = consistent_parameters(regressor, theta, R, scale, lam, weights=weights)
+            links = plausible_links(regressor, estimate, theta, R, scale, lam, weights=weights)
+            result: tuple[str, object] = ("ok", (estimate, links))
         except Exception as err:  # a solver failure is reported, the worker lives on
             result = ("error", f"{type(err).__name__}: {err}")
         conn.send(result)  # type: ignore[attr-defined]

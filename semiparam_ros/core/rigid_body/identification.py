@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,8 +42,8 @@ from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = ["DISTAL_PRIOR_FACTOR", "OUTSIDE_EXCITED", "ConsistentEstimate", "ExcitationReport",
-           "consistent_parameters", "excitation_report", "export_urdf", "full_column_rms", "outside_excited",
-           "prior_weights"]
+           "consistent_parameters", "excitation_report", "export_urdf", "full_column_rms", "link_of",
+           "outside_excited", "prior_weights"]
 
 #: The distal body's CAD prior is this many times weaker than the other bodies' (module docstring).
 DISTAL_PRIOR_FACTOR = 10.0
@@ -115,11 +116,24 @@ class ConsistentEstimate:
 
     def link(self, i: int) -> tuple[float, np.ndarray, np.ndarray]:
         """Return body i: mass [kg], centre of mass [m] in the body frame, inertia about it (3, 3) [kg·m²]."""
-        p = self.full[10 * i: 10 * i + 10]
-        m = float(p[0])
-        c = p[1:4] / m if m > 0 else np.zeros(3)
-        i_o = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]])
-        return m, c, i_o - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+        return link_of(self.full, i)
+
+
+def link_of(full: np.ndarray, i: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """Return body i of full parameters: mass [kg], centre of mass [m] (body frame), inertia about it [kg·m²].
+
+    Args:
+        full: Per-body ``[m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` about each body frame.
+        i: The body's index.
+
+    Returns:
+        ``(m, c (3,), I_c (3, 3))``; a massless body has its centre of mass at the origin.
+    """
+    p = full[10 * i: 10 * i + 10]
+    m = float(p[0])
+    c = p[1:4] / m if m > 0 else np.zeros(3)
+    i_o = np.array([[p[4], p[5], p[7]], [p[5], p[6], p[8]], [p[7], p[8], p[9]]])
+    return m, c, i_o - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
 
 
 def prior_weights(regressor: RigidBodyRegressor) -> np.ndarray:
@@ -141,7 +155,8 @@ def prior_weights(regressor: RigidBodyRegressor) -> np.ndarray:
 
 def consistent_parameters(regressor: RigidBodyRegressor, theta: np.ndarray, R: np.ndarray,
                           scale: np.ndarray, lam: float, *, prior: np.ndarray | None = None,
-                          weights: np.ndarray | None = None) -> ConsistentEstimate:
+                          weights: np.ndarray | None = None,
+                          fixed_bodies: Sequence[int] = ()) -> ConsistentEstimate:
     """Project an online estimate onto physically consistent per-link parameters (module docstring).
 
     Args:
@@ -152,6 +167,8 @@ def consistent_parameters(regressor: RigidBodyRegressor, theta: np.ndarray, R: n
         lam: λ of the pull toward the prior (the learner's ridge).
         prior: (n_params,) full prior (default the URDF's CAD parameters, zero extras).
         weights: (n_params,) per-parameter weights w of the prior term (default :func:`prior_weights`).
+        fixed_bodies: Bodies whose ten parameters are held at the prior (the data do not move them; the
+            other bodies take what they can of the data).
 
     Returns:
         The consistent estimate.
@@ -184,6 +201,8 @@ def consistent_parameters(regressor: RigidBodyRegressor, theta: np.ndarray, R: n
     nonneg = [j for j, name in enumerate(names) if name.endswith((".viscous", ".coulomb", ".armature"))]
     if nonneg:
         constraints.append(pi[nonneg] >= 0)
+    for i in fixed_bodies:
+        constraints.append(pi[10 * i: 10 * i + 10] == prior[10 * i: 10 * i + 10])
     problem = cp.Problem(cp.Minimize(cost), constraints)
     start = time.perf_counter()
     try:
@@ -274,7 +293,8 @@ def outside_excited(variance: np.ndarray, threshold: float = OUTSIDE_EXCITED) ->
     return np.asarray(np.max(np.asarray(variance), axis=-1) > threshold)
 
 
-def export_urdf(regressor: RigidBodyRegressor, estimate: ConsistentEstimate) -> str:
+def export_urdf(regressor: RigidBodyRegressor, estimate: ConsistentEstimate,
+                comments: Sequence[str] = ()) -> str:
     """Write the URDF with the consistent per-link inertials and the identified joint friction.
 
     Each identified body's link gets the body's mass, centre of mass and inertia about it (rpy 0); links
@@ -284,7 +304,10 @@ def export_urdf(regressor: RigidBodyRegressor, estimate: ConsistentEstimate) -> 
 
     Args:
         regressor: The regressor the estimate was made with (its URDF text, bodies, locked joints).
-        estimate: The consistent estimate.
+        estimate: The consistent estimate (for a file a user loads: the ``estimate`` of the plausible
+            links, :class:`~semiparam_ros.core.rigid_body.plausible.PlausibleLinks`).
+        comments: Lines written as an XML comment at the top of the robot element (where each link's
+            values came from).
 
     Returns:
         The URDF text.
@@ -316,6 +339,10 @@ def export_urdf(regressor: RigidBodyRegressor, estimate: ConsistentEstimate) -> 
             dynamics = ET.SubElement(element, "dynamics")
         dynamics.set("damping", repr(float(viscous or 0.0)))
         dynamics.set("friction", repr(float(coulomb or 0.0)))
+    if comments:
+        text = "\n".join(["", "Inertials identified by semiparam_ros (export_urdf):",
+                          *(f"  {line}" for line in comments), ""])
+        root.insert(0, ET.Comment(text.replace("--", "- -")))
     return ET.tostring(root, encoding="unicode")
 
 
