@@ -81,13 +81,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     for bag in report.recovered:
         print(f"warning: {bag} was truncated or corrupt: read as far as possible, samples were lost",
               file=sys.stderr)
+    for text in report.warnings:
+        print(f"warning: {text}", file=sys.stderr)
+    if report.fit is not None and not args.quiet:
+        print(report.fit.text())
     if args.json is not None:
         from semiparam_ros.atomic import atomic_open
 
         summary = {"bags": report.bags, "messages": report.messages, "samples": report.samples,
                    "learned": report.learned, "drops": report.drops, "not_learned": report.not_learned,
                    "wall_s": report.wall_s, "log_s": report.log_s, "realtime_factor": report.realtime_factor,
-                   "recovered": report.recovered, "checkpoint": report.checkpoint}
+                   "recovered": report.recovered, "checkpoint": report.checkpoint,
+                   "warnings": report.warnings, "fit": None if report.fit is None else report.fit.as_dict()}
         with atomic_open(args.json, "w") as fh:
             json.dump(summary, fh, indent=2)
     return 0

@@ -48,6 +48,33 @@ def atomic_save_npz(path: str | os.PathLike[str], arrays: Mapping[str, np.ndarra
         np.savez(fh, **converted)  # type: ignore[arg-type]  # numpy's stub reads ** as allow_pickle
 
 
+#: The first bytes of files a user may hand over instead of a checkpoint, and what they are.
+_MAGIC = ((b"\x89MCAP", "an MCAP bag (learn it with `learn`)"),
+          (b"SQLite format 3", "a SQLite (.db3) bag (learn it with `learn`)"),
+          (b"\x93NUMPY", "a single .npy array"))
+
+
+def _other_kind_of_file(path: Path) -> str | None:
+    """Name what a file is when it is plainly no zip archive (None: a zip, or unrecognised)."""
+    with path.open("rb") as fh:
+        head = fh.read(512)
+    if not head:
+        return "empty"
+    if head.startswith(b"PK"):
+        return None
+    for magic, what in _MAGIC:
+        if head.startswith(magic):
+            return what
+    text = head.decode("utf-8", errors="replace").lstrip()
+    if "ros__parameters" in text or path.suffix in (".yaml", ".yml"):
+        return "a YAML file (a parameter file goes to `learn --config` or the node's --params-file)"
+    if text.startswith("<?xml") or "<robot" in text:
+        return "an XML/URDF file (robot.urdf in the parameter file names it)"
+    if text.startswith(("{", "[")):
+        return "a JSON file"
+    return None
+
+
 def load_npz(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """Read every array of an ``.npz`` checkpoint into memory.
 
@@ -62,8 +89,16 @@ def load_npz(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
             or contains pickled objects.
     """
     path = Path(path)
+    if path.is_dir():
+        what = " (a bag folder: learn it with `learn`)" if any(path.glob("*.mcap")) or any(
+            path.glob("*.db3")) else ""
+        raise CheckpointError(f"checkpoint {str(path)!r} is a folder{what}, not a .npz checkpoint")
     if not path.is_file():
         raise CheckpointError(f"checkpoint {str(path)!r} does not exist or is not a file")
+    other = _other_kind_of_file(path)
+    if other is not None:
+        raise CheckpointError(f"checkpoint {str(path)!r} is {other}, not a .npz checkpoint (written by "
+                              "`learn --checkpoint`, the node's ~/save or OnlineEstimator.save)")
     try:
         data = np.load(path, allow_pickle=False)
     except ValueError as err:

@@ -15,10 +15,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.io.bags import absolute_topic, read_messages, recovery_notes, topic_info
+from semiparam_ros.serving.fit_summary import FitSummary, SampleReservoir, fit_summary
 
 __all__ = ["LearnProgress", "LearnReport", "learn_bags"]
 
@@ -61,6 +64,8 @@ class LearnReport:
         log_s: Recorded time of the bags [s] (sum over bags of last − first sample stamp).
         recovered: Bags that were truncated or corrupt and read as far as possible (samples were lost).
         checkpoint: Where the checkpoint was written, or None.
+        warnings: What the estimator found wrong with the input (e.g. efforts that are not N·m).
+        fit: The model's fit on a sample of the logs, beside the URDF's (None without samples).
     """
 
     bags: list[str]
@@ -73,6 +78,8 @@ class LearnReport:
     log_s: float = 0.0
     recovered: list[str] = field(default_factory=list)
     checkpoint: str | None = None
+    warnings: list[str] = field(default_factory=list)
+    fit: FitSummary | None = None
 
     @property
     def realtime_factor(self) -> float:
@@ -118,6 +125,8 @@ def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
         est.load(init)
     learned_before = est.n_samples_learned
     report = LearnReport(bags=[str(b) for b in bags])
+    n_joints = len(config["robot.joints"])
+    reservoir = SampleReservoir(3 * n_joints, config.n_outputs)
     start = time.perf_counter()
     next_report = start
     for index, bag in enumerate(bags):
@@ -134,6 +143,9 @@ def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
                 n_msgs += 1
                 results = est.process(msg)
                 if results:
+                    for result in results:
+                        sample = result.sample
+                        reservoir.add(np.concatenate((sample.q, sample.dq, sample.ddq)), sample.y)
                     report.samples += len(results)
                     stamp = results[-1].sample.stamp_ns
                     first_ns = results[0].sample.stamp_ns if first_ns is None else first_ns
@@ -153,6 +165,8 @@ def learn_bags(bags: Sequence[str | Path], config: EstimatorConfig, *,
     report.learned = est.n_samples_learned - learned_before
     report.drops = {k: v for k, v in est.drops.items() if v}
     report.not_learned = {k: v for k, v in est.not_learned.items() if v}
+    report.warnings = list(est.warnings)
+    report.fit = fit_summary(est, *reservoir.arrays())
     if progress is not None:
         progress(LearnProgress(len(bags) - 1, len(bags), 0, 0, report.samples, report.wall_s, report.log_s))
     if checkpoint is not None:

@@ -293,3 +293,49 @@ def test_left_out_terms_are_those_of_the_prediction(panda):
                                atol=1e-9 * (1 + np.abs(total).max()))
     with pytest.raises(ValueError):
         model.predict(q, dq, ddq, exclude=("inertia",))
+
+
+def test_learn_prints_the_fit_beside_the_urdf(panda, tmp_path, capsys):
+    """The fit summary scores the served model, its rigid body and the URDF on a sample of the log: checked
+    against the simulator (the URDF's error is the RMS of truth − RNEA_urdf, within noise) and against
+    load_model's own predictions on the same rows."""
+    report = panda["report"]
+    fit = report.fit
+    rec = panda["rec"]
+    assert fit is not None and fit.n_samples == min(4000, report.samples) and fit.outputs == rec.joint_names
+    # the URDF misses friction, offsets and the 15 % inertial perturbation: far worse than the model
+    assert fit.model.mean() < 0.5 * fit.urdf.mean()
+    urdf = arm_regressor("panda").wrench(rec.q, rec.dq, rec.ddq)
+    independent = np.sqrt(np.mean((rec.measured_torques - urdf) ** 2, axis=0))
+    np.testing.assert_allclose(fit.urdf, independent, rtol=0.15)  # a 4000-row sample of 4000 rows
+    code = learn_cli.main([str(panda["bag"]), "--config", str(PANDA), "--set", "nonparametric.n_features=100",
+                           "--checkpoint", str(tmp_path / "m.npz"), "--json", str(tmp_path / "r.json")])
+    out = capsys.readouterr().out
+    assert code == 0 and "fit on" in out and "URDF" in out and "panda_joint4" in out
+    assert "excitation: information condition number" in out
+    assert json.loads((tmp_path / "r.json").read_text())["fit"]["rmse_urdf"] == pytest.approx(
+        fit.urdf.tolist(), rel=1e-9)
+
+
+def test_load_model_names_what_a_file_is_when_it_is_no_checkpoint(panda, tmp_path):
+    (tmp_path / "my_arm.yaml").write_text("/**:\n  ros__parameters:\n    robot: {joints: [a]}\n")
+    (tmp_path / "arm.urdf").write_text("<?xml version='1.0'?>\n<robot name='a'/>\n")
+    (tmp_path / "empty.npz").write_bytes(b"")
+    for name, what in (("my_arm.yaml", "a YAML file"), ("arm.urdf", "an XML/URDF file"),
+                       ("empty.npz", "is empty")):
+        with pytest.raises(CheckpointError, match=what):
+            load_model(tmp_path / name)
+    mcap = next(panda["bag"].glob("*.mcap"))
+    with pytest.raises(CheckpointError, match="an MCAP bag"):
+        load_model(mcap)
+    with pytest.raises(CheckpointError, match="a bag folder"):
+        load_model(panda["bag"])
+
+
+def test_learn_without_a_robot_says_what_to_set(panda, tmp_path, capsys):
+    cfg = tmp_path / "bare.yaml"
+    cfg.write_text("/**:\n  ros__parameters:\n    topics: {joint_states: /joint_states}\n")
+    code = learn_cli.main([str(panda["bag"]), "--config", str(cfg), "--checkpoint", str(tmp_path / "x.npz")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "robot.urdf and robot.joints are not set" in err and "config/template.yaml" in err

@@ -53,8 +53,9 @@ from semiparam_ros.errors import CheckpointError, ConfigurationError
 
 __all__ = [
     "CAD_COM_STD_M", "CAD_INERTIA_RELATIVE_STD", "CAD_MASS_RELATIVE_STD", "DETERMINED_MASS_FRACTION",
+    "MAX_COM_STD_M",
     "PayloadEstimate", "PayloadLearner",
-    "cad_parameter_std", "payload_beyond_urdf", "payload_from_parameters",
+    "cad_parameter_std", "payload_beyond_urdf", "payload_from_parameters", "undetermined_reason",
 ]
 
 _I = ((0, 1, 3), (1, 2, 4), (3, 4, 5))  # [Ixx, Ixy, Iyy, Ixz, Iyz, Izz] → 3×3
@@ -145,8 +146,41 @@ def payload_from_parameters(delta: np.ndarray, covariance: np.ndarray, *, body: 
     std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", jac, covariance, jac), 0.0))
     inertia = np.array([[values[4 + k] for k in row] for row in _I])
     inertia_std = np.array([[std[4 + k] for k in row] for row in _I])
-    return PayloadEstimate(float(values[0]), float(std[0]), values[1:4].copy(), std[1:4].copy(), inertia,
-                           inertia_std, body, int(n_samples), reference, bool(detected), missing)
+    mass, mass_std, com_std = float(values[0]), float(std[0]), std[1:4].copy()
+    if not missing:
+        missing = undetermined_reason(mass, mass_std, com_std)
+    return PayloadEstimate(mass, mass_std, values[1:4].copy(), com_std, inertia, inertia_std, body,
+                           int(n_samples), reference, bool(detected), missing)
+
+
+#: A payload whose centre-of-mass σ exceeds this on an axis is not determined [m].
+MAX_COM_STD_M = 0.5
+
+
+def undetermined_reason(mass: float, mass_std: float, com_std: np.ndarray) -> str:
+    """Say why a payload estimate determines nothing ("" when it does).
+
+    Not determined when the mass σ is not below the mass (nothing is carried, or the distal body was not
+    excited: the estimate is noise around zero) or a centre-of-mass σ exceeds :data:`MAX_COM_STD_M`.
+
+    Args:
+        mass: Estimated mass [kg].
+        mass_std: Its standard deviation [kg].
+        com_std: (3,) standard deviations of the centre of mass [m].
+
+    >>> undetermined_reason(-0.006, 0.267, np.array([18.0, 17.0, 96.0]))
+    'not determined: the mass σ 0.267 kg is not below the mass -0.006 kg (nothing carried, ...)'
+    >>> undetermined_reason(1.5, 0.01, np.array([0.01, 0.01, 0.02]))
+    ''
+    """
+    if not mass_std < abs(mass):
+        return (f"not determined: the mass σ {mass_std:.3g} kg is not below the mass {mass:.3g} kg (nothing "
+                "carried, or the distal body not excited)")
+    worst = float(np.max(com_std))
+    if not worst <= MAX_COM_STD_M:
+        return (f"not determined: a centre-of-mass σ of {worst:.3g} m exceeds {MAX_COM_STD_M:g} m (the "
+                "motion does not separate the payload's position)")
+    return ""
 
 
 #: Assumed accuracy of a URDF's CAD inertial parameters for the links before the payload (one standard
@@ -289,7 +323,9 @@ class PayloadLearner:
 
     Example:
         >>> import numpy as np
-        >>> from semiparam_ros.core.rigid_body.dynamics import point_mass_parameters, resolve_urdf
+        >>> from semiparam_ros.core.kinds import OutputKind
+        >>> from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor, point_mass_parameters
+        >>> from semiparam_ros.core.rigid_body.urdf import resolve_urdf
         >>> urdf_path = resolve_urdf("example-robot-data://robots/panda_description/urdf/panda.urdf")
         >>> joints = [f"panda_joint{i}" for i in range(1, 8)]
         >>> reg = RigidBodyRegressor.from_urdf(urdf_path, joints, output=OutputKind.JOINT_TORQUES)

@@ -227,3 +227,25 @@ def test_payload_beyond_urdf_says_when_it_is_not_determined():
     assert not still.determined
     assert still.missing.startswith("not determined") and "unexcited" in still.missing
     assert np.isfinite(still.mass) and still.mass_std > 0.1
+
+
+def test_no_payload_is_not_determined_on_a_log_without_one(tmp_path):
+    """A Panda carrying nothing, its links 15 % off CAD: whatever number comes out is noise around zero,
+    and the estimate says so (σ of the mass not below the mass, or a centre-of-mass σ beyond 0.5 m)."""
+    from semiparam_ros.core.rigid_body.payload import MAX_COM_STD_M, undetermined_reason
+
+    rec = simulate_arm(ArmScenarioConfig(name="panda_empty", robot="panda", duration=20.0, rate=200.0,
+                                         seed=5))
+    est = OnlineEstimator(load_config(REPO / "config" / "panda.yaml").with_overrides(
+        {"nonparametric.n_features": 50}))
+    for k in range(rec.stamps.shape[0]):
+        est.process(JointStateData(int(rec.stamps[k]), rec.joint_names, rec.q_measured[k],
+                                   rec.dq_measured[k], rec.measured_torques[k]))
+    est.save(tmp_path / "empty.npz")
+    got = load_model(tmp_path / "empty.npz").payload()
+    assert not got.determined and got.missing.startswith("not determined"), got
+    assert got.mass_std >= abs(got.mass) or float(np.max(got.com_std)) > MAX_COM_STD_M
+    # the rule itself, on the numbers a real KUKA log without payload gave
+    assert undetermined_reason(-0.006, 0.267, np.array([18.0, 17.0, 96.0])).startswith("not determined")
+    assert undetermined_reason(1.5, 0.05, np.array([0.01, 0.01, 0.01])) == ""
+    assert "centre-of-mass" in undetermined_reason(1.5, 0.05, np.array([0.01, 0.6, 0.01]))
