@@ -35,9 +35,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--robot",
         choices=("icub", "panda", "ur5"),
-        default="icub",
-        help="icub: F/T sensor in the upper arm; panda, ur5: measured joint torques (default %(default)s)",
+        help="icub: F/T sensor in the upper arm; panda, ur5: measured joint torques (default icub)",
     )
+    p.add_argument(
+        "--urdf",
+        help="simulate the joint torques of this URDF's arm instead of a preset (a file path, package://…, "
+        "example-robot-data://…; with --joints): friction, offsets and noise scaled to its gravity torques; "
+        "a parameter file for learn is written beside each bag (params.yaml)",
+    )
+    p.add_argument("--joints", nargs="+", metavar="JOINT", help="with --urdf: the moving joints, in order")
+    p.add_argument("--end-effector", help="with --urdf: the frame payloads and contacts act at (default: the "
+                   "child link of the last joint)")
     p.add_argument(
         "--rate",
         type=float,

@@ -28,8 +28,9 @@ The measurement model, at every joint-state stamp t (s from the first stamp), jo
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -69,7 +70,9 @@ __all__ = [
     "JointFriction",
     "JointTorqueMeasurement",
     "ParameterPerturbation",
+    "arm_from_urdf",
     "arm_regressor",
+    "arm_spec",
     "perturb_parameters",
     "simulate_arm",
     "true_parameters",
@@ -348,6 +351,93 @@ ARM_ROBOTS: dict[str, ArmRobot] = {
     ),
 }
 
+def arm_spec(robot: str | ArmRobot) -> ArmRobot:
+    """Return an arm: a preset by its key in :data:`ARM_ROBOTS`, or the arm itself.
+
+    Raises:
+        ValueError: For an unknown key.
+    """
+    if isinstance(robot, ArmRobot):
+        return robot
+    if robot not in ARM_ROBOTS:
+        raise ValueError(f"robot must be one of {sorted(ARM_ROBOTS)} (or an arm of any URDF: --urdf), got "
+                         f"{robot!r}")
+    return ARM_ROBOTS[robot]
+
+
+#: Friction, offsets and noise of :func:`arm_from_urdf`, per joint, as fractions of the joint's torque scale
+#: (the largest URDF gravity torque over random poses): of the order of the presets' (the Panda's Coulomb
+#: friction is ≈ 2 % of its largest gravity torques).
+_VISCOUS_PER_TORQUE = 0.015  # N·m·s/rad per N·m
+_COULOMB_PER_TORQUE = 0.02
+_OFFSET_PER_TORQUE = 0.005
+_NOISE_PER_TORQUE = 0.003
+#: The least torque scale of a joint [N·m] (a wrist joint gravity barely loads).
+_MIN_TORQUE_SCALE = 1.0
+
+
+def arm_from_urdf(urdf: str, joints: Sequence[str], *, name: str | None = None,
+                  end_effector: str | None = None, max_velocity: float = 1.0,
+                  max_acceleration: float = 4.0) -> ArmRobot:
+    """Build a simulated arm of any fixed-base URDF (the user's own, for a dry run of identification).
+
+    The excitation stays within 90 % of each joint's URDF range about its middle (±π for a continuous
+    joint); friction, offsets and torque noise scale with each joint's torque scale, the largest URDF
+    gravity torque over 64 random poses (at least 1 N·m): viscous 1.5 %, Coulomb 2 %, offsets ±0.5 %,
+    noise 0.3 % of it; the payload is 5 % of the moving links' mass, 3 cm out along the end effector's z.
+    Every other joint is locked at 0.
+
+    Args:
+        urdf: ``robot.urdf`` value (a file path, ``package://``, ``example-robot-data://``).
+        joints: The moving joints, in the order they are published.
+        name: Prefix of the bag names (default the URDF's robot name, made a plain identifier).
+        end_effector: Frame where payloads are attached and contacts act (default the child link of the
+            last joint).
+        max_velocity: Bound on every |q̇| of the excitation [rad/s].
+        max_acceleration: Bound on every |q̈| of the excitation [rad/s²].
+
+    Returns:
+        The arm.
+
+    Raises:
+        ValueError: If the URDF cannot be read or a joint or frame is not in it.
+    """
+    import re
+
+    path = str(resolve_urdf(urdf))
+    joints = tuple(joints)
+    reg = regressor_of(path, joints, output=OutputKind.JOINT_TORQUES)
+    lower, upper = reg.position_limits()
+    lower = np.where(np.isfinite(lower), lower, -np.pi)
+    upper = np.where(np.isfinite(upper), upper, np.pi)
+    middle, half = 0.5 * (lower + upper), 0.45 * (upper - lower)
+    window = tuple((float(a), float(b)) for a, b in zip(middle - half, middle + half, strict=True))
+    rng = np.random.default_rng(0)
+    q = rng.uniform(lower, upper, (64, len(joints)))
+    gravity = np.abs(reg.wrench(q, np.zeros_like(q), np.zeros_like(q)))
+    scale = np.maximum(gravity.max(axis=0), _MIN_TORQUE_SCALE)
+    signs = np.where(np.arange(len(joints)) % 2 == 0, 1.0, -1.0)
+    friction = JointFriction(viscous=tuple(_VISCOUS_PER_TORQUE * scale),
+                             coulomb=tuple(_COULOMB_PER_TORQUE * scale),
+                             offset=tuple(_OFFSET_PER_TORQUE * scale * signs),
+                             armature=(0.0,) * len(joints), smoothing=0.05)
+    masses = reg.urdf_parameters()[0::10][: reg.n_bodies]
+    root = ET.parse(path).getroot()
+    robot_name = name or re.sub(r"\W+", "_", root.get("name") or "robot").strip("_").lower() or "robot"
+    if end_effector is None:
+        child = {j.get("name"): j.find("child") for j in root.findall("joint")}
+        element = child.get(joints[-1])
+        if element is None:
+            raise ValueError(f"joint {joints[-1]!r} is not in {urdf}")
+        end_effector = str(element.get("link"))
+    return ArmRobot(name=robot_name, urdf=path, joints=joints, end_effector=end_effector,
+                    position_window=window, max_velocity=float(max_velocity),
+                    max_acceleration=float(max_acceleration), base_period=10.0, friction=friction,
+                    torque_noise_std=tuple(float(v) for v in _NOISE_PER_TORQUE * scale),
+                    position_noise_std=1e-5, velocity_noise_std=1e-3,
+                    payload_mass=round(0.05 * float(masses.sum()), 2), payload_point=(0.0, 0.0, 0.03))
+
+
 #: Scenarios of the arms (:func:`semiparam_ros.sim.generate.preset_configs`): ``excitation`` (no payload),
 #: ``payload`` (pickup at the middle), ``contacts`` (contact episodes in [0.15, 0.65]·T, then a pickup at
 #: 0.75·T; 120 s unless given).
@@ -364,7 +454,7 @@ class ArmScenarioConfig(RecordingConfig):
 
     Attributes:
         name: Bag folder name.
-        robot: Key of :data:`ARM_ROBOTS`.
+        robot: Key of :data:`ARM_ROBOTS`, or any arm (:func:`arm_from_urdf`).
         duration: Length (s).
         rate: Joint-state rate (Hz).
         seed: Seed. The true parameters depend on (robot, seed) only; trajectory and noise also on the
@@ -379,7 +469,7 @@ class ArmScenarioConfig(RecordingConfig):
     """
 
     duration: float = DEFAULT_DURATION_S
-    robot: str = "panda"
+    robot: str | ArmRobot = "panda"
     rate: float = 1000.0
     perturbation: ParameterPerturbation | None = field(default_factory=ParameterPerturbation)
     friction_scale: float = 1.0
@@ -389,11 +479,10 @@ class ArmScenarioConfig(RecordingConfig):
 
     def __post_init__(self) -> None:
         self.check_common()
-        if self.robot not in ARM_ROBOTS:
-            raise ValueError(f"robot must be one of {sorted(ARM_ROBOTS)}, got {self.robot!r}")
-        n = len(ARM_ROBOTS[self.robot].joints)
+        spec = arm_spec(self.robot)
+        n = len(spec.joints)
         if self.trajectory is not None and self.trajectory.n_joints != n:
-            raise ValueError(f"the trajectory moves {self.trajectory.n_joints} joints, {self.robot} has {n}")
+            raise ValueError(f"the trajectory moves {self.trajectory.n_joints} joints, {spec.name} has {n}")
         if isinstance(self.rate, bool) or not (np.isfinite(self.rate) and self.rate > 0):
             raise ValueError(f"rate must be a positive number, got {self.rate!r}")
         if self.rate > 10_000:
@@ -419,7 +508,7 @@ class ArmScenarioConfig(RecordingConfig):
 
     def true_friction(self) -> JointFriction:
         """Return the friction of this recording (the robot's, armature replaced if given, scaled)."""
-        fr = ARM_ROBOTS[self.robot].friction
+        fr = arm_spec(self.robot).friction
         if self.armature is not None:
             fr = replace(fr, armature=(float(self.armature),) * fr.n_joints)
         return fr.scaled(self.friction_scale)
@@ -472,14 +561,14 @@ class ArmRecording:
     info: dict[str, Any]
 
 
-def arm_regressor(robot: str) -> RigidBodyRegressor:
-    """Return the joint-torque regressor of a preset robot (others locked at 0; cached, not thread-safe)."""
-    spec = ARM_ROBOTS[robot]
+def arm_regressor(robot: str | ArmRobot) -> RigidBodyRegressor:
+    """Return the joint-torque regressor of an arm (others locked at 0; cached, not thread-safe)."""
+    spec = arm_spec(robot)
     return regressor_of(str(resolve_urdf(spec.urdf)), tuple(spec.joints), output=OutputKind.JOINT_TORQUES)
 
 
-def _kinematics(robot: str) -> ArmKinematics:
-    spec = ARM_ROBOTS[robot]
+def _kinematics(robot: str | ArmRobot) -> ArmKinematics:
+    spec = arm_spec(robot)
     return arm_kinematics(str(resolve_urdf(spec.urdf)), tuple(spec.joints), spec.end_effector)
 
 
@@ -496,8 +585,8 @@ def true_parameters(config: ArmScenarioConfig) -> np.ndarray:
         Per body ``[m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` (kg, kg·m, kg·m²), the columns of
         :func:`arm_regressor`.
     """
-    spec = ARM_ROBOTS[config.robot]
-    params_urdf = arm_regressor(config.robot).urdf_parameters()
+    spec = arm_spec(config.robot)
+    params_urdf = arm_regressor(spec).urdf_parameters()
     if config.perturbation is None:
         return params_urdf.copy()
     robot_rng = np.random.default_rng([int(config.seed), zlib.crc32(spec.name.encode())])
@@ -554,9 +643,9 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     Raises:
         ValueError: If the robot's URDF cannot be loaded or the excitation leaves the joint limits.
     """
-    spec = ARM_ROBOTS[config.robot]
-    reg = arm_regressor(config.robot)
-    kin = _kinematics(config.robot)
+    spec = arm_spec(config.robot)
+    reg = arm_regressor(spec)
+    kin = _kinematics(spec)
     # Physical robot: (robot, seed) → true_parameters. Recording: (seed, name) → trajectory, noise, contacts.
     rng_traj, rng_joint, rng_torque, rng_contact = recording_seeds(config.seed, config.name)
 

@@ -31,8 +31,11 @@ from semiparam_ros.sim.arms import (
     ARM_SCENARIOS,
     DEFAULT_DURATION_S,
     ArmRecording,
+    ArmRobot,
     ArmScenarioConfig,
     ParameterPerturbation,
+    arm_from_urdf,
+    arm_spec,
 )
 from semiparam_ros.sim.contacts import ContactConfig, contacts_timing
 from semiparam_ros.sim.effects import DEFAULT_EFFECTS, EffectParameters
@@ -107,7 +110,36 @@ def generate(
             recording = simulate_recording(config, progress=bar.update)
             paths.append(write_recording(recording, out / config.name, overwrite=overwrite, compress=compress,
                                          progress=bar.update))
+        if isinstance(recording, ArmRecording):
+            write_parameter_file(recording.robot, paths[-1] / PARAMETER_FILE)
     return paths
+
+
+#: The parameter file written beside an arm's bag (``learn BAG --config BAG/params.yaml``).
+PARAMETER_FILE = "params.yaml"
+
+
+def write_parameter_file(robot: ArmRobot, path: Path) -> None:
+    """Write the node's parameter file for a simulated arm's bags: its URDF (absolute), joints and topic.
+
+    Everything else takes its default, as for the user's own arm (config/template.yaml).
+
+    Raises:
+        OSError: If the file cannot be written (atomically: nothing is left half-written).
+    """
+    import yaml
+
+    from semiparam_ros.atomic import atomic_open
+    from semiparam_ros.core.kinds import InputKind
+    from semiparam_ros.core.rigid_body.urdf import resolve_urdf
+
+    tree = {"/**": {"ros__parameters": {
+        "robot": {"urdf": str(resolve_urdf(robot.urdf).resolve()), "joints": list(robot.joints)},
+        "topics": {InputKind.JOINT_STATES.value: "/joint_states"}}}}
+    header = (f"# semiparam_ros estimator: the simulated {robot.name} of the bag beside this file (joint "
+              "torques).\n#   learn <this bag> --config <this file> --checkpoint model.npz\n")
+    with atomic_open(path, "w") as fh:
+        fh.write(header + yaml.safe_dump(tree, sort_keys=False))
 
 
 #: The iCub's presets: stream rates and length of the bags ``simulate --preset`` writes.
@@ -197,7 +229,7 @@ def _rate_label(rate: float) -> str:
 
 
 def _arm_configs(
-    robot: str,
+    robot: str | ArmRobot,
     scenarios: tuple[str, ...] = ("excitation", "payload"),
     *,
     rate: float = 1000.0,
@@ -213,7 +245,7 @@ def _arm_configs(
     The robot and the scenarios are checked by :func:`preset_configs`.
 
     Args:
-        robot: Key of :data:`ARM_ROBOTS`.
+        robot: Key of :data:`ARM_ROBOTS`, or any arm (:func:`~semiparam_ros.sim.arms.arm_from_urdf`).
         scenarios: Any of :data:`ARM_SCENARIOS`.
         rate: Joint-state rate (Hz).
         duration: Length (s); default 60 s (``contacts``: 120 s).
@@ -230,7 +262,8 @@ def _arm_configs(
     Raises:
         ValueError: On invalid values.
     """
-    mass = ARM_ROBOTS[robot].payload_mass if payload_mass is None else float(payload_mass)
+    spec = arm_spec(robot)
+    mass = spec.payload_mass if payload_mass is None else float(payload_mass)
     extra = {k: v for k, v in overrides.items() if v is not None}
     out = []
     for scenario in scenarios:
@@ -246,7 +279,7 @@ def _arm_configs(
             length = float(duration) if duration is not None else DEFAULT_DURATION_S
             if scenario == "payload":
                 kwargs.update(payload_mass=mass, payload_time=payload_time)
-        name = f"{robot}_{scenario}_{_rate_label(rate)}"
+        name = f"{spec.name}_{scenario}_{_rate_label(rate)}"
         out.append(
             ArmScenarioConfig(
                 name=name, robot=robot, duration=length, rate=float(rate), perturbation=perturbation, **kwargs
@@ -265,13 +298,13 @@ _DEFAULT_SCENARIOS = {"icub": ("xy", "xz", "payload"), **{r: ("excitation", "pay
 ARM_DEFAULT_RATE_HZ = 1000.0
 
 
-def preset_configs(robot: str = "icub", scenarios: tuple[str, ...] | None = None, *, preset: str = "default",
-                   **overrides: Any) -> list[RecordingConfig]:
+def preset_configs(robot: str | ArmRobot = "icub", scenarios: tuple[str, ...] | None = None, *,
+                   preset: str = "default", **overrides: Any) -> list[RecordingConfig]:
     """Return the recording configurations of a robot's scenarios.
 
     Args:
-        robot: ``"icub"`` (F/T sensor wrench) or a key of :data:`~semiparam_ros.sim.arms.ARM_ROBOTS` (joint
-            torques).
+        robot: ``"icub"`` (F/T sensor wrench), a key of :data:`~semiparam_ros.sim.arms.ARM_ROBOTS` or any arm
+            (:func:`~semiparam_ros.sim.arms.arm_from_urdf`) (joint torques).
         scenarios: Names of :data:`SCENARIOS` ``[robot]``; ``None``: the robot's defaults.
         preset: The iCub's :data:`ICUB_PRESETS` key (the arms have ``"default"`` only).
         **overrides: Fields of the robot's configuration and its builder's options (iCub: ``effects``,
@@ -285,12 +318,13 @@ def preset_configs(robot: str = "icub", scenarios: tuple[str, ...] | None = None
     Raises:
         ValueError: An unknown robot, preset or scenario, or an invalid value.
     """
-    if robot not in SCENARIOS:
+    key = robot if isinstance(robot, str) else "panda"  # any arm has the arms' scenarios
+    if key not in SCENARIOS:
         raise ValueError(f"robot must be one of {sorted(SCENARIOS)}, got {robot!r}")
-    chosen = _DEFAULT_SCENARIOS[robot] if scenarios is None else tuple(scenarios)
-    unknown = [s for s in chosen if s not in SCENARIOS[robot]]
+    chosen = _DEFAULT_SCENARIOS[key] if scenarios is None else tuple(scenarios)
+    unknown = [s for s in chosen if s not in SCENARIOS[key]]
     if unknown:
-        raise ValueError(f"scenarios {unknown} are not {robot}'s: it has {', '.join(SCENARIOS[robot])}")
+        raise ValueError(f"scenarios {unknown} are not {key}'s: it has {', '.join(SCENARIOS[key])}")
     if robot == "icub":
         return list(_icub_configs(preset, chosen, **overrides))
     if preset != "default":
@@ -302,13 +336,17 @@ def preset_configs(robot: str = "icub", scenarios: tuple[str, ...] | None = None
 class SimulationOptions:
     """The ``simulate`` command's options, as given (``None``/``False``: not given).
 
-    Attributes mirror the command line (see ``simulate --help``): ``robot``, ``preset``, ``scenario``,
+    Attributes mirror the command line (see ``simulate --help``): ``robot`` (default ``icub``), or ``urdf``
+    with ``joints`` (and ``end_effector``) for any arm, ``preset``, ``scenario``,
     ``duration`` [s], ``samples``, ``rate``/``joint_rate``/``wrench_rate`` [Hz], ``delay`` [s],
     ``radius`` [m], ``speed`` [m/s], ``seed``, the payload, trajectory variability, effects, contact, arm
     and noise options.
     """
 
-    robot: str = "icub"
+    robot: str | None = None
+    urdf: str | None = None
+    joints: tuple[str, ...] | None = None
+    end_effector: str | None = None
     preset: str = "default"
     scenario: tuple[str, ...] | None = None
     duration: float | None = None
@@ -361,14 +399,25 @@ def options_configs(options: SimulationOptions) -> list[RecordingConfig]:
             a non-positive ``samples``, or an invalid value.
     """
     o = options
-    inapplicable = _ARM_ONLY if o.robot == "icub" else _ICUB_ONLY
+    if o.urdf is not None:
+        if o.robot is not None:
+            raise ValueError("--robot and --urdf: give one (--urdf simulates the arm of that URDF)")
+        if not o.joints:
+            raise ValueError("--urdf needs --joints: the moving joints, in the order they are published")
+        robot: str | ArmRobot = arm_from_urdf(o.urdf, o.joints, end_effector=o.end_effector)
+    else:
+        if o.joints or o.end_effector:
+            raise ValueError("--joints and --end-effector go with --urdf")
+        robot = o.robot or "icub"
+    label = robot if isinstance(robot, str) else f"--urdf {o.urdf}"
+    inapplicable = _ARM_ONLY if robot == "icub" else _ICUB_ONLY
     given = ["--" + n.replace("_", "-") for n in inapplicable if getattr(o, n) not in (None, False)]
     if given:
-        raise ValueError(f"{', '.join(given)}: not applicable to --robot {o.robot}")
+        raise ValueError(f"{', '.join(given)}: not applicable to {label}")
     if o.samples is not None and o.samples <= 0:
         raise ValueError("--samples must be positive")
     contacts = _contacts(o)
-    if o.robot == "icub":
+    if robot == "icub":
         wrench_rate = o.wrench_rate if o.wrench_rate is not None else o.rate
         duration = o.duration
         if o.samples is not None:
@@ -395,13 +444,13 @@ def options_configs(options: SimulationOptions) -> list[RecordingConfig]:
     trajectory = None
     if o.trajectory is not None:
         described = read_excitation(o.trajectory)
-        joints = ARM_ROBOTS[o.robot].joints
+        joints = arm_spec(robot).joints
         if described.joint_names != joints:
             raise ValueError(f"--trajectory {o.trajectory}: its joints {list(described.joint_names)} are not "
-                             f"{o.robot}'s {list(joints)}")
+                             f"{label}'s {list(joints)}")
         trajectory = described.trajectory
     return preset_configs(
-        o.robot, o.scenario, preset=o.preset, rate=rate, duration=duration, payload_mass=o.payload_mass,
+        robot, o.scenario, preset=o.preset, rate=rate, duration=duration, payload_mass=o.payload_mass,
         payload_time=o.payload_time, contacts=contacts, seed=o.seed, perturbation=perturbation,
         friction_scale=0.0 if o.no_effects else friction_scale, armature=o.armature,
         noise_scale=0.0 if o.no_noise else o.noise_scale, trajectory=trajectory)

@@ -416,3 +416,40 @@ def test_one_pipeline_and_one_writer_for_both_measurements(tmp_path):
     rec = simulate_recording(arm)
     one = write_recording(rec, tmp_path / "one" / "bag")
     assert (one / "bag.mcap").stat().st_size > 0 and "panda" in (one / "scenario.yaml").read_text()
+
+
+def test_any_urdf_is_simulated_and_learned_from_its_parameter_file(tmp_path, capsys):
+    """simulate --urdf FILE --joints …: the UR5's URDF given as a plain file (as a user's own arm is), clean
+    torques equal to Pinocchio's RNEA of the true parameters, and the bag learned with the parameter file
+    written beside it."""
+    from semiparam_ros.cli import learn
+
+    urdf = resolve_urdf(ARM_ROBOTS["ur5"].urdf)
+    joints = list(ARM_ROBOTS["ur5"].joints)
+    argv = ["--urdf", str(urdf), "--joints", *joints, "--duration", "3", "--rate", "200", "--scenario",
+            "excitation", "--no-noise", "--friction-scale", "0", "--out", str(tmp_path), "--quiet"]
+    assert main(argv) == 0
+    (bag,) = [p for p in tmp_path.iterdir() if p.is_dir()]
+    assert bag.name == "ur5_excitation_200hz"
+    info = yaml.safe_load((bag / "scenario.yaml").read_text())
+    params = np.asarray(info["true_parameters"]["before_payload"])
+    measured = read_topic_arrays(bag, "/joint_states").fields
+    truth = read_topic_arrays(bag, "/ground_truth/joint_accelerations").fields
+    model = pin.buildModelFromUrdf(str(urdf))  # the UR5's URDF moves exactly these six joints
+    for j in range(1, model.njoints):
+        model.inertias[j] = pin.Inertia.FromDynamicParameters(params[10 * (j - 1): 10 * j])
+    expected = rnea(model, truth["positions"], truth["velocities"], truth["accelerations"])
+    np.testing.assert_allclose(measured["effort"], expected, rtol=0, atol=tolerance(expected))
+    config = yaml.safe_load((bag / "params.yaml").read_text())["/**"]["ros__parameters"]
+    assert config["robot"] == {"urdf": str(urdf.resolve()), "joints": joints}
+    assert learn.main([str(bag), "--config", str(bag / "params.yaml"), "--set", "nonparametric.n_features=20",
+                       "--checkpoint", str(tmp_path / "m.npz"), "--quiet"]) == 0
+    import re
+
+    learned = re.search(r"learned (\d+) of (\d+) samples", capsys.readouterr().out)
+    assert learned and learned[1] == learned[2] and int(learned[1]) >= 550  # 600 stamps, less the q̈ warm-up
+    # misuse: one line, exit 2
+    assert main(["--urdf", str(urdf), "--out", str(tmp_path / "x"), "--quiet"]) == 2
+    assert main(["--robot", "panda", "--urdf", str(urdf), "--joints", *joints, "--quiet"]) == 2
+    assert main(["--joints", *joints, "--quiet"]) == 2
+    assert "--joints" in capsys.readouterr().err
