@@ -17,7 +17,12 @@ from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.eval.bags.contact_detection import contact_report, run_contacts
 from semiparam_ros.eval.bags.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags
-from semiparam_ros.eval.protocol.horizon import horizon_figure, horizon_markdown
+from semiparam_ros.eval.protocol.horizon import (
+    HEADLINE_HORIZONS,
+    headline_markdown,
+    horizon_figure,
+    horizon_markdown,
+)
 from semiparam_ros.eval.protocol.options import DEFAULT_WINDOW_S, ProtocolOptions
 from semiparam_ros.eval.protocol.report import adaptation_report, protocol_report
 from semiparam_ros.io.bags import recovery_notes
@@ -111,7 +116,9 @@ def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: 
             says; ``SPC``: the paper's cascade).
         options: The protocol's parts, windows and limits (default :class:`ProtocolOptions`).
         horizons: Also score every model by its age (seconds, 0 = one step, ``"frozen"``;
-            :mod:`semiparam_ros.eval.protocol.horizon`), written under ``"horizons"`` in the JSON.
+            :mod:`semiparam_ros.eval.protocol.horizon`), written under ``"horizons"`` in the JSON and
+            tabled. ``None``: joint torques are scored frozen and one step ahead (the headline table, what
+            a controller gets, printed first); a wrench (the paper's set-up) is not.
         paths: Where to write the report, tables and figures (default: nowhere).
         progress: Show a progress bar (only when stderr is a terminal).
         jobs: Models run in parallel on this machine (the numbers do not depend on it).
@@ -125,6 +132,10 @@ def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: 
     """
     topics = topics or Topics.from_config(config)
     paths = paths or ReportPaths()
+    torques = config.output_kind == OutputKind.JOINT_TORQUES
+    asked = horizons is not None
+    if torques and horizons is None:  # lead with what a controller gets: frozen, beside one step ahead
+        horizons = HEADLINE_HORIZONS
     with recovery_notes() as recovered:
         result, info = evaluate_bags(train, test, config, topics=topics, kinds=models or KINDS,
                                      options=options, horizons=horizons, progress=progress, jobs=jobs,
@@ -135,11 +146,14 @@ def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: 
     if horizon is not None:
         info["horizons"] = horizon.to_json()
     report = protocol_report(result, config=config.to_flat(), protocol=info)
-    text = evaluation_text(report)
+    text = "## One step ahead (test-then-train, the paper's protocol)\n\n" + evaluation_text(report)
+    headline = "" if horizon is None else headline_markdown(horizon, report.output.kind.unit)
+    if headline:
+        text = "## What a controller gets\n\n" + headline + "\n" + text
     for note in recovered:
         text = f"WARNING: {note}\n\n" + text
     title = f"{Path(train).name} → {Path(test).name}"
-    if horizon is not None:
+    if horizon is not None and asked:
         text += "\n## By the age of the model\n\n" + horizon_markdown(horizon)
         if paths.horizon_plot is not None:
             horizon_figure(horizon, paths.horizon_plot, title=title)

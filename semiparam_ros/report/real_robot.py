@@ -52,6 +52,7 @@ from semiparam_ros.eval.protocol.horizon import (
     DEFAULT_HORIZONS,
     HorizonReport,
     evaluate_horizons,
+    headline_markdown,
     horizon_figure,
     horizon_markdown,
 )
@@ -417,6 +418,7 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
     """
     report = comparison.report
     joints = list(report.output.components)
+    headline = "" if comparison.horizons is None else headline_markdown(comparison.horizons, "N·m")
     head = "| model | " + " | ".join(joints) + " | mean |\n|---" + "|---" * (len(joints) + 1) + "|\n"
     rmse = "".join(_row(k, [*(m.components[j].rmse for j in joints), m.rmse_mean], ".3f") + "\n"
                    for k, m in report.models.items())
@@ -424,7 +426,9 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
                    for k, m in report.models.items())
     split = report.protocol.get("split_size")
     text = (
-        f"Train: {report.samples_train} samples; test: {report.splits} parts of {split} samples "
+        ("## What a controller gets\n\n" + headline + "\n## One step ahead (test-then-train, the paper's "
+         "protocol)\n\n" if headline else "")
+        + f"Train: {report.samples_train} samples; test: {report.splits} parts of {split} samples "
         f"({report.samples_test} in all, {report.protocol.get('sample_period_s', float('nan')) * 1e3:.1f} ms "
         "period); at regime = second half of each part.\n\n"
         "RMSE at regime [N·m]:\n\n" + head + rmse

@@ -93,3 +93,33 @@ def test_evaluate_on_a_truncated_bag_says_so_in_the_json_and_the_report(bags, tm
     notes = json.loads(out.read_text())["protocol"]["recovered_bags"]
     assert len(notes) == 1 and "cut.mcap" in notes[0] and "recovered" in notes[0]
     assert "WARNING: bag" in capsys.readouterr().out
+
+
+def test_joint_torques_lead_with_what_a_controller_gets(bags, tmp_path, capsys):
+    """On joint torques the first table is the served model (frozen) beside one step ahead, persistence
+    included; its numbers are the JSON's horizon means, and persistence one step ahead is the RMS of the
+    measured torques' one-step differences on the scored samples, computed here from the bag itself."""
+    import json
+
+    out = tmp_path / "report.json"
+    code = evaluate_cli.main([
+        "paper", "--train", str(bags / "train"), "--test", str(bags / "test"), "--config", str(CONFIG),
+        "--set", "robot.output=joint_torques", "--set", "nonparametric.n_features=30",
+        "--models", "P", "SP", "--splits", "2", "--window", "0.5", "--no-progress", "--json", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0
+    assert text.index("## What a controller gets") < text.index("## One step ahead (test-then-train")
+    assert "## By the age of the model" not in text  # the full age table stays an option (--horizons)
+    means = json.loads(out.read_text())["protocol"]["horizons"]["mean"]
+    rows = {line.split("|")[1].strip(): line.split("|")[2:4] for line in text.splitlines()
+            if line.startswith("| ") and line.count("|") == 4}
+    for model in ("P", "SP"):
+        assert float(rows[model][0]) == pytest.approx(means[model]["frozen"], abs=5e-4)
+        assert float(rows[model][1]) == pytest.approx(means[model]["1 step"], abs=5e-4)
+    persistence = rows["persistence (the previous measured output)"]
+    assert persistence[0].strip() == "—"
+    effort = np.array([m.effort for m in read_messages(bags / "test", wrench_topic=None)])
+    # the pipeline's q̈ window drops the first samples (and holds the last): the scored ones are a
+    # contiguous run of the bag, so the one-step differences over any long run agree to a few percent
+    direct = float(np.mean(np.sqrt(np.mean(np.diff(effort, axis=0) ** 2, axis=0))))
+    assert float(persistence[1]) == pytest.approx(direct, rel=0.1)
