@@ -19,7 +19,6 @@ from semiparam_ros.eval.bags.contact_detection import contact_report, run_contac
 from semiparam_ros.eval.bags.replay import KINDS, Topics, evaluate_adaptation, evaluate_bags
 from semiparam_ros.eval.protocol.horizon import (
     HEADLINE_HORIZONS,
-    headline_markdown,
     horizon_figure,
     horizon_markdown,
 )
@@ -35,6 +34,7 @@ from semiparam_ros.report.tables import (
     comparisons_table,
     components_table,
     contacts_table,
+    headline_markdown,
     protocol_table,
 )
 

@@ -52,7 +52,6 @@ from semiparam_ros.eval.protocol.horizon import (
     DEFAULT_HORIZONS,
     HorizonReport,
     evaluate_horizons,
-    headline_markdown,
     horizon_figure,
     horizon_markdown,
 )
@@ -60,6 +59,7 @@ from semiparam_ros.eval.protocol.metrics import OutputSpec
 from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol.prequential import SampleArrays, predict_only, run_protocol, test_then_train
 from semiparam_ros.eval.protocol.report import ProtocolReport, protocol_report
+from semiparam_ros.report.tables import headline_markdown
 
 __all__ = [
     "BATCH",

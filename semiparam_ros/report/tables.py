@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.eval.bags.contact_detection import ContactReport
 from semiparam_ros.eval.protocol.compare import Comparison, format_p
+from semiparam_ros.eval.protocol.horizon import FROZEN, HorizonReport
 from semiparam_ros.eval.protocol.metrics import GROUP_UNITS
 from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S
 from semiparam_ros.eval.protocol.report import AdaptationReport, Check, ProtocolReport
@@ -23,6 +24,7 @@ __all__ = [
     "components_table",
     "contacts_table",
     "fmt",
+    "headline_markdown",
     "protocol_table",
 ]
 
@@ -258,3 +260,40 @@ def contacts_table(report: ContactReport) -> str:
             row.append(f"{ek.delay_s:.3f}" if ek.detected else "missed")
         lines.append("| " + " | ".join(row) + " |")
     return text + "\nPer episode:\n\n" + "\n".join(lines) + "\n"
+
+
+def headline_markdown(report: HorizonReport, unit: str) -> str:
+    """Render what a controller gets: each model frozen (served) beside one step ahead, persistence too.
+
+    The frozen column is the model learned on the training log and nothing after — what ``load_model``
+    and the node's feed-forward serve on motion they have not seen; one step ahead is the paper's
+    test-then-train, where the previous measured output (persistence) is the baseline any learning must
+    beat. Needs the ``"1 step"`` and ``"frozen"`` horizons
+    (:data:`~semiparam_ros.eval.protocol.horizon.HEADLINE_HORIZONS`).
+
+    Args:
+        report: A :class:`~semiparam_ros.eval.protocol.horizon.HorizonReport` with both horizons.
+        unit: Unit of the outputs (for the title).
+
+    Returns:
+        Markdown ('' when a horizon is missing).
+    """
+    labels = {h.label for h in report.horizons}
+    if not {"1 step", FROZEN} <= labels:
+        return ""
+    rows = []
+    for model in report.rmse:
+        if model == "persistence":
+            frozen = "—"
+            name = "persistence (the previous measured output)"
+        else:
+            frozen = f"{report.mean(model, FROZEN):.3f}"
+            name = "CAD (the URDF, never learns)" if model == "CAD" else model
+        rows.append(f"| {name} | {frozen} | {report.mean(model, '1 step'):.3f} |\n")
+    return (f"Mean RMSE over the outputs [{unit}] on the test log:\n\n"
+            "| model | frozen: served, as a feed-forward uses it | one step ahead: test-then-train |\n"
+            "|---|---|---|\n" + "".join(rows)
+            + "\nFrozen: learned on the training log only, predicts the test log from the state "
+            "(`load_model(...).predict`, the node's feed-forward). One step ahead: learned every test sample "
+            "up to the previous one (the paper's protocol); there the previous measured output is "
+            "already accurate, so compare with persistence.\n")

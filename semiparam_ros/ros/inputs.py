@@ -191,9 +191,10 @@ class InputStreams:
         """Say that a stream is silent, and which topics of its type exist (the graph, now)."""
         topic = self._node.resolve_topic_name(self.subscriptions[kind].topic_name)
         type_name = _TYPE_NAMES[kind]
-        others = sorted(name for name, types in self._node.get_topic_names_and_types()
-                        if type_name in types and name != topic
-                        and self._node.count_publishers(name) > 0)
+        own, graph = self._node.get_name(), self._node
+        others = sorted(name for name, types in graph.get_topic_names_and_types()
+                        if type_name in types and name != topic  # the node's own outputs are no candidates
+                        and any(info.node_name != own for info in graph.get_publishers_info_by_topic(name)))
         where = (f"topics of that type with publishers: {', '.join(others)}" if others
                  else "no other topic of that type has a publisher")
         since = "since start-up" if count == 0 else "since the last one"

@@ -149,7 +149,9 @@ def test_misspelt_name_in_a_parameter_file_and_print_defaults(ros_env, tmp_path)
     assert "Traceback" not in out
     listing = subprocess.run([sys.executable, "-m", "semiparam_ros.ros.main", "--print-defaults"],
                              capture_output=True, text=True, timeout=120, env=ros_env.env, check=True).stdout
-    lines = listing.splitlines()
+    header = [line for line in listing.splitlines() if line.startswith("#")]
+    lines = [line for line in listing.splitlines() if not line.startswith("#")]
+    assert "robot.urdf and robot.joints" in " ".join(header)  # what the node needs, before the table
     assert [line.split(" (")[0] for line in lines] == [p.name for p in PARAMETERS]
     assert any(line.startswith("gate.threshold (double, > 0 and <= 1e+06, default 5.0, settable at run time)")
                for line in lines), lines

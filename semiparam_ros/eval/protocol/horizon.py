@@ -50,7 +50,6 @@ __all__ = [
     "HorizonReport",
     "delayed_predictions",
     "evaluate_horizons",
-    "headline_markdown",
     "horizon_figure",
     "horizon_markdown",
     "inside_training_range",
@@ -326,42 +325,6 @@ def evaluate_horizons(models: Mapping[str, Any], train: SampleArrays, test: Samp
 
 #: Horizons of the headline: what a controller is served (frozen) beside one step ahead.
 HEADLINE_HORIZONS: tuple[float | str, ...] = (0.0, FROZEN)
-
-
-def headline_markdown(report: HorizonReport, unit: str) -> str:
-    """Render what a controller gets: each model frozen (served) beside one step ahead, persistence too.
-
-    The frozen column is the model learned on the training log and nothing after — what ``load_model``
-    and the node's feed-forward serve on motion they have not seen; one step ahead is the paper's
-    test-then-train, where the previous measured output (persistence) is the baseline any learning must
-    beat. Needs the ``"1 step"`` and ``"frozen"`` horizons (:data:`HEADLINE_HORIZONS`).
-
-    Args:
-        report: A :class:`HorizonReport` with both horizons.
-        unit: Unit of the outputs (for the title).
-
-    Returns:
-        Markdown ('' when a horizon is missing).
-    """
-    labels = {h.label for h in report.horizons}
-    if not {"1 step", FROZEN} <= labels:
-        return ""
-    rows = []
-    for model in report.rmse:
-        if model == "persistence":
-            frozen = "—"
-            name = "persistence (the previous measured output)"
-        else:
-            frozen = f"{report.mean(model, FROZEN):.3f}"
-            name = "CAD (the URDF, never learns)" if model == "CAD" else model
-        rows.append(f"| {name} | {frozen} | {report.mean(model, '1 step'):.3f} |\n")
-    return (f"Mean RMSE over the outputs [{unit}] on the test log:\n\n"
-            "| model | frozen: served, as a feed-forward uses it | one step ahead: test-then-train |\n"
-            "|---|---|---|\n" + "".join(rows)
-            + "\nFrozen: learned on the training log only, predicts the test log from the state "
-            "(`load_model(...).predict`, the node's feed-forward). One step ahead: learned every test sample "
-            "up to the previous one (the paper's protocol); there the previous measured output is "
-            "already accurate, so compare with persistence.\n")
 
 
 def horizon_markdown(report: HorizonReport, *, reference: str | None = "persistence") -> str:
