@@ -25,7 +25,7 @@ from semiparam_ros.errors import StartupError
 from semiparam_ros.ros.estimator_node import EstimatorNode
 from semiparam_ros.ros.parameter_files import command_line_assignments, parameter_files
 
-__all__ = ["EXECUTORS", "main", "parse_node_args", "spin"]
+__all__ = ["EXECUTORS", "build_parser", "main", "parse_node_args", "spin"]
 
 _SPIN_TIMEOUT_S = 0.1  # EventsExecutor.spin_once timeout (see spin())
 
@@ -78,6 +78,11 @@ def parse_node_args(args: list[str]) -> argparse.Namespace:
     Raises:
         SystemExit: Unknown option or executor name (argparse prints the usage).
     """
+    return build_parser().parse_args(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the parser of the node's own options (``estimator --help``)."""
     parser = argparse.ArgumentParser(prog="estimator", description="semiparam_ros estimator node")
     parser.add_argument("--executor", choices=tuple(EXECUTORS), default=next(iter(EXECUTORS)),
                         help="rclpy executor spinning the node (default: %(default)s; measured in "
@@ -86,7 +91,7 @@ def parse_node_args(args: list[str]) -> argparse.Namespace:
                         help="run as a managed (lifecycle) node: configure, activate, deactivate, cleanup")
     parser.add_argument("--print-defaults", action="store_true",
                         help="print every parameter with its type, range, default and meaning, and exit")
-    return parser.parse_args(args)
+    return parser
 
 
 #: What ``--print-defaults`` says before the parameters.
