@@ -20,5 +20,6 @@ def test_node_reference_lists_every_interface_of_a_started_node(tmp_path, monkey
                  "`~/save`", "`joint_states`"):
         assert name in table  # the graph was read (an empty graph would render an empty table)
     committed = text[text.index(BEGIN) + len(BEGIN): text.index(END)].strip()
-    assert committed == table.strip(), "docs/node.md is stale: run .venv/bin/python -m docs.tools.node_reference"
+    stale = "docs/node.md is stale: run .venv/bin/python -m docs.tools.node_reference"
+    assert committed == table.strip(), stale
     assert render_page(text, table) == text
