@@ -16,4 +16,5 @@ shift || true
 cd "$root"
 mkdir -p results
 PYTHONPATH="$root${PYTHONPATH:+:$PYTHONPATH}" .venv/bin/python -m semiparam_ros.cli.real_robots \
-  --data "$data" --json results/real_robots.json --markdown results/real_robots.md --figure results/real_robots_horizons.png --no-progress "$@"
+  --data "$data" --json results/real_robots.json --markdown results/real_robots.md --figure results/real_robots_horizons.png \
+  --served-figure results/real_robots_served.png --no-progress "$@"

@@ -50,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ages of the model for the horizon table [s] (0 = one step, 'frozen'); "
                         "none given = skip it (default: 0 0.1 1 10 frozen)")
     p.add_argument("--figure", type=Path, help="draw the error-by-age figure here (PNG)")
+    p.add_argument("--served-figure", type=Path,
+                   help="draw the served SP (frozen) against the measured torques of the test log here (PNG)")
     p.add_argument("--json", type=Path, help="write the JSON here")
     p.add_argument("--markdown", type=Path, help="write the markdown tables here")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -78,7 +80,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                               splits=args.splits, inject=not args.no_inject,
                               horizons=horizons, json_path=args.json,
                               markdown_path=args.markdown, figure_path=args.figure,
-                              progress=not args.no_progress)
+                              served_figure_path=args.served_figure, progress=not args.no_progress)
     except (ValueError, OSError) as err:
         return error_exit("real_robots", err)
     print(text, end="")

@@ -37,7 +37,7 @@ from semiparam_ros.eval.bags.contact_detection import (
 from semiparam_ros.eval.protocol.options import Variant
 from semiparam_ros.eval.protocol.report import AdaptationReport, ProtocolReport
 
-__all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_contacts", "plot_protocol"]
+__all__ = ["COLORS", "LABELS", "plot_adaptation", "plot_contacts", "plot_protocol", "plot_served"]
 
 #: The paper's colours: parametric green, nonparametric red, semiparametric blue; the joint semiparametric
 #: fit (not in the paper) purple.
@@ -246,4 +246,39 @@ def plot_contacts(report: ContactReport, truth: GroundTruthEpisodes, runs: Mappi
                  color="tab:green")
     top.legend(loc="lower left", fontsize=8, ncol=3, framealpha=0.9)
     bottom.legend(loc="lower left", fontsize=8, ncol=3, framealpha=0.9)
+    return _save(fig, path, dpi)
+
+
+def plot_served(trace: Any, path: str | Path, *, title: str = "", seconds: float = 10.0,
+                dpi: int = 110) -> Path:
+    """Draw the served model (frozen) against the measured torques, per joint, and write it as PNG.
+
+    Args:
+        trace: A :class:`~semiparam_ros.report.real_robot.ServedTrace`.
+        path: Destination ``.png`` (written atomically).
+        title: Figure title.
+        seconds: Length of the test log drawn, from its start [s].
+        dpi: Resolution.
+
+    Returns:
+        The written path.
+    """
+    keep = trace.time_s <= trace.time_s[0] + seconds
+    t = trace.time_s[keep]
+    n = len(trace.joints)
+    fig, axes = plt.subplots(n, 1, figsize=(7.2, 1.35 * n + 0.8), sharex=True, squeeze=False)
+    for j, ax in enumerate(axes[:, 0]):
+        served, std = trace.served[keep, j], trace.std[keep, j]
+        ax.fill_between(t, served - 2 * std, served + 2 * std, color="tab:blue", alpha=0.2, lw=0,
+                        label="served ±2σ")
+        ax.plot(t, trace.measured[keep, j], color="black", lw=1.0, label="measured")
+        ax.plot(t, served, color="tab:blue", lw=1.0, label="served SP (frozen)")
+        ax.plot(t, trace.urdf[keep, j], color="tab:gray", lw=0.9, ls="--", label="URDF")
+        ax.set_ylabel(f"{trace.joints[j]}\n[N·m]", fontsize=8)
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=4)
+    axes[-1, 0].set_xlabel("time on the test log [s]")
+    fig.suptitle(title or "the served model, learned on another log, against the measured torques",
+                 fontsize=10)
+    fig.tight_layout()
     return _save(fig, path, dpi)

@@ -138,6 +138,27 @@ class InjectedTorque:
 
 
 @dataclass(frozen=True)
+class ServedTrace:
+    """What the served model (frozen) predicts on a test log, beside what was measured.
+
+    Attributes:
+        joints: The joints, in the columns' order.
+        time_s: (N,) time from the test log's first sample [s].
+        measured: (N, n) measured torques [N·m].
+        served: (N, n) the served SP's prediction (``load_model(...).predict``) [N·m].
+        std: (N, n) its σ [N·m].
+        urdf: (N, n) the URDF's rigid body (RNEA with the CAD inertias, no friction) [N·m].
+    """
+
+    joints: tuple[str, ...]
+    time_s: np.ndarray
+    measured: np.ndarray
+    served: np.ndarray
+    std: np.ndarray
+    urdf: np.ndarray
+
+
+@dataclass(frozen=True)
 class RealRobotComparison:
     """Everything :func:`compare_on_logs` measured.
 
@@ -152,6 +173,8 @@ class RealRobotComparison:
         excitation: What the training data excited (:func:`excitation_summary`).
         coverage: Per learner, the fraction of the test log's errors within ±2σ of its served model
             frozen (``load_model(...).predict``), per joint.
+        served: The served SP frozen on the test log beside the measured torques and the URDF's rigid
+            body (for the figure; not in the JSON), or ``None``.
     """
 
     report: ProtocolReport
@@ -162,6 +185,7 @@ class RealRobotComparison:
     horizons: HorizonReport | None = None
     excitation: dict[str, Any] | None = None
     coverage: dict[str, list[float]] | None = None
+    served: ServedTrace | None = None
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form."""
@@ -337,7 +361,33 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
     std = dict(zip(joints, (float(s) for s in test.Y.std(axis=0)), strict=True))
     coverage = {k: [float(c) for c in models[k + FROZEN_SUFFIX].coverage(test.X, test.Y)] for k in LEARNERS}
     return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected, horizon,
-                               excitation_summary(config, models["SP"], test), coverage)
+                               excitation_summary(config, models["SP"], test), coverage,
+                               served_trace(config, models["SP" + FROZEN_SUFFIX], test))
+
+
+def served_trace(config: EstimatorConfig, served: Any, test: SampleArrays) -> ServedTrace | None:
+    """Predict a test log with a served model (frozen) and the URDF's rigid body.
+
+    Args:
+        config: The configuration (its URDF and joints).
+        served: A :class:`~semiparam_ros.eval.models.served.ServedModel`, or anything else (then None).
+        test: The test stream.
+
+    Returns:
+        The trace, or ``None`` when ``served`` is no served model.
+    """
+    from semiparam_ros.core.estimator.build import build_regressor
+    from semiparam_ros.eval.models.served import ServedModel
+
+    if not isinstance(served, ServedModel):
+        return None
+    n = len(config["robot.joints"])
+    q, dq, ddq = test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:]
+    total, std = served.served.predict(q, dq, ddq)
+    urdf = build_regressor(config).wrench(q, dq, ddq)
+    stamps = np.asarray(test.stamps_ns, dtype=np.int64)
+    time_s = (stamps - stamps[0]) * 1e-9
+    return ServedTrace(tuple(config["robot.joints"]), time_s, np.asarray(test.Y), total, std, urdf)
 
 
 def excitation_summary(config: EstimatorConfig, model: Any, test: SampleArrays) -> dict[str, Any]:
@@ -480,7 +530,8 @@ def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", t
                    inject: bool = True,
                    horizons: Sequence[float | str] | None = DEFAULT_HORIZONS,
                    json_path: Path | None = None, markdown_path: Path | None = None,
-                   figure_path: Path | None = None, progress: bool = True) -> str:
+                   figure_path: Path | None = None, served_figure_path: Path | None = None,
+                   progress: bool = True) -> str:
     """Run the ``real_robots`` command: load, compare, write the JSON and markdown, return the text.
 
     Args:
@@ -498,6 +549,8 @@ def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", t
         json_path: Destination of the JSON (``None``: not written).
         markdown_path: Destination of the tables (``None``: not written).
         figure_path: Destination of the age figure (PNG; ``None`` or no horizons: not drawn).
+        served_figure_path: Destination of the served model against the measured torques (PNG; ``None``:
+            not drawn).
         progress: Progress bar (only on a terminal).
 
     Returns:
@@ -525,6 +578,11 @@ def run_comparison(*, data: Path, config: Path, train: str = "measurements_1", t
     text = comparison_markdown(comparison)
     if figure_path is not None and comparison.horizons is not None:
         horizon_figure(comparison.horizons, figure_path, title=f"{train} → {test}")
+    if served_figure_path is not None and comparison.served is not None:
+        from semiparam_ros.report.figures import plot_served
+
+        plot_served(comparison.served, served_figure_path,
+                    title=f"SP learned on {train}, served frozen on {test}: measured vs predicted")
     if json_path is not None:
         write_json(comparison.to_json(), json_path)
     if markdown_path is not None:
