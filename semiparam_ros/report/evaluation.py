@@ -36,6 +36,7 @@ from semiparam_ros.report.tables import (
     contacts_table,
     headline_markdown,
     protocol_table,
+    slices_markdown,
 )
 
 __all__ = [
@@ -149,7 +150,8 @@ def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: 
     text = "## One step ahead (test-then-train, the paper's protocol)\n\n" + evaluation_text(report)
     headline = "" if horizon is None else headline_markdown(horizon, report.output.kind.unit)
     if headline:
-        text = "## What a controller gets\n\n" + headline + "\n" + text
+        sliced = slices_markdown(horizon, report.output.kind.unit)
+        text = "## What a controller gets\n\n" + headline + "\n" + sliced + "\n" + text
     for note in recovered:
         text = f"WARNING: {note}\n\n" + text
     title = f"{Path(train).name} → {Path(test).name}"

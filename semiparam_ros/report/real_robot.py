@@ -59,7 +59,8 @@ from semiparam_ros.eval.protocol.metrics import OutputSpec
 from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol.prequential import SampleArrays, predict_only, run_protocol, test_then_train
 from semiparam_ros.eval.protocol.report import ProtocolReport, protocol_report
-from semiparam_ros.report.tables import headline_markdown
+from semiparam_ros.eval.protocol.slices import motion_slices
+from semiparam_ros.report.tables import headline_markdown, slices_markdown
 
 __all__ = [
     "BATCH",
@@ -175,6 +176,8 @@ class RealRobotComparison:
             frozen (``load_model(...).predict``), per joint.
         served: The served SP frozen on the test log beside the measured torques and the URDF's rigid
             body (for the figure; not in the JSON), or ``None``.
+        coverage_slices: Per learner, its served model's ±2σ coverage by motion state
+            (:mod:`~semiparam_ros.eval.protocol.slices`, mean over the joints) and over all samples.
     """
 
     report: ProtocolReport
@@ -186,6 +189,7 @@ class RealRobotComparison:
     excitation: dict[str, Any] | None = None
     coverage: dict[str, list[float]] | None = None
     served: ServedTrace | None = None
+    coverage_slices: dict[str, dict[str, float]] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form."""
@@ -198,6 +202,7 @@ class RealRobotComparison:
             "horizons": None if self.horizons is None else self.horizons.to_json(),
             "excitation": self.excitation,
             "coverage": self.coverage,
+            "coverage_slices": self.coverage_slices,
         }
 
 
@@ -360,9 +365,27 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
                                     frozen_models={k: models[k + FROZEN_SUFFIX] for k in LEARNERS})
     std = dict(zip(joints, (float(s) for s in test.Y.std(axis=0)), strict=True))
     coverage = {k: [float(c) for c in models[k + FROZEN_SUFFIX].coverage(test.X, test.Y)] for k in LEARNERS}
+    masks = motion_slices(test.X, len(joints), test.n_outputs, test.sample_period_s)
+    by_slice = {k: _coverage_by_slice(models[k + FROZEN_SUFFIX], test, masks) for k in LEARNERS}
     return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected, horizon,
                                excitation_summary(config, models["SP"], test), coverage,
-                               served_trace(config, models["SP" + FROZEN_SUFFIX], test))
+                               served_trace(config, models["SP" + FROZEN_SUFFIX], test), by_slice)
+
+
+def _coverage_by_slice(model: Any, test: SampleArrays, masks: dict[str, np.ndarray]) -> dict[str, float]:
+    """±2σ coverage of a served model by motion state (mean over the outputs with enough samples)."""
+    from semiparam_ros.eval.protocol.slices import MIN_SAMPLES, SLICES
+
+    n = test.X.shape[1] // 3
+    total, std = model.served.predict(test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:])
+    inside = np.abs(test.Y - total) <= 2.0 * std
+    out = {"all": float(np.mean(inside))}
+    for name in SLICES:
+        mask = masks[name]
+        values = [float(np.mean(inside[mask[:, k], k])) for k in range(inside.shape[1])
+                  if int(mask[:, k].sum()) >= MIN_SAMPLES]
+        out[name] = float(np.mean(values)) if values else float("nan")
+    return out
 
 
 def served_trace(config: EstimatorConfig, served: Any, test: SampleArrays) -> ServedTrace | None:
@@ -469,6 +492,9 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
     report = comparison.report
     joints = list(report.output.components)
     headline = "" if comparison.horizons is None else headline_markdown(comparison.horizons, "N·m")
+    if headline:
+        headline += "\n" + slices_markdown(comparison.horizons, "N·m",
+                                            coverage=comparison.coverage_slices)
     head = "| model | " + " | ".join(joints) + " | mean |\n|---" + "|---" * (len(joints) + 1) + "|\n"
     rmse = "".join(_row(k, [*(m.components[j].rmse for j in joints), m.rmse_mean], ".3f") + "\n"
                    for k, m in report.models.items())

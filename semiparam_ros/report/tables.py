@@ -26,6 +26,7 @@ __all__ = [
     "fmt",
     "headline_markdown",
     "protocol_table",
+    "slices_markdown",
 ]
 
 _DIRECTION = {"ahead": "A ahead", "behind": "A behind", "tie": "not separable"}
@@ -297,3 +298,37 @@ def headline_markdown(report: HorizonReport, unit: str) -> str:
             "(`load_model(...).predict`, the node's feed-forward). One step ahead: learned every test sample "
             "up to the previous one (the paper's protocol); there the previous measured output is "
             "already accurate, so compare with persistence.\n")
+
+
+def slices_markdown(report: HorizonReport, unit: str, horizon: str = FROZEN,
+                    coverage: dict[str, dict[str, float]] | None = None) -> str:
+    """Render each model's mean RMSE by motion state at one horizon (frozen: what a controller gets).
+
+    Args:
+        report: A :class:`~semiparam_ros.eval.protocol.horizon.HorizonReport` with slices.
+        unit: Unit of the outputs.
+        horizon: The horizon's label (``"frozen"`` or ``"1 step"``).
+        coverage: Per model, the ±2σ coverage by slice of its served model, or None.
+
+    Returns:
+        Markdown ('' when the report has no slices at that horizon).
+    """
+    from semiparam_ros.eval.protocol.slices import SLICES
+
+    rows = [(m, v[horizon]) for m, v in report.slices.items() if horizon in v and m != "persistence"]
+    if not rows:
+        return ""
+    share = report.slice_share
+    head = ("| model | " + " | ".join(f"{s} ({100 * share.get(s, 0.0):.0f} %)" for s in SLICES) + " | all |\n"
+            + "|---" * (len(SLICES) + 2) + "|\n")
+    body = "".join(f"| {m} | " + " | ".join(f"{v[s]:.3f}" for s in SLICES)
+                   + f" | {report.mean(m, horizon):.3f} |\n" for m, v in rows)
+    text = (f"By motion state, {horizon} [{unit}] (per joint by its own velocity: at rest < 0.01 rad/s, "
+            "reversals ± 0.2 s of a sign change, slow < 0.2 rad/s, fast; share of the samples in "
+            "brackets):\n\n" + head + body)
+    if coverage:
+        text += ("\n±2σ coverage of the served model by motion state:\n\n| model | "
+                 + " | ".join(SLICES) + " | all |\n" + "|---" * (len(SLICES) + 2) + "|\n"
+                 + "".join(f"| {m} | " + " | ".join(f"{c[s]:.3f}" for s in SLICES) + f" | {c['all']:.3f} |\n"
+                           for m, c in coverage.items()))
+    return text

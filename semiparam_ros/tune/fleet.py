@@ -36,10 +36,10 @@ from semiparam_ros.atomic import atomic_write_bytes, atomic_write_text
 from semiparam_ros.core.config import load_config
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.bags.replay import Topics, load_samples
+from semiparam_ros.eval.protocol.slices import SLICES, motion_slices, slice_rmse
 from semiparam_ros.jobs.parallel import run_jobs
 from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import LearnedModel
-from semiparam_ros.tune.held_out import served_error
 
 __all__ = ["FleetRow", "Robot", "discover_robots", "fleet_markdown", "learn_fleet"]
 
@@ -68,6 +68,9 @@ class FleetRow:
         learned: Samples learned.
         drops: Input dropped, by reason.
         frozen_rmse: Mean over the outputs of the frozen model's RMSE on the held-out bag [N·m or N, N·m].
+        frozen_slices: The same by motion state (:mod:`~semiparam_ros.eval.protocol.slices`).
+        coverage: The frozen model's ±2σ coverage on the held-out bag, over all samples (``all``) and by
+            motion state.
         checkpoint: The checkpoint written, or None.
         error: Why the robot failed or was skipped.
     """
@@ -80,6 +83,8 @@ class FleetRow:
     learned: int = 0
     drops: dict[str, int] = field(default_factory=dict)
     frozen_rmse: float | None = None
+    frozen_slices: dict[str, float] = field(default_factory=dict)
+    coverage: dict[str, float] = field(default_factory=dict)
     checkpoint: str | None = None
     error: str = ""
 
@@ -124,8 +129,16 @@ def _learn_robot(robot: Robot) -> tuple[FleetRow, bytes | None]:
                    learned=report.learned, drops=report.drops)
     if held_out is not None:
         test, _ = load_samples(held_out, config, Topics.from_config(config))
-        err = served_error(LearnedModel(est), test)
+        model = LearnedModel(est)
+        n = len(model.joints)
+        tau, std = model.predict(test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:])
+        err = np.asarray(tau) - test.Y
         row.frozen_rmse = float(np.mean(np.sqrt(np.mean(err**2, axis=0))))
+        masks = motion_slices(test.X, n, test.n_outputs, test.sample_period_s)
+        row.frozen_slices = slice_rmse(err, masks)
+        inside = (np.abs(err) <= 2.0 * np.asarray(std)).astype(np.float64)
+        row.coverage = {"all": float(inside.mean()), **{
+            k: (float(inside[m].mean()) if m.any() else float("nan")) for k, m in masks.items()}}
     return row, data
 
 
@@ -194,7 +207,10 @@ def _robot_job(robot: Robot) -> tuple[FleetRow, bytes | None] | str:
 
 
 def fleet_markdown(rows: Sequence[FleetRow]) -> str:
-    """Return the summary table (robot, status, bags, samples, drops, frozen error on the held-out bag)."""
+    """Return the summary tables: robot, status, bags, samples, drops, frozen error on the held-out bag.
+
+    Then the frozen error and ±2σ coverage by motion state, for the robots scored.
+    """
     lines = ["| robot | status | bags learned | held-out bag | samples | learned | drops "
              "| frozen RMSE on the held-out bag | note |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -203,4 +219,12 @@ def fleet_markdown(rows: Sequence[FleetRow]) -> str:
         held = "—" if r.held_out is None else Path(r.held_out).name
         lines.append(f"| {r.robot} | {r.status} | {len(r.bags)} | {held} | {r.samples} | {r.learned} "
                      f"| {drops} | {rmse} | {r.error} |")
+    scored = [r for r in rows if r.frozen_slices]
+    if scored:
+        lines += ["", "Frozen RMSE (±2σ coverage) on the held-out bag by motion state:", "",
+                  "| robot | " + " | ".join(SLICES) + " | all |", "|---" * (len(SLICES) + 2) + "|"]
+        for r in scored:
+            cells = [f"{r.frozen_slices[k]:.4g} ({r.coverage.get(k, float('nan')):.2f})" for k in SLICES]
+            lines.append(f"| {r.robot} | " + " | ".join(cells)
+                         + f" | {r.frozen_rmse:.4g} ({r.coverage.get('all', float('nan')):.2f}) |")
     return "\n".join(lines) + "\n"

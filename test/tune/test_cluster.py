@@ -163,12 +163,19 @@ def test_learn_fleet_equals_separate_learn_runs_and_reports_what_failed(fleet, t
         config = load_config(configs / f"{robot}.yaml")
         test, _ = load_samples(bags[-1], config, Topics.from_config(config))
         n = len(config["robot.joints"])
-        tau, _ = load_model(tmp_path / f"{robot}.npz").predict(test.X[:, :n], test.X[:, n:2 * n],
-                                                               test.X[:, 2 * n:])
+        tau, std = load_model(tmp_path / f"{robot}.npz").predict(test.X[:, :n], test.X[:, n:2 * n],
+                                                                 test.X[:, 2 * n:])
         assert row.frozen_rmse == pytest.approx(np.mean(np.sqrt(np.mean((tau - test.Y) ** 2, axis=0))),
                                                 rel=1e-9)
+        # by motion state: the fast slice's errors, joint by joint from its own velocity
+        dq = test.X[:, n:2 * n]
+        fast = [np.sqrt(np.mean((tau - test.Y)[np.abs(dq[:, j]) >= 0.2, j] ** 2)) for j in range(n)
+                if (np.abs(dq[:, j]) >= 0.2).sum() >= 20]
+        assert row.frozen_slices["fast"] == pytest.approx(np.mean(fast), rel=1e-9)
+        assert row.coverage["all"] == pytest.approx(np.mean(np.abs(tau - test.Y) <= 2 * std), rel=1e-9)
     summary = (tmp_path / "out" / "fleet.md").read_text()
     assert "| empty_arm | skipped |" in summary and "| broken_arm | failed |" in summary
+    assert "by motion state" in summary
     assert len(json.loads((tmp_path / "out" / "fleet.json").read_text())) == len(rows)
 
 

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -41,6 +41,7 @@ import numpy as np
 from semiparam_ros.atomic import atomic_savefig
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.protocol.prequential import SampleArrays, stamps_for
+from semiparam_ros.eval.protocol.slices import motion_slices, slice_rmse, slice_shares
 
 __all__ = [
     "DEFAULT_HORIZONS",
@@ -209,6 +210,9 @@ class HorizonReport:
         n_scored: Scored samples (index ≥ the largest finite delay).
         n_inside: Of which inside the training range.
         sample_period_s: The test stream's period [s].
+        slices: ``slices[model][horizon label][slice]`` = mean RMSE over the outputs in that motion state
+            (:mod:`~semiparam_ros.eval.protocol.slices`), on the scored samples.
+        slice_share: Fraction of the scored (sample, output) pairs in each slice.
     """
 
     horizons: tuple[Horizon, ...]
@@ -219,6 +223,8 @@ class HorizonReport:
     n_scored: int
     n_inside: int
     sample_period_s: float
+    slices: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    slice_share: dict[str, float] = field(default_factory=dict)
 
     @classmethod
     def merge(cls, parts: Sequence[HorizonReport]) -> HorizonReport:
@@ -234,7 +240,8 @@ class HorizonReport:
                    {m: v for p in parts for m, v in p.rmse.items()},
                    {m: v for p in parts for m, v in p.rmse_inside.items()},
                    {m: v for p in parts for m, v in p.rmse_outside.items()},
-                   first.n_scored, first.n_inside, first.sample_period_s)
+                   first.n_scored, first.n_inside, first.sample_period_s,
+                   {m: v for p in parts for m, v in p.slices.items()}, first.slice_share)
 
     def mean(self, model: str, horizon: str, subset: str = "all") -> float:
         """Mean over the components of the RMSE of ``model`` at ``horizon`` (subset all/inside/outside)."""
@@ -255,6 +262,7 @@ class HorizonReport:
             "mean": means(self.rmse), "mean_inside": means(self.rmse_inside),
             "mean_outside": means(self.rmse_outside),
             "n_scored": self.n_scored, "n_inside": self.n_inside, "sample_period_s": self.sample_period_s,
+            "slices": self.slices, "slice_share": self.slice_share,
         }
 
 
@@ -301,11 +309,13 @@ def evaluate_horizons(models: Mapping[str, Any], train: SampleArrays, test: Samp
     start = max(h.delay for h in hs)
     names = tuple(components) if components is not None else tuple(f"y{k}" for k in range(test.n_outputs))
     inside = inside_training_range(train.X, test.X)[start:]
+    masks = motion_slices(test.X[start:], test.X.shape[1] // 3, test.n_outputs, period)
+    sliced: dict[str, dict[str, dict[str, float]]] = {}
     rm_all: dict[str, dict[str, list[float]]] = {}
     rm_in: dict[str, dict[str, list[float]]] = {}
     rm_out: dict[str, dict[str, list[float]]] = {}
     for name, model in models.items():
-        rm_all[name], rm_in[name], rm_out[name] = {}, {}, {}
+        rm_all[name], rm_in[name], rm_out[name], sliced[name] = {}, {}, {}, {}
         fixed_pred = None
         for h in hs:
             if name in fixed:
@@ -320,7 +330,9 @@ def evaluate_horizons(models: Mapping[str, Any], train: SampleArrays, test: Samp
             rm_all[name][h.label] = _rmse(err)
             rm_in[name][h.label] = _rmse(err[inside])
             rm_out[name][h.label] = _rmse(err[~inside])
-    return HorizonReport(tuple(hs), names, rm_all, rm_in, rm_out, int(n - start), int(inside.sum()), period)
+            sliced[name][h.label] = slice_rmse(err, masks)
+    return HorizonReport(tuple(hs), names, rm_all, rm_in, rm_out, int(n - start), int(inside.sum()), period,
+                         sliced, slice_shares(masks))
 
 
 #: Horizons of the headline: what a controller is served (frozen) beside one step ahead.
