@@ -72,6 +72,15 @@ class ArmPlant:
         """``τ_f(q̇)`` [N·m] (no armature in the presets)."""
         return self._fv * dq + self._fc * np.tanh(dq / self._vs) + self._fo
 
+    def inverse_dynamics(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """Return the true model's torques ``RNEA_true(q, q̇, q̈) + τ_f(q̇)`` [N·m] at (N, n) states.
+
+        The best feed-forward there is: what a learned one is measured against.
+        """
+        q, dq, ddq = (np.atleast_2d(np.asarray(a, dtype=np.float64)) for a in (q, dq, ddq))
+        rigid = np.array([pin.rnea(self.model, self.data, q[i], dq[i], ddq[i]) for i in range(q.shape[0])])
+        return rigid + self.friction_torques(dq)
+
     def step(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, period_s: float, substeps: int
              ) -> tuple[np.ndarray, np.ndarray]:
         """Advance the state by one control period under a held torque (semi-implicit Euler)."""
