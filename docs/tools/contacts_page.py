@@ -3,7 +3,7 @@
 The words live in the template; this module computes its ``${name}`` placeholders from the
 :class:`~semiparam_ros.eval.bags.contact_detection.ContactReport` JSON files that ``scripts/contacts.sh``
 writes (``contacts_<log>.json`` in the figures folder; ``<log>`` is ``icub_seed<k>`` for the iCub seeds and
-``panda`` for the joint-torque arm). The acceptance criteria of issue 13 are evaluated here
+``panda`` for the joint-torque arm). The contact acceptance criteria are evaluated here
 (:func:`acceptance`) and shown as yes/no; the template states no finding in words.
 
 Placeholders: ``command``, ``headline`` (the first iCub log's table), ``headline_log``, ``seeds_table``
@@ -26,7 +26,7 @@ from semiparam_ros.report.tables import contacts_table, fmt
 
 __all__ = ["acceptance", "contacts_values", "load_contact_reports", "render_contacts", "write_contacts"]
 
-#: Acceptance of issue 13 (item 6): error after the contacts within this ratio of before, gate on.
+#: Contact acceptance: error after the contacts within this ratio of before, gate on.
 AFTER_BEFORE_MAX = 1.10
 #: Payload adopted within this time of the pickup, gate on [s].
 ADOPTION_MAX_S = 10.0
@@ -51,7 +51,7 @@ def load_contact_reports(figures: str | Path) -> dict[str, ContactReport]:
 
 
 def acceptance(report: ContactReport) -> dict[str, bool]:
-    """Evaluate issue 13's acceptance on one report (the first output group: force, or joint torque).
+    """Evaluate the contact acceptance on one report (the first output group: force, or joint torque).
 
     Returns:
         ``{criterion: holds}``: ``after_within_10pct`` (gate on), ``gate_off_worse`` (gate off's ratio
