@@ -46,6 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--joints", nargs="+", metavar="JOINT", help="with --urdf: the moving joints, in order")
     p.add_argument("--end-effector", help="with --urdf: the frame payloads and contacts act at (default: the "
                    "child link of the last joint)")
+    p.add_argument("--ft-sensor", metavar="JOINT", help="with --urdf: a fixed joint holding a six-axis F/T "
+                   "sensor; its wrench is recorded on /wrench too and the parameter file learns it")
     p.add_argument(
         "--rate",
         type=float,

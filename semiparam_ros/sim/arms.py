@@ -70,10 +70,12 @@ __all__ = [
     "JointFriction",
     "JointTorqueMeasurement",
     "ParameterPerturbation",
+    "SensorWrench",
     "arm_from_urdf",
     "arm_regressor",
     "arm_spec",
     "perturb_parameters",
+    "sensor_wrench",
     "simulate_arm",
     "true_parameters",
 ]
@@ -255,6 +257,8 @@ class ArmRobot:
         velocity_noise_std: σ of the joint velocity noise (rad/s).
         payload_mass: Default payload (kg).
         payload_point: Where the payload sits in the end-effector frame (m).
+        ft_sensor: A fixed URDF joint holding a six-axis F/T sensor whose wrench is also recorded (on
+            ``/wrench``), or ``None``.
     """
 
     name: str
@@ -271,6 +275,7 @@ class ArmRobot:
     velocity_noise_std: float
     payload_mass: float
     payload_point: tuple[float, float, float]
+    ft_sensor: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """Plain-Python description (for ``scenario.yaml``)."""
@@ -279,6 +284,7 @@ class ArmRobot:
             "urdf": self.urdf,
             "joints": list(self.joints),
             "end_effector": self.end_effector,
+            "ft_sensor": self.ft_sensor,
         }
 
 
@@ -377,7 +383,7 @@ _MIN_TORQUE_SCALE = 1.0
 
 
 def arm_from_urdf(urdf: str, joints: Sequence[str], *, name: str | None = None,
-                  end_effector: str | None = None, max_velocity: float = 1.0,
+                  end_effector: str | None = None, ft_sensor: str | None = None, max_velocity: float = 1.0,
                   max_acceleration: float = 4.0) -> ArmRobot:
     """Build a simulated arm of any fixed-base URDF (the user's own, for a dry run of identification).
 
@@ -393,6 +399,8 @@ def arm_from_urdf(urdf: str, joints: Sequence[str], *, name: str | None = None,
         name: Prefix of the bag names (default the URDF's robot name, made a plain identifier).
         end_effector: Frame where payloads are attached and contacts act (default the child link of the
             last joint).
+        ft_sensor: A fixed joint of the URDF holding a six-axis F/T sensor: its wrench is recorded too
+            (:class:`SensorWrench`), or ``None``.
         max_velocity: Bound on every |q̇| of the excitation [rad/s].
         max_acceleration: Bound on every |q̈| of the excitation [rad/s²].
 
@@ -430,12 +438,16 @@ def arm_from_urdf(urdf: str, joints: Sequence[str], *, name: str | None = None,
         if element is None:
             raise ValueError(f"joint {joints[-1]!r} is not in {urdf}")
         end_effector = str(element.get("link"))
-    return ArmRobot(name=robot_name, urdf=path, joints=joints, end_effector=end_effector,
-                    position_window=window, max_velocity=float(max_velocity),
-                    max_acceleration=float(max_acceleration), base_period=10.0, friction=friction,
-                    torque_noise_std=tuple(float(v) for v in _NOISE_PER_TORQUE * scale),
-                    position_noise_std=1e-5, velocity_noise_std=1e-3,
-                    payload_mass=round(0.05 * float(masses.sum()), 2), payload_point=(0.0, 0.0, 0.03))
+    robot = ArmRobot(name=robot_name, urdf=path, joints=joints, end_effector=end_effector,
+                     position_window=window, max_velocity=float(max_velocity),
+                     max_acceleration=float(max_acceleration), base_period=10.0, friction=friction,
+                     torque_noise_std=tuple(float(v) for v in _NOISE_PER_TORQUE * scale),
+                     position_noise_std=1e-5, velocity_noise_std=1e-3,
+                     payload_mass=round(0.05 * float(masses.sum()), 2), payload_point=(0.0, 0.0, 0.03),
+                     ft_sensor=ft_sensor or None)
+    if robot.ft_sensor is not None:  # the sensor must be a fixed joint with bodies beyond it
+        regressor_of(path, joints, output=OutputKind.WRENCH, ft_sensor=robot.ft_sensor)
+    return robot
 
 
 #: Scenarios of the arms (:func:`semiparam_ros.sim.generate.preset_configs`): ``excitation`` (no payload),
@@ -515,6 +527,64 @@ class ArmScenarioConfig(RecordingConfig):
 
 
 @dataclass(frozen=True)
+class SensorWrench:
+    """An arm's six-axis F/T sensor over a recording: ``[f, τ]`` in the sensor frame (N, N·m).
+
+    The reading is the wrench the bodies beyond the sensor exert on it (Φ_s(q, q̇, q̈) π_s: their true
+    inertial parameters, the URDF's perturbed as the arm's are, a payload included after the pickup) plus a
+    constant offset per axis (±2 % of the axis' RMS) and white noise (1 % of it).
+
+    Attributes:
+        frame: The sensor's frame (the fixed joint's name), the ``frame_id`` of the messages.
+        rigid: (N, 6) the rigid-body wrench.
+        true: (N, 6) rigid plus the offset (noise-free).
+        measured: (N, 6) the reading.
+        offset: (6,) the constant offset.
+    """
+
+    frame: str
+    rigid: np.ndarray
+    true: np.ndarray
+    measured: np.ndarray
+    offset: np.ndarray
+
+
+def sensor_wrench(config: ArmScenarioConfig, spec: ArmRobot, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
+                  after: np.ndarray) -> SensorWrench:
+    """Simulate the F/T sensor of an arm that has one (see :class:`SensorWrench`).
+
+    Args:
+        config: The scenario (seed, perturbation, payload, noise scale).
+        spec: The arm (its ``ft_sensor``).
+        q: (N, n) positions [rad].
+        dq: (N, n) velocities [rad/s].
+        ddq: (N, n) accelerations [rad/s²].
+        after: (N,) whether the payload is carried.
+
+    Raises:
+        ValueError: If the arm has no sensor, or the payload's frame is not beyond it.
+    """
+    if spec.ft_sensor is None:
+        raise ValueError(f"{spec.name} has no F/T sensor")
+    reg = regressor_of(str(resolve_urdf(spec.urdf)), tuple(spec.joints), output=OutputKind.WRENCH,
+                       ft_sensor=spec.ft_sensor)
+    rng = np.random.default_rng([int(config.seed), zlib.crc32(f"{spec.name}:{spec.ft_sensor}".encode())])
+    urdf = reg.urdf_parameters()
+    perturbation = config.perturbation
+    before = urdf.copy() if perturbation is None else perturb_parameters(urdf, perturbation, rng)
+    carried, _ = add_payload(reg, before, frame=spec.end_effector, mass=config.payload_mass,
+                             pickup_s=config.pickup_time, start_ns=config.start_ns,
+                             point_in_frame=spec.payload_point)
+    rigid = rigid_outputs(reg, q, dq, ddq, after, before, carried, chunk=2000)
+    rms = np.sqrt(np.mean(rigid**2, axis=0)) + 1e-3
+    offset = 0.02 * rms * np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
+    noise = config.noise_scale * 0.01 * rms * np.random.default_rng(
+        [int(config.seed), zlib.crc32(config.name.encode()), 6]).standard_normal(rigid.shape)
+    true = rigid + offset
+    return SensorWrench(spec.ft_sensor, rigid, true, true + noise, offset)
+
+
+@dataclass(frozen=True)
 class ArmRecording:
     """Stamped arrays of one arm recording. Joint arrays (N, n) are in the order of ``joint_names``.
 
@@ -536,6 +606,7 @@ class ArmRecording:
         parameters_before, parameters_after: True full parameters before and after the pickup.
         contact_episodes: The contact episodes.
         info: Scenario description for ``scenario.yaml`` (plain Python).
+        wrench: The F/T sensor's reading when the robot has one (:class:`SensorWrench`), else ``None``.
     """
 
     config: ArmScenarioConfig
@@ -559,6 +630,7 @@ class ArmRecording:
     parameters_after: np.ndarray
     contact_episodes: tuple[ContactEpisode, ...]
     info: dict[str, Any]
+    wrench: SensorWrench | None = None
 
 
 def arm_regressor(robot: str | ArmRobot) -> RigidBodyRegressor:
@@ -677,6 +749,9 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     rigid = rigid_outputs(reg, q, dq, ddq, after, params_before, params_after, chunk=2000)
 
     friction = config.true_friction()
+    if spec.ft_sensor is not None and config.contacts is not None:
+        raise ValueError("contacts are simulated for joint torques only: no contacts with an F/T sensor")
+    wrench = None if spec.ft_sensor is None else sensor_wrench(config, spec, q, dq, ddq, after)
     episodes, force = draw_contacts(config.contacts, config.duration, t, rng_contact)
     sensors = JointTorqueMeasurement(kin, spec.end_effector, friction,
                                      config.noise_scale * np.asarray(spec.torque_noise_std))
@@ -689,7 +764,12 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
     info: dict[str, Any] = {
         "name": config.name,
         "robot": spec.as_dict(),
-        "output": OutputKind.JOINT_TORQUES.value,
+        "output": (OutputKind.JOINT_TORQUES if wrench is None else OutputKind.WRENCH).value,
+        "ft_sensor": None if wrench is None else {
+            "frame": wrench.frame, "offset_N_Nm": wrench.offset.tolist(),
+            "noise": "white, 1 % of each axis' RMS (times the noise scale)",
+            "model": "the wrench of the bodies beyond the sensor, their URDF parameters perturbed as the "
+                     "arm's, the payload included after the pickup"},
         "seed": int(config.seed),
         "duration_s": float(config.duration),
         "start_stamp_ns": int(config.start_ns),
@@ -757,4 +837,5 @@ def simulate_arm(config: ArmScenarioConfig) -> ArmRecording:
         parameters_after=params_after,
         contact_episodes=episodes,
         info=info,
+        wrench=wrench,
     )

@@ -133,11 +133,16 @@ def write_parameter_file(robot: ArmRobot, path: Path) -> None:
     from semiparam_ros.core.kinds import InputKind
     from semiparam_ros.core.rigid_body.urdf import resolve_urdf
 
-    tree = {"/**": {"ros__parameters": {
-        "robot": {"urdf": str(resolve_urdf(robot.urdf).resolve()), "joints": list(robot.joints)},
-        "topics": {InputKind.JOINT_STATES.value: "/joint_states"}}}}
-    header = (f"# semiparam_ros estimator: the simulated {robot.name} of the bag beside this file (joint "
-              "torques).\n#   learn <this bag> --config <this file> --checkpoint model.npz\n")
+    values: dict[str, object] = {"urdf": str(resolve_urdf(robot.urdf).resolve()),
+                                 "joints": list(robot.joints)}
+    topics = {InputKind.JOINT_STATES.value: "/joint_states"}
+    if robot.ft_sensor is not None:  # the sensor's wrench is learned (robot.output is inferred from it)
+        values.update(ft_sensor=robot.ft_sensor, frame_id=robot.ft_sensor)
+        topics[InputKind.WRENCH.value] = "/wrench"
+    tree = {"/**": {"ros__parameters": {"robot": values, "topics": topics}}}
+    learned = "joint torques" if robot.ft_sensor is None else f"the wrench of F/T sensor {robot.ft_sensor}"
+    header = (f"# semiparam_ros estimator: the simulated {robot.name} of the bag beside this file "
+              f"({learned}).\n#   learn <this bag> --config <this file> --checkpoint model.npz\n")
     with atomic_open(path, "w") as fh:
         fh.write(header + yaml.safe_dump(tree, sort_keys=False))
 
@@ -337,7 +342,7 @@ class SimulationOptions:
     """The ``simulate`` command's options, as given (``None``/``False``: not given).
 
     Attributes mirror the command line (see ``simulate --help``): ``robot`` (default ``icub``), or ``urdf``
-    with ``joints`` (and ``end_effector``) for any arm, ``preset``, ``scenario``,
+    with ``joints`` (and ``end_effector``, ``ft_sensor``) for any arm, ``preset``, ``scenario``,
     ``duration`` [s], ``samples``, ``rate``/``joint_rate``/``wrench_rate`` [Hz], ``delay`` [s],
     ``radius`` [m], ``speed`` [m/s], ``seed``, the payload, trajectory variability, effects, contact, arm
     and noise options.
@@ -347,6 +352,7 @@ class SimulationOptions:
     urdf: str | None = None
     joints: tuple[str, ...] | None = None
     end_effector: str | None = None
+    ft_sensor: str | None = None
     preset: str = "default"
     scenario: tuple[str, ...] | None = None
     duration: float | None = None
@@ -404,10 +410,11 @@ def options_configs(options: SimulationOptions) -> list[RecordingConfig]:
             raise ValueError("--robot and --urdf: give one (--urdf simulates the arm of that URDF)")
         if not o.joints:
             raise ValueError("--urdf needs --joints: the moving joints, in the order they are published")
-        robot: str | ArmRobot = arm_from_urdf(o.urdf, o.joints, end_effector=o.end_effector)
+        robot: str | ArmRobot = arm_from_urdf(o.urdf, o.joints, end_effector=o.end_effector,
+                                              ft_sensor=o.ft_sensor)
     else:
-        if o.joints or o.end_effector:
-            raise ValueError("--joints and --end-effector go with --urdf")
+        if o.joints or o.end_effector or o.ft_sensor:
+            raise ValueError("--joints, --end-effector and --ft-sensor go with --urdf")
         robot = o.robot or "icub"
     label = robot if isinstance(robot, str) else f"--urdf {o.urdf}"
     inapplicable = _ARM_ONLY if robot == "icub" else _ICUB_ONLY

@@ -234,6 +234,11 @@ def _torque_messages(rec: ArmRecording, bag: BagWriter) -> Iterator[None]:
                               JointStateData(stamp, names, empty, empty, rec.rigid_torques[i]))
         bag.write_joint_state(GROUND_TRUTH_FRICTION_TOPIC,
                               JointStateData(stamp, names, empty, empty, rec.friction_torques[i]))
+        if rec.wrench is not None:
+            w, truth = rec.wrench.measured[i], rec.wrench.true[i]
+            bag.write_wrench(WRENCH_TOPIC, WrenchData(stamp, rec.wrench.frame, w[:3], w[3:]))
+            bag.write_wrench(GROUND_TRUTH_WRENCH_TOPIC,
+                             WrenchData(stamp, rec.wrench.frame, truth[:3], truth[3:]))
         if contacts:
             bag.write_joint_state(GROUND_TRUTH_EXTERNAL_TORQUES_TOPIC,
                                   JointStateData(stamp, names, empty, empty, rec.external_torques[i]))
@@ -251,6 +256,10 @@ def _torque_topics(rec: ArmRecording, counts: dict[str, int]) -> dict[str, dict[
         GROUND_TRUTH_RIGID_TORQUES_TOPIC: {"type": _JOINT_STATE, "fields": "effort"},
         GROUND_TRUTH_FRICTION_TOPIC: {"type": _JOINT_STATE, "fields": "effort"},
     }
+    if rec.wrench is not None:
+        topics[WRENCH_TOPIC] = {"type": _WRENCH, "frame_id": rec.wrench.frame}
+        topics[GROUND_TRUTH_WRENCH_TOPIC] = {"type": _WRENCH, "frame_id": rec.wrench.frame,
+                                             "fields": "the reading without noise"}
     if rec.config.contacts is not None:
         topics[GROUND_TRUTH_EXTERNAL_TORQUES_TOPIC] = {"type": _JOINT_STATE, "fields": "effort (-J^T F)"}
         topics[GROUND_TRUTH_CONTACT_TOPIC] = {"type": _WRENCH, "frame_id": rec.robot.end_effector}

@@ -453,3 +453,35 @@ def test_any_urdf_is_simulated_and_learned_from_its_parameter_file(tmp_path, cap
     assert main(["--robot", "panda", "--urdf", str(urdf), "--joints", *joints, "--quiet"]) == 2
     assert main(["--joints", *joints, "--quiet"]) == 2
     assert "--joints" in capsys.readouterr().err
+
+
+def test_any_urdf_with_an_ft_sensor_records_its_wrench(tmp_path):
+    """simulate --urdf … --ft-sensor: the iCub arm's F/T sensor, clean and at the URDF's inertias, reads
+    Pinocchio's RNEA wrench through the sensor joint (an independent model) plus the stated constant offset;
+    the parameter file beside the bag learns the wrench."""
+    from helpers.dynamics import reference_model, reference_wrench
+
+    from semiparam_ros.core.config import load_config
+    from semiparam_ros.core.kinds import OutputKind
+
+    urdf = resolve_urdf("example-robot-data://robots/icub_description/robots/icub.urdf")
+    joints = ["r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow"]
+    assert main(["--urdf", str(urdf), "--joints", *joints, "--ft-sensor", "r_arm_ft_sensor",
+                 "--duration", "2", "--rate", "100", "--scenario", "excitation", "--no-noise",
+                 "--no-perturbation", "--out", str(tmp_path), "--quiet"]) == 0
+    (bag,) = [p for p in tmp_path.iterdir() if p.is_dir()]
+    info = yaml.safe_load((bag / "scenario.yaml").read_text())
+    offset = np.asarray(info["ft_sensor"]["offset_N_Nm"])
+    wrench = read_topic_arrays(bag, "/wrench")
+    truth = read_topic_arrays(bag, "/ground_truth/joint_accelerations").fields
+    assert wrench.frame_id == "r_arm_ft_sensor"
+    model = reference_model(urdf.read_text(), joints, sensor="r_arm_ft_sensor")
+    expected = np.array([reference_wrench(model, joints, "r_arm_ft_sensor", q, dq, ddq) for q, dq, ddq in
+                         zip(truth["positions"], truth["velocities"], truth["accelerations"], strict=True)])
+    np.testing.assert_allclose(wrench.fields["wrench"] - offset, expected, rtol=0,
+                               atol=1e-9 * (1 + np.abs(expected).max()))
+    config = load_config(bag / "params.yaml")
+    assert config.output_kind == OutputKind.WRENCH and config["topics.wrench"] == "/wrench"
+    assert main(["--robot", "panda", "--ft-sensor", "x", "--out", str(tmp_path / "x"), "--quiet"]) == 2
+    assert main(["--urdf", str(urdf), "--joints", *joints, "--ft-sensor", "no_such_joint",
+                 "--out", str(tmp_path / "y"), "--quiet"]) == 2
