@@ -43,7 +43,7 @@ from semiparam_ros.errors import ConfigurationError
 
 __all__ = ["DISTAL_PRIOR_FACTOR", "OUTSIDE_EXCITED", "ConsistentEstimate", "ExcitationReport",
            "consistent_parameters", "excitation_report", "export_urdf", "full_column_rms", "link_of",
-           "outside_excited", "prior_weights"]
+           "outside_excited", "prior_weights", "random_state_regressor"]
 
 #: The distal body's CAD prior is this many times weaker than the other bodies' (module docstring).
 DISTAL_PRIOR_FACTOR = 10.0
@@ -85,14 +85,29 @@ def full_column_rms(regressor: RigidBodyRegressor, *, n_states: int = 64, seed: 
     Returns:
         (n_params,) positive.
     """
+    rms = np.sqrt(np.mean(random_state_regressor(regressor, n_states=n_states, seed=seed) ** 2, axis=(0, 1)))
+    return np.where(rms > 0, rms, 1.0)
+
+
+def random_state_regressor(regressor: RigidBodyRegressor, *, n_states: int = 64, seed: int = 0) -> np.ndarray:
+    """Return the full regressor at random states (the base-parameter search's).
+
+    q uniform within the joint limits (±π where unbounded), |q̇| ≤ 1.5 rad/s, |q̈| ≤ 10 rad/s².
+
+    Args:
+        regressor: The rigid-body regressor.
+        n_states: Random states.
+        seed: Their seed.
+
+    Returns:
+        (n_states, t, n_params).
+    """
     rng = np.random.default_rng(seed)
     lo, hi = regressor.position_limits()
     lo, hi = np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi)
     n = len(regressor.joint_names)
     q = rng.uniform(lo, hi, (n_states, n))
-    Phi = regressor.regressor(q, rng.uniform(-1.5, 1.5, (n_states, n)), rng.uniform(-10, 10, (n_states, n)))
-    rms = np.sqrt(np.mean(Phi**2, axis=(0, 1)))
-    return np.where(rms > 0, rms, 1.0)
+    return regressor.regressor(q, rng.uniform(-1.5, 1.5, (n_states, n)), rng.uniform(-10, 10, (n_states, n)))
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from semiparam_ros.core.rigid_body.identification import (
     ConsistentEstimate,
     consistent_parameters,
     link_of,
+    random_state_regressor,
 )
 
 __all__ = ["COM_DISTANCE_M", "MASS_RATIO", "PAYLOAD_RATIO", "LinkOrigin", "PlausibleLinks", "check_link",
@@ -214,14 +215,7 @@ def _origin(estimate: ConsistentEstimate, urdf: np.ndarray, i: int, body: str, r
                       payload)
 
 
-def _prediction_change_rms(regressor: RigidBodyRegressor, delta: np.ndarray, *, n_states: int = 64,
-                           seed: int = 0) -> float:
+def _prediction_change_rms(regressor: RigidBodyRegressor, delta: np.ndarray) -> float:
     """RMS of ``Φ δ`` over random states within the joint limits (the projection's column-RMS states)."""
-    rng = np.random.default_rng(seed)
-    lo, hi = regressor.position_limits()
-    lo, hi = np.where(np.isfinite(lo), lo, -np.pi), np.where(np.isfinite(hi), hi, np.pi)
-    n = len(regressor.joint_names)
-    q = rng.uniform(lo, hi, (n_states, n))
-    phi = regressor.regressor(q, rng.uniform(-1.5, 1.5, (n_states, n)), rng.uniform(-10, 10, (n_states, n)))
-    return float(np.sqrt(np.mean((phi @ delta) ** 2)))
+    return float(np.sqrt(np.mean((random_state_regressor(regressor) @ delta) ** 2)))
 
