@@ -70,7 +70,7 @@ def test_urdf_and_joints_are_enough_for_a_torque_arm(tmp_path, monkeypatch):
         assert predictions.wait_for(lambda msgs: len(msgs) >= 50, 30), node.output()
         assert len(predictions.snapshot()[-1].effort) == 7
         assert client.node.count_subscribers("/wrench") == 0  # no F/T sensor: no wrench input
-        assert "estimating joint_torques" in node.output()
+        assert wait_until(lambda: "estimating joint_torques" in node.output(), 30), node.output()
     finally:
         client.close()
         node.stop()
@@ -84,7 +84,8 @@ def test_an_ft_sensor_makes_it_learn_the_wrench(tmp_path, monkeypatch):
     try:
         assert client.wait_for_publisher("/estimator/predicted_wrench", 60), node.output()
         assert wait_until(lambda: client.node.count_subscribers("/wrench") == 1, 30)
-        assert "estimating wrench" in node.output()
+        # the start-up line comes after the entities are created: wait for it, do not race it
+        assert wait_until(lambda: "estimating wrench" in node.output(), 30), node.output()
     finally:
         client.close()
         node.stop()
