@@ -20,6 +20,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 __all__ = ["BEGIN", "END", "Interface", "main", "node_interfaces", "node_table"]
 
@@ -74,10 +75,6 @@ def node_interfaces(params_file: Path, output: str, overrides: dict | None = Non
         The interfaces of the node and its helper nodes (standard parameter services excluded).
     """
     import rclpy
-    from rclpy.action import (
-        get_action_client_names_and_types_by_node,
-        get_action_server_names_and_types_by_node,
-    )
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
@@ -92,36 +89,52 @@ def node_interfaces(params_file: Path, output: str, overrides: dict | None = Non
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     try:
-        deadline = time.monotonic() + 3.0
-        while time.monotonic() < deadline:  # let the helper nodes' entities reach the graph
+        # the graph fills in as discovery runs (helper nodes, action servers): read it until it holds still
+        start, last, stable_since = time.monotonic(), None, time.monotonic()
+        while True:
             executor.spin_once(timeout_sec=0.05)
-        fqn = node.get_fully_qualified_name()
-        found: set[Interface] = set()
-        names = [(n, ns) for n, ns in node.get_node_names_and_namespaces() if n == node.get_name()
-                 or n.startswith(f"_{node.get_name()}_")]
-        for name, namespace in names:
-            for topic, types in node.get_publisher_names_and_types_by_node(name, namespace):
-                if not _standard(topic):
-                    qos = _qos([i for i in node.get_publishers_info_by_topic(topic) if i.node_name == name])
-                    found.add(Interface("publishes", _relative(topic, fqn), types[0], qos, output))
-            for topic, types in node.get_subscriber_names_and_types_by_node(name, namespace):
-                if not _standard(topic):
-                    infos = node.get_subscriptions_info_by_topic(topic)
-                    qos = _qos([i for i in infos if i.node_name == name])
-                    found.add(Interface("subscribes", _relative(topic, fqn), types[0], qos, output))
-            for service, types in node.get_service_names_and_types_by_node(name, namespace):
-                if not _standard(service) and "/_action/" not in service:
-                    found.add(Interface("service", _relative(service, fqn), types[0], "", output))
-            for action, types in get_action_server_names_and_types_by_node(node, name, namespace):
-                found.add(Interface("action server", _relative(action, fqn), types[0], "", output))
-            for action, types in get_action_client_names_and_types_by_node(node, name, namespace):
-                found.add(Interface("action client", _relative(action, fqn), types[0], "", output))
-        return {i for i in found if "/_action/" not in i.name}
+            found = _read_graph(node, output)
+            now = time.monotonic()
+            if found != last:
+                last, stable_since = found, now
+            elif (now - stable_since >= 2.0 and now - start >= 3.0) or now - start >= 30.0:
+                return found
     finally:
         executor.remove_node(node)
         node.abort()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def _read_graph(node: Any, output: str) -> set[Interface]:
+    """Everything the node and its helper nodes have on the graph now (standard services excluded)."""
+    from rclpy.action import (
+        get_action_client_names_and_types_by_node,
+        get_action_server_names_and_types_by_node,
+    )
+
+    fqn = node.get_fully_qualified_name()
+    found: set[Interface] = set()
+    names = [(n, ns) for n, ns in node.get_node_names_and_namespaces() if n == node.get_name()
+             or n.startswith(f"_{node.get_name()}_")]
+    for name, namespace in names:
+        for topic, types in node.get_publisher_names_and_types_by_node(name, namespace):
+            if not _standard(topic):
+                qos = _qos([i for i in node.get_publishers_info_by_topic(topic) if i.node_name == name])
+                found.add(Interface("publishes", _relative(topic, fqn), types[0], qos, output))
+        for topic, types in node.get_subscriber_names_and_types_by_node(name, namespace):
+            if not _standard(topic):
+                infos = node.get_subscriptions_info_by_topic(topic)
+                qos = _qos([i for i in infos if i.node_name == name])
+                found.add(Interface("subscribes", _relative(topic, fqn), types[0], qos, output))
+        for service, types in node.get_service_names_and_types_by_node(name, namespace):
+            if not _standard(service) and "/_action/" not in service:
+                found.add(Interface("service", _relative(service, fqn), types[0], "", output))
+        for action, types in get_action_server_names_and_types_by_node(node, name, namespace):
+            found.add(Interface("action server", _relative(action, fqn), types[0], "", output))
+        for action, types in get_action_client_names_and_types_by_node(node, name, namespace):
+            found.add(Interface("action client", _relative(action, fqn), types[0], "", output))
+    return {i for i in found if "/_action/" not in i.name}
 
 
 def node_table() -> str:
