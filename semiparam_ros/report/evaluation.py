@@ -34,9 +34,8 @@ from semiparam_ros.report.tables import (
     comparisons_table,
     components_table,
     contacts_table,
-    headline_markdown,
+    controller_section,
     protocol_table,
-    slices_markdown,
 )
 
 __all__ = [
@@ -148,10 +147,7 @@ def evaluate_paper(train: Path, test: Path, config: EstimatorConfig, *, topics: 
         info["horizons"] = horizon.to_json()
     report = protocol_report(result, config=config.to_flat(), protocol=info)
     text = "## One step ahead (test-then-train, the paper's protocol)\n\n" + evaluation_text(report)
-    headline = "" if horizon is None else headline_markdown(horizon, report.output.kind.unit)
-    if headline:
-        sliced = slices_markdown(horizon, report.output.kind.unit)
-        text = "## What a controller gets\n\n" + headline + "\n" + sliced + "\n" + text
+    text = controller_section(horizon, report.output.kind.unit) + text
     for note in recovered:
         text = f"WARNING: {note}\n\n" + text
     title = f"{Path(train).name} → {Path(test).name}"

@@ -59,8 +59,8 @@ from semiparam_ros.eval.protocol.metrics import OutputSpec
 from semiparam_ros.eval.protocol.options import DEFAULT_FIRST_S, DEFAULT_SPLITS, DEFAULT_WINDOW_S
 from semiparam_ros.eval.protocol.prequential import SampleArrays, predict_only, run_protocol, test_then_train
 from semiparam_ros.eval.protocol.report import ProtocolReport, protocol_report
-from semiparam_ros.eval.protocol.slices import motion_slices
-from semiparam_ros.report.tables import headline_markdown, slices_markdown
+from semiparam_ros.eval.protocol.slices import motion_slices, slice_coverage
+from semiparam_ros.report.tables import controller_section
 
 __all__ = [
     "BATCH",
@@ -364,53 +364,20 @@ def compare_on_logs(config: EstimatorConfig, train: SampleArrays, test: SampleAr
                                     components=joints,
                                     frozen_models={k: models[k + FROZEN_SUFFIX] for k in LEARNERS})
     std = dict(zip(joints, (float(s) for s in test.Y.std(axis=0)), strict=True))
-    coverage = {k: [float(c) for c in models[k + FROZEN_SUFFIX].coverage(test.X, test.Y)] for k in LEARNERS}
     masks = motion_slices(test.X, len(joints), test.n_outputs, test.sample_period_s)
-    by_slice = {k: _coverage_by_slice(models[k + FROZEN_SUFFIX], test, masks) for k in LEARNERS}
-    return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected, horizon,
-                               excitation_summary(config, models["SP"], test), coverage,
-                               served_trace(config, models["SP" + FROZEN_SUFFIX], test), by_slice)
-
-
-def _coverage_by_slice(model: Any, test: SampleArrays, masks: dict[str, np.ndarray]) -> dict[str, float]:
-    """±2σ coverage of a served model by motion state (mean over the outputs with enough samples)."""
-    from semiparam_ros.eval.protocol.slices import MIN_SAMPLES, SLICES
-
-    n = test.X.shape[1] // 3
-    total, std = model.served.predict(test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:])
-    inside = np.abs(test.Y - total) <= 2.0 * std
-    out = {"all": float(np.mean(inside))}
-    for name in SLICES:
-        mask = masks[name]
-        values = [float(np.mean(inside[mask[:, k], k])) for k in range(inside.shape[1])
-                  if int(mask[:, k].sum()) >= MIN_SAMPLES]
-        out[name] = float(np.mean(values)) if values else float("nan")
-    return out
-
-
-def served_trace(config: EstimatorConfig, served: Any, test: SampleArrays) -> ServedTrace | None:
-    """Predict a test log with a served model (frozen) and the URDF's rigid body.
-
-    Args:
-        config: The configuration (its URDF and joints).
-        served: A :class:`~semiparam_ros.eval.models.served.ServedModel`, or anything else (then None).
-        test: The test stream.
-
-    Returns:
-        The trace, or ``None`` when ``served`` is no served model.
-    """
-    from semiparam_ros.core.estimator.build import build_regressor
-    from semiparam_ros.eval.models.served import ServedModel
-
-    if not isinstance(served, ServedModel):
-        return None
-    n = len(config["robot.joints"])
+    n = len(joints)
     q, dq, ddq = test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:]
-    total, std = served.served.predict(q, dq, ddq)
-    urdf = build_regressor(config).wrench(q, dq, ddq)
+    served = {k: models[k + FROZEN_SUFFIX].served for k in LEARNERS}
+    predicted = {k: model.predict(q, dq, ddq) for k, model in served.items()}  # once per learner
+    inside = {k: np.abs(test.Y - total) <= 2.0 * sigma for k, (total, sigma) in predicted.items()}
+    coverage = {k: [float(c) for c in v.mean(axis=0)] for k, v in inside.items()}
+    by_slice = {k: slice_coverage(v, masks) for k, v in inside.items()}
+    total, sigma = predicted["SP"]
     stamps = np.asarray(test.stamps_ns, dtype=np.int64)
-    time_s = (stamps - stamps[0]) * 1e-9
-    return ServedTrace(tuple(config["robot.joints"]), time_s, np.asarray(test.Y), total, std, urdf)
+    trace = ServedTrace(tuple(joints), (stamps - stamps[0]) * 1e-9, np.asarray(test.Y), total, sigma,
+                        served["SP"].cad(q, dq, ddq))
+    return RealRobotComparison(report, std, tuple(friction_joints), tuple(criteria), injected, horizon,
+                               excitation_summary(config, models["SP"], test), coverage, trace, by_slice)
 
 
 def excitation_summary(config: EstimatorConfig, model: Any, test: SampleArrays) -> dict[str, Any]:
@@ -491,10 +458,7 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
     """
     report = comparison.report
     joints = list(report.output.components)
-    headline = "" if comparison.horizons is None else headline_markdown(comparison.horizons, "N·m")
-    if headline:
-        headline += "\n" + slices_markdown(comparison.horizons, "N·m",
-                                            coverage=comparison.coverage_slices)
+    leading = controller_section(comparison.horizons, "N·m", coverage=comparison.coverage_slices)
     head = "| model | " + " | ".join(joints) + " | mean |\n|---" + "|---" * (len(joints) + 1) + "|\n"
     rmse = "".join(_row(k, [*(m.components[j].rmse for j in joints), m.rmse_mean], ".3f") + "\n"
                    for k, m in report.models.items())
@@ -502,8 +466,7 @@ def comparison_markdown(comparison: RealRobotComparison) -> str:
                    for k, m in report.models.items())
     split = report.protocol.get("split_size")
     text = (
-        ("## What a controller gets\n\n" + headline + "\n## One step ahead (test-then-train, the paper's "
-         "protocol)\n\n" if headline else "")
+        (leading + "## One step ahead (test-then-train, the paper's protocol)\n\n" if leading else "")
         + f"Train: {report.samples_train} samples; test: {report.splits} parts of {split} samples "
         f"({report.samples_test} in all, {report.protocol.get('sample_period_s', float('nan')) * 1e3:.1f} ms "
         "period); at regime = second half of each part.\n\n"

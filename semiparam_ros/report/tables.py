@@ -23,6 +23,7 @@ __all__ = [
     "comparisons_table",
     "components_table",
     "contacts_table",
+    "controller_section",
     "fmt",
     "headline_markdown",
     "protocol_table",
@@ -332,3 +333,23 @@ def slices_markdown(report: HorizonReport, unit: str, horizon: str = FROZEN,
                  + "".join(f"| {m} | " + " | ".join(f"{c[s]:.3f}" for s in SLICES) + f" | {c['all']:.3f} |\n"
                            for m, c in coverage.items()))
     return text
+
+
+def controller_section(report: HorizonReport | None, unit: str,
+                       coverage: dict[str, dict[str, float]] | None = None) -> str:
+    """Return the section that leads a joint-torque report: what a controller gets, by motion state too.
+
+    Args:
+        report: The horizon report (frozen and one step ahead), or None.
+        unit: Unit of the outputs.
+        coverage: Per model, the served model's ±2σ coverage by slice, or None.
+
+    Returns:
+        Markdown ending with a blank line ('' without the two horizons).
+    """
+    headline = "" if report is None else headline_markdown(report, unit)
+    if not headline:
+        return ""
+    assert report is not None
+    sliced = slices_markdown(report, unit, coverage=coverage)
+    return "## What a controller gets\n\n" + headline + "\n" + sliced + "\n"

@@ -36,7 +36,7 @@ from semiparam_ros.atomic import atomic_write_bytes, atomic_write_text
 from semiparam_ros.core.config import load_config
 from semiparam_ros.errors import ConfigurationError
 from semiparam_ros.eval.bags.replay import Topics, load_samples
-from semiparam_ros.eval.protocol.slices import SLICES, motion_slices, slice_rmse
+from semiparam_ros.eval.protocol.slices import SLICES, motion_slices, slice_coverage, slice_rmse
 from semiparam_ros.jobs.parallel import run_jobs
 from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import LearnedModel
@@ -136,9 +136,7 @@ def _learn_robot(robot: Robot) -> tuple[FleetRow, bytes | None]:
         row.frozen_rmse = float(np.mean(np.sqrt(np.mean(err**2, axis=0))))
         masks = motion_slices(test.X, n, test.n_outputs, test.sample_period_s)
         row.frozen_slices = slice_rmse(err, masks)
-        inside = (np.abs(err) <= 2.0 * np.asarray(std)).astype(np.float64)
-        row.coverage = {"all": float(inside.mean()), **{
-            k: (float(inside[m].mean()) if m.any() else float("nan")) for k, m in masks.items()}}
+        row.coverage = slice_coverage(np.abs(err) <= 2.0 * np.asarray(std), masks)
     return row, data
 
 

@@ -22,11 +22,12 @@ none has); its share is the fraction of (sample, output) pairs in it.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 __all__ = ["MIN_SAMPLES", "REST_VELOCITY", "REVERSAL_WINDOW_S", "SLICES", "SLOW_VELOCITY", "motion_slices",
-           "slice_rmse", "slice_shares"]
+           "slice_coverage", "slice_rmse", "slice_shares"]
 
 #: The slices, in the order tables show them.
 SLICES = ("at rest", "reversals", "slow", "fast")
@@ -70,15 +71,30 @@ def motion_slices(X: np.ndarray, n_joints: int, n_outputs: int, period_s: float)
     return masks
 
 
-def slice_rmse(errors: np.ndarray, masks: dict[str, np.ndarray]) -> dict[str, float]:
-    """Mean over the outputs (with enough samples) of each slice's RMSE of ``errors`` (N, t)."""
+def _per_slice(values: np.ndarray, masks: dict[str, np.ndarray], reduce: Callable[[np.ndarray], float]
+               ) -> dict[str, float]:
+    """Mean over the outputs (with enough samples in the slice) of ``reduce`` of each output's values."""
     out = {}
     for name in SLICES:
         mask = masks[name]
-        values = [math.sqrt(float(np.mean(errors[mask[:, k], k] ** 2))) for k in range(errors.shape[1])
-                  if int(mask[:, k].sum()) >= MIN_SAMPLES]
-        out[name] = float(np.mean(values)) if values else float("nan")
+        per_output = [reduce(values[mask[:, k], k]) for k in range(values.shape[1])
+                      if int(mask[:, k].sum()) >= MIN_SAMPLES]
+        out[name] = float(np.mean(per_output)) if per_output else float("nan")
     return out
+
+
+def slice_rmse(errors: np.ndarray, masks: dict[str, np.ndarray]) -> dict[str, float]:
+    """Mean over the outputs (with enough samples) of each slice's RMSE of ``errors`` (N, t)."""
+    return _per_slice(errors, masks, lambda e: math.sqrt(float(np.mean(e**2))))
+
+
+def slice_coverage(inside: np.ndarray, masks: dict[str, np.ndarray]) -> dict[str, float]:
+    """Return each slice's share of ``inside`` (N, t), the errors within ±2σ: coverage by motion state.
+
+    The mean over the outputs with enough samples in the slice, as :func:`slice_rmse`; under ``all`` the
+    share over every sample and output.
+    """
+    return {"all": float(np.mean(inside)), **_per_slice(inside, masks, lambda b: float(np.mean(b)))}
 
 
 def slice_shares(masks: dict[str, np.ndarray]) -> dict[str, float]:
