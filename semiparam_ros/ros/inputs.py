@@ -41,9 +41,6 @@ _MIN_NAME_BOUND = 1024
 _MAX_LOST_PER_EVENT = 100_000  # a larger lost-message count in one event is a middleware counter glitch
 #: An input stream silent this long [s] (since start-up or its last message) is named on the console.
 SILENCE_S = 3.0
-#: The ROS type names of the input streams, as the graph reports them.
-_TYPE_NAMES = {InputKind.JOINT_STATES: "sensor_msgs/msg/JointState",
-               InputKind.WRENCH: "geometry_msgs/msg/WrenchStamped"}
 #: What :func:`take` returns for a subscription being destroyed.
 GONE: Any = object()
 
@@ -190,7 +187,8 @@ class InputStreams:
     def silence_message(self, kind: InputKind, silent_s: float, count: int) -> str:
         """Say that a stream is silent, and which topics of its type exist (the graph, now)."""
         topic = self._node.resolve_topic_name(self.subscriptions[kind].topic_name)
-        type_name = _TYPE_NAMES[kind]
+        msg_type = _MESSAGE_TYPES[kind]  # as the graph names it: sensor_msgs/msg/JointState
+        type_name = f"{msg_type.__module__.split('.')[0]}/msg/{msg_type.__name__}"
         own, graph = self._node.get_name(), self._node
         others = sorted(name for name, types in graph.get_topic_names_and_types()
                         if type_name in types and name != topic  # the node's own outputs are no candidates

@@ -137,7 +137,7 @@ def fit_summary(estimator: OnlineEstimator, X: np.ndarray, Y: np.ndarray) -> Fit
     q, dq, ddq = X[:, :n], X[:, n:2 * n], X[:, 2 * n:]
     model = LearnedModel(estimator)
     parts = model.predict_parts(q, dq, ddq)
-    urdf = estimator.regressor.wrench(q, dq, ddq)
+    urdf = model.cad(q, dq, ddq)
 
     def rmse(prediction: np.ndarray) -> np.ndarray:
         return np.sqrt(np.mean((Y - prediction) ** 2, axis=0))
