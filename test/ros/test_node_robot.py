@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 import threading
 import time
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -54,12 +55,22 @@ def _log_times(output: str) -> list[tuple[float, str]]:
     return [(float(m[1]), m[2]) for m in map(_STAMP.match, output.splitlines()) if m]
 
 
-def test_urdf_and_joints_are_enough_for_a_torque_arm(tmp_path, monkeypatch):
+@contextmanager
+def _node_and_client(tmp_path, monkeypatch, robot: dict, tag: str, **more: object):
+    """The node started on a parameter file naming ``robot`` (a subprocess) and a client beside it."""
     env = make_ros_env(tmp_path, monkeypatch)
-    node = NodeProcess(env, params_file=_params(tmp_path, {"urdf": PANDA_URDF, "joints": PANDA_JOINTS}),
-                       tag="torques")
+    node = NodeProcess(env, params_file=_params(tmp_path, robot, **more), tag=tag)
     client = TestClient(env)
     try:
+        yield node, client
+    finally:
+        client.close()
+        node.stop()
+
+
+def test_urdf_and_joints_are_enough_for_a_torque_arm(tmp_path, monkeypatch):
+    with _node_and_client(tmp_path, monkeypatch, {"urdf": PANDA_URDF, "joints": PANDA_JOINTS},
+                          "torques") as (node, client):
         predictions = client.collect(JointState, "/estimator/predicted_joint_torques")
         assert client.wait_for_publisher("/estimator/predicted_joint_torques", 60), node.output()
         pub = client.node.create_publisher(JointState, "/joint_states", _BEST_EFFORT)
@@ -71,24 +82,15 @@ def test_urdf_and_joints_are_enough_for_a_torque_arm(tmp_path, monkeypatch):
         assert len(predictions.snapshot()[-1].effort) == 7
         assert client.node.count_subscribers("/wrench") == 0  # no F/T sensor: no wrench input
         assert wait_until(lambda: "estimating joint_torques" in node.output(), 30), node.output()
-    finally:
-        client.close()
-        node.stop()
 
 
 def test_an_ft_sensor_makes_it_learn_the_wrench(tmp_path, monkeypatch):
-    env = make_ros_env(tmp_path, monkeypatch)
     robot = {k.split(".")[1]: v for k, v in ICUB_RIGHT_ARM.items() if k != "robot.output"}
-    node = NodeProcess(env, params_file=_params(tmp_path, robot), tag="wrench")
-    client = TestClient(env)
-    try:
+    with _node_and_client(tmp_path, monkeypatch, robot, "wrench") as (node, client):
         assert client.wait_for_publisher("/estimator/predicted_wrench", 60), node.output()
         assert wait_until(lambda: client.node.count_subscribers("/wrench") == 1, 30)
         # the start-up line comes after the entities are created: wait for it, do not race it
         assert wait_until(lambda: "estimating wrench" in node.output(), 30), node.output()
-    finally:
-        client.close()
-        node.stop()
 
 
 def test_no_joints_stops_and_says_what_to_set(tmp_path, monkeypatch):
@@ -102,12 +104,8 @@ def test_no_joints_stops_and_says_what_to_set(tmp_path, monkeypatch):
 
 
 def test_joint_states_on_another_topic_are_named_within_5_s(tmp_path, monkeypatch):
-    env = make_ros_env(tmp_path, monkeypatch)
-    path = _params(tmp_path, {"urdf": PANDA_URDF, "joints": PANDA_JOINTS},
-                   topics="{joint_states: /arm/joint_states}")
-    node = NodeProcess(env, params_file=path, tag="silent")
-    client = TestClient(env)
-    try:
+    with _node_and_client(tmp_path, monkeypatch, {"urdf": PANDA_URDF, "joints": PANDA_JOINTS}, "silent",
+                          topics="{joint_states: /arm/joint_states}") as (node, client):
         pub = client.node.create_publisher(JointState, "/joint_states", _BEST_EFFORT)
         publishing = [True]
 
@@ -129,17 +127,11 @@ def test_joint_states_on_another_topic_are_named_within_5_s(tmp_path, monkeypatc
         warned, text = next((t, text) for t, text in logged if text.startswith("no sensor_msgs"))
         assert warned - started <= 5.0, (started, warned)
         assert "/joint_states" in text.split("publishers:")[1]  # where the robot does publish
-    finally:
-        client.close()
-        node.stop()
 
 
 def test_every_drop_reason_reaches_the_console(tmp_path, monkeypatch):
-    env = make_ros_env(tmp_path, monkeypatch)
-    node = NodeProcess(env, params_file=_params(tmp_path, {"urdf": PANDA_URDF, "joints": PANDA_JOINTS}),
-                       tag="drops")
-    client = TestClient(env)
-    try:
+    with _node_and_client(tmp_path, monkeypatch, {"urdf": PANDA_URDF, "joints": PANDA_JOINTS},
+                          "drops") as (node, client):
         pub = client.node.create_publisher(JointState, "/joint_states", _BEST_EFFORT)
         assert wait_until(lambda: client.node.count_subscribers("/joint_states") == 1, 60), node.output()
         for k in range(100):
@@ -159,6 +151,3 @@ def test_every_drop_reason_reaches_the_console(tmp_path, monkeypatch):
         assert "waited for the acceleration estimate's window" in output
         assert not any(" 0," in line.split("every non-zero count:")[-1] for line in warnings
                        if "every non-zero count" in line)
-    finally:
-        client.close()
-        node.stop()
