@@ -57,7 +57,7 @@ from semiparam_ros.core.learners.parametric import ParametricModel
 from semiparam_ros.core.learners.uncertainty import predict_with_variance
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, ExcitationReport
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate
-from semiparam_ros.core.rigid_body.plausible import PlausibleLinks
+from semiparam_ros.core.rigid_body.plausible import PlausibleLinks, plausible_links
 from semiparam_ros.core.validation import check_finite_array
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
@@ -178,8 +178,6 @@ class LearnedModel:
             ValueError: For a model without a rigid-body part (``NP``).
             ConfigurationError: If the solver fails.
         """
-        from semiparam_ros.core.rigid_body.plausible import plausible_links  # the projection: cvxpy
-
         estimate = self.consistent()
         par = self._rigid_learner()
         return plausible_links(self.estimator.regressor, estimate, par.parameters, par.rls.R,

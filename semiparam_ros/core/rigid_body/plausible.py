@@ -32,6 +32,7 @@ from semiparam_ros.core.rigid_body.identification import (
     ConsistentEstimate,
     consistent_parameters,
     link_of,
+    prior_weights,
     random_state_regressor,
 )
 
@@ -58,8 +59,8 @@ class LinkOrigin:
         com_distance: Distance of the exported centre of mass from the link frame [m].
         from_data: The quantities the data moved from the URDF's values: a subset of ``mass``,
             ``centre of mass``, ``inertia`` (empty: all the URDF's).
-        held: Whether the data left the link implausible, so it was held at its URDF values.
-        reason: Why it was held ('' when not).
+        reason: Why the data left the link implausible, so that it was held at its URDF values ('' when
+            it was not: :attr:`held`).
         payload: Mass carried beyond the URDF [kg] (the distal body only; 0 elsewhere).
     """
 
@@ -68,9 +69,13 @@ class LinkOrigin:
     urdf_mass: float
     com_distance: float
     from_data: tuple[str, ...]
-    held: bool = False
     reason: str = ""
     payload: float = 0.0
+
+    @property
+    def held(self) -> bool:
+        """Whether the link was held at its URDF values (the data left it implausible)."""
+        return bool(self.reason)
 
 
 @dataclass(frozen=True)
@@ -175,6 +180,7 @@ def plausible_links(regressor: RigidBodyRegressor, estimate: ConsistentEstimate,
     """
     urdf = regressor.urdf_parameters()
     distal = regressor.body_index(regressor.distal_body_name)
+    weights = prior_weights(regressor) if weights is None else weights  # once for every re-solve
     held: dict[int, str] = {}
     current = estimate
     for _ in range(regressor.n_bodies):
@@ -211,8 +217,7 @@ def _origin(estimate: ConsistentEstimate, urdf: np.ndarray, i: int, body: str, r
         moved.append("inertia")
     carries = distal and not reason and mass > PAYLOAD_RATIO * urdf_mass
     payload = mass - urdf_mass if carries else 0.0
-    return LinkOrigin(body, mass, urdf_mass, float(np.linalg.norm(com)), tuple(moved), bool(reason), reason,
-                      payload)
+    return LinkOrigin(body, mass, urdf_mass, float(np.linalg.norm(com)), tuple(moved), reason, payload)
 
 
 def _prediction_change_rms(regressor: RigidBodyRegressor, delta: np.ndarray) -> float:
