@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from semiparam_ros.sim.arms import ARM_ROBOTS, ArmScenarioConfig, arm_regressor, true_parameters
+from semiparam_ros.sim.arms import ArmScenarioConfig, arm_regressor, arm_spec, true_parameters
 from semiparam_ros.sim.trajectories import multisine
 
 __all__ = ["ArmPlant", "LoopResult", "desired_trajectory", "pd_gains", "run_loop"]
@@ -50,7 +50,7 @@ class ArmPlant:
     """
 
     def __init__(self, robot: str = "panda", seed: int = 0) -> None:
-        self.spec = ARM_ROBOTS[robot]
+        self.spec = arm_spec(robot)
         config = ArmScenarioConfig(name=f"{robot}_closed_loop", robot=robot, seed=seed)
         self.regressor = arm_regressor(robot)
         self.parameters = true_parameters(config)
@@ -129,7 +129,7 @@ def desired_trajectory(robot: str, seed: int, duration_s: float, rate_hz: float
     Returns:
         ``(t [s], q_d [rad], q̇_d [rad/s], q̈_d [rad/s²])``, arrays (N,) and (N, n).
     """
-    spec = ARM_ROBOTS[robot]
+    spec = arm_spec(robot)
     window = np.asarray(spec.position_window, dtype=np.float64)
     traj = multisine(window[:, 0], window[:, 1], seed=seed, base_period=spec.base_period,
                      max_velocity=spec.max_velocity, max_acceleration=spec.max_acceleration)

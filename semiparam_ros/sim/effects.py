@@ -59,6 +59,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from semiparam_ros.core.config import ICUB_RIGHT_ARM
 from semiparam_ros.sim.ik import ArmKinematics
 
 __all__ = [
@@ -77,8 +78,8 @@ __all__ = [
     "sensor_reading",
 ]
 
-#: The F/T sensor frame of the iCub right arm (the ``r_upper_arm`` link frame).
-SENSOR_FRAME = "r_arm_ft_sensor"
+#: The F/T sensor frame of the iCub right arm (the ``r_upper_arm`` link frame): the estimator's iCub.
+SENSOR_FRAME: str = ICUB_RIGHT_ARM["robot.ft_sensor"]
 _CHEST_FRAME = "chest"
 
 

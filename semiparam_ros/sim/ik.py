@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from semiparam_ros.core.config import ICUB_RIGHT_ARM
 from semiparam_ros.sim.trajectories import CartesianCircle, FourierTrajectory
 
 __all__ = [
@@ -32,8 +33,8 @@ __all__ = [
     "clik_periodic_orbit",
 ]
 
-#: The four joints the paper's arm model uses (shoulder pitch, roll, yaw, elbow).
-ARM_JOINTS: tuple[str, ...] = ("r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow")
+#: The four joints the paper's arm model uses (shoulder pitch, roll, yaw, elbow): the estimator's iCub.
+ARM_JOINTS: tuple[str, ...] = tuple(ICUB_RIGHT_ARM["robot.joints"])
 
 
 class ArmKinematics:
