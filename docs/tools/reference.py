@@ -97,6 +97,10 @@ _CHECKPOINT_GROUPS = {
              "RᵀR = λI + ΦᵀΦ, the right-hand sides beside it), the residual's random features (`rff.*`), "
              "input standardization and factor, the fast correction (`fast.*`, `tracker.*`) and counters",
     "noise": "The running noise scale s² per output [(N·m)² or N², (N·m)²] and its clock",
+    "calibration": ("The served σ's calibration for new motion: per output and motion state (at rest, "
+                    "around a reversal, in motion) the histogram of a frozen copy's normalized errors on "
+                    "later motion (`weights`, ln z bins 0.05 wide), the one-step noise s² of that state "
+                    "(`s2`, NaN before a sample in it) and the samples scored"),
     "gate": "The contact gate's warm-up and counters",
     "payload": "A tared payload learner (present after `~/payload/tare`)",
     "meta": "Format version, structural fingerprint, samples learned, the whole configuration (JSON), the "

@@ -364,6 +364,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "published std is sqrt(s^2 (1 + z A^-1 z^T)); with the consistent SP, s^2 is of the "
                   "model's errors (its fast correction left out)", min=0.0, min_exclusive=True, max=1e9,
                   runtime="estimator"),
+    ParameterSpec("uncertainty.calibration_block", "double", 20.0,
+                  "seconds between the frozen copies of the model that calibrate the served std for new "
+                  "motion: each copy is scored on the next block of the learning stream and the served std "
+                  "(load_model, the feed-forward) is scaled per output and motion state so that 95 % of "
+                  "those errors lie within +-2 std (core/estimator/calibration.py); 0 = the one-step std",
+                  min=0.0, max=1e9),
     ParameterSpec("gate.enabled", "bool", True,
                   "contact-aware learning gate: a sample whose residual exceeds gate.threshold standard "
                   "deviations is predicted but not learned, unless the excursion outlasts "

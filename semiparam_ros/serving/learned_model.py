@@ -3,12 +3,15 @@
 :func:`load_model` reads a self-contained checkpoint (configuration, URDF text and learned state travel
 inside it; see :meth:`OnlineEstimator.checkpoint_state`) and returns a :class:`LearnedModel`:
 
-    τ(q, q̇, q̈) = Φ(q, q̇, q̈) π̂  +  g(x) r(x),          σ(x) = sqrt(s² (1 + v(x)))
+    τ(q, q̇, q̈) = Φ(q, q̇, q̈) π̂  +  g(x) r(x),          σ(x) = c_m sqrt(s²_m (1 + v(x)))
 
 the identified rigid-body part (base inertial parameters π̂ with friction and offsets) plus the residual
 where the data determine it (weight g in [0, 1], 0 in states never seen; see
-:mod:`semiparam_ros.core.learners.consistent`), with its predictive standard deviation σ (s² the
-noise variance the estimator measured, v the relative posterior variance at x). No correction of a recent
+:mod:`semiparam_ros.core.learners.consistent`), with its predictive standard deviation σ (m each output's
+motion state at x — at rest, around a reversal, in motion —, s²_m the one-step noise variance the
+estimator measured in that state, v the relative posterior variance at x, c_m the scale that puts 95 % of
+a frozen copy's errors on later motion within ±2σ: :mod:`semiparam_ros.core.estimator.calibration`;
+before anything was scored, the one-step sqrt(s² (1 + v))). No correction of a recent
 measured error enters: the model depends on the state only, so it may be evaluated at a **desired** state,
 ahead of the measurement.
 
@@ -49,6 +52,7 @@ import numpy as np
 from semiparam_ros.core.checkpoint import load_npz
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import Model, build_regressor, rigid_body_part, traits_of
+from semiparam_ros.core.estimator.calibration import STATES, motion_states
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.estimator.state import learner_kind, read_config
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
@@ -106,10 +110,14 @@ class LearnedModel:
     """
 
     def __init__(self, estimator: OnlineEstimator, *, model: Model | None = None,
-                 noise_s2: np.ndarray | None = None, solve: bool = True) -> None:
+                 noise_s2: np.ndarray | None = None,
+                 calibration: tuple[np.ndarray, np.ndarray | None] | None = None,
+                 solve: bool = True) -> None:
         self.estimator = estimator
         self._frozen = model
         self._frozen_s2 = noise_s2
+        self._frozen_calibration = calibration
+        self._scales: tuple[int, np.ndarray] | None = None  # the live calibration's, by scores counted
         self._consistent: tuple[tuple[int, int], ConsistentEstimate] | None = None
         self._attached: ConsistentEstimate | None = None
         self._solve = bool(solve)
@@ -136,7 +144,9 @@ class LearnedModel:
         """
         s2 = self._noise_s2()
         return LearnedModel(self.estimator, model=self._model().copy(),
-                            noise_s2=None if s2 is None else s2.copy(), solve=self._solve)
+                            noise_s2=None if s2 is None else s2.copy(),
+                            calibration=self._calibration(copy=True),
+                            solve=self._solve)
 
     def attach_consistent(self, estimate: ConsistentEstimate | None) -> None:
         """Use a consistent estimate solved elsewhere (the node's worker process) instead of solving here."""
@@ -268,6 +278,33 @@ class LearnedModel:
     def _noise_s2(self) -> np.ndarray | None:
         return self.estimator.noise.s2 if self._frozen is None else self._frozen_s2
 
+    def sigma_scales(self) -> np.ndarray:
+        """Return the served σ's scale per output and motion state, (t, 3).
+
+        Columns: at rest, around a reversal, in motion
+        (:data:`~semiparam_ros.core.estimator.calibration.STATES`).
+        σ(x) = c sqrt(s²_m (1 + v(x))), m the output's motion state at x and s²_m its one-step noise: c puts
+        95 % of the errors a frozen copy of the model made on later
+        motion of the learning stream within ±2σ (:mod:`semiparam_ros.core.estimator.calibration`). NaN
+        where nothing was scored (a new model, a checkpoint written before the calibration,
+        ``uncertainty.calibration_block: 0``): σ is then the one-step sqrt(s² (1 + v)).
+        """
+        return self._calibration()[0]
+
+    def _calibration(self, copy: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """Return the scales and s²_m of the served σ, each (t, 3) (a snapshot's, or the estimator's now)."""
+        if self._frozen is not None and self._frozen_calibration is not None:
+            return self._frozen_calibration
+        calibration = self.estimator.calibration
+        if calibration is None:
+            return np.full((len(self.output_names), len(STATES)), np.nan), None
+        if self._scales is None or self._scales[0] != calibration.n_scored:
+            self._scales = (calibration.n_scored, calibration.scales())
+        s2 = calibration.s2
+        if copy:
+            return self._scales[1].copy(), s2.copy()
+        return self._scales[1], s2
+
     # ------------------------------------------------------------------ description
     @property
     def joints(self) -> tuple[str, ...]:
@@ -384,11 +421,19 @@ class LearnedModel:
                      if traits.combination == "consistent" else model.parameters)
         return np.asarray(rigid, dtype=np.float64) / self.estimator.column_scale
 
-    def _std(self, variance: np.ndarray) -> np.ndarray:
+    def _std(self, variance: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """σ at the rows of X: c_m sqrt(s²_m (1 + v)), m each output's motion state (one-step σ without)."""
+        relative = 1.0 + np.fmax(variance, 0.0)
         s2 = self._noise_s2()
-        if s2 is None:
-            return np.full(variance.shape, np.inf)
-        return np.sqrt(s2 * (1.0 + np.fmax(variance, 0.0)))
+        one_step = np.full(variance.shape, np.inf) if s2 is None else np.sqrt(s2 * relative)
+        scales, per_state = self._calibration()
+        if per_state is None or np.isnan(scales).all():
+            return one_step
+        states = motion_states(X, self._n, scales.shape[0])
+        c = np.take_along_axis(scales.T, states, axis=0)
+        s2_m = np.take_along_axis(per_state.T, states, axis=0)
+        served = c * np.sqrt(s2_m * relative)
+        return np.where(np.isnan(served), one_step, served)
 
     def predict_parts(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None,
                       exclude: Sequence[str] = (), exclude_source: str = "model") -> ModelPrediction:
@@ -416,7 +461,7 @@ class LearnedModel:
         X, single = self._states(q, dq, ddq)
         pred = self._model_rows(X, consistent)
         assert pred.variance is not None  # every path returns it
-        std = self._std(np.asarray(pred.variance))
+        std = self._std(np.asarray(pred.variance), X)
         total, rigid, residual = pred.total, pred.parametric, pred.residual
         if exclude:
             n = self._n

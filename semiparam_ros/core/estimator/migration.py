@@ -20,6 +20,10 @@ Version 1 (before the format was versioned by migration) → 2, by the arrays th
   without the flag of a rigid body set from outside: a reference that followed π̂; its residual in the
   layout that regressed every learned regressor entry: today's layout (the reference's residual and the
   cross-products ``B_E = Rᵀ d_E``, exact).
+
+Version 2 → 3: ``calibration.*`` (the served σ's scales for new motion,
+:mod:`semiparam_ros.core.estimator.calibration`) absent: empty histograms, i.e. the served σ is the one-step
+σ, as before.
 """
 
 from __future__ import annotations
@@ -57,7 +61,7 @@ def migrate(state: dict[str, np.ndarray], version: int, target: int,
     Raises:
         CheckpointError: A version newer than ``target`` or unknown, or arrays a step cannot convert.
 
-    >>> new, notes = migrate({"meta.version": np.array(2)}, 2, 2, dict)
+    >>> new, notes = migrate({"meta.version": np.array(3)}, 3, 3, dict)
     >>> notes
     []
     """
@@ -144,4 +148,15 @@ def _consistent_v1(state: dict[str, np.ndarray], new: dict[str, np.ndarray], pre
         state[f"{prefix}reference"] = ref
 
 
-_STEPS: dict[int, Step] = {1: _v1_to_v2}
+def _v2_to_v3(state: dict[str, np.ndarray], fresh: Callable[[], dict[str, np.ndarray]]
+              ) -> tuple[dict[str, np.ndarray], list[str]]:
+    new = fresh()
+    added = {k: v for k, v in new.items() if k.startswith("calibration.")}
+    if not added:  # the loading configuration calibrates nothing (uncertainty.calibration_block: 0)
+        return state, []
+    state.update(added)
+    return state, ["it carries no calibration of σ for new motion: the served σ is the one-step σ until "
+                   "the model has learned another block"]
+
+
+_STEPS: dict[int, Step] = {1: _v1_to_v2, 2: _v2_to_v3}

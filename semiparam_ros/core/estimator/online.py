@@ -30,6 +30,7 @@ from semiparam_ros.core.estimator.build import (
     rigid_body_part,
     traits_of,
 )
+from semiparam_ros.core.estimator.calibration import FrozenCalibration
 from semiparam_ros.core.estimator.migration import migrate
 from semiparam_ros.core.estimator.state import (
     CHECKPOINT_VERSION,
@@ -137,6 +138,9 @@ class OnlineEstimator:
         self._rejected = 0
         self._last_learned_ns: int | None = None  # stamp of the newest learned sample
         self.noise = NoiseScale(self.model.n_outputs, config["uncertainty.noise_time_constant"])
+        #: What a frozen copy of the model scored on later motion: the served σ's scale per output and
+        #: motion state (None with ``uncertainty.calibration_block: 0``).
+        self.calibration = _calibration(config, self.model.n_outputs)
         self.gate = ContactGate(gate_config(config))
         self.gate_enabled = bool(config["gate.enabled"])
         self.forgetting: float | None = None  # β from adaptation.time_constant, once the rate is measured
@@ -264,7 +268,10 @@ class OnlineEstimator:
             # σ is the model's: a fast correction of the recent error (the consistent SP's) makes one-step
             # errors far smaller than those of a model that stops learning, e.g. through a contact
             correction = prediction.correction
-            self.noise.update(sample.stamp_ns, error if correction is None else error + correction, variance)
+            model_error = error if correction is None else error + correction
+            self.noise.update(sample.stamp_ns, model_error, variance)
+            if learned and self.calibration is not None:
+                self.calibration.observe(sample.stamp_ns, x, y, model, model_error, variance)
         else:
             self.noise.skip(sample.stamp_ns)
         return StepResult(sample, prediction, time.perf_counter() - start, learned, std, verdict)
@@ -519,6 +526,8 @@ class OnlineEstimator:
         self.pipeline.reset(keep_counts=True)
         self.noise.restart_stream()
         self.gate.restart_stream()
+        if self.calibration is not None:
+            self.calibration.restart_stream()
         self._last_learned_ns = None
         self._projected_at = None
 
@@ -535,6 +544,8 @@ class OnlineEstimator:
         self._projected_at = None
         self._projected_learned = 0
         self.noise.reset()
+        if self.calibration is not None:
+            self.calibration.reset()
         self.gate.reset()
 
     def save(self, path: str | Path) -> None:
@@ -563,6 +574,8 @@ class OnlineEstimator:
         """
         state = {key: np.array(value, copy=True) for key, value in self.model.state_dict("model.").items()}
         state.update(self.noise.state_dict("noise."))
+        if self.calibration is not None:
+            state.update(self.calibration.state_dict("calibration."))
         state.update(self.gate.state_dict("gate."))
         if self.payload is not None:
             state.update(self.payload.state_dict("payload."))
@@ -602,10 +615,13 @@ class OnlineEstimator:
         model = self.model.copy()
         noise = NoiseScale(self.model.n_outputs, self.noise.time_constant_s)
         gate = ContactGate(self.gate.config)
+        calibration = _calibration(self.config, self.model.n_outputs)
         payload = None
         try:
             model.load_state_dict(state, "model.")
             noise.load_state_dict(state, "noise.")
+            if calibration is not None and "calibration.weights" in state:
+                calibration.load_state_dict(state, "calibration.")
             gate.load_state_dict(state, "gate.")
             if "payload.reference" in state:  # a tare was made
                 payload = PayloadLearner.from_state_dict(self.regressor, state, "payload.")
@@ -632,6 +648,16 @@ class OnlineEstimator:
         self.traits = traits_of(model)
         self.migration_notes = notes
         self.noise = noise
+        self.calibration = calibration
         self.gate = gate
         self.payload = payload
         self.n_samples_learned = n_learned
+
+
+def _calibration(config: EstimatorConfig, n_outputs: int) -> FrozenCalibration | None:
+    """Return the served σ's calibration of a configuration (None with a block of 0: the one-step σ)."""
+    block = float(config["uncertainty.calibration_block"])
+    if block <= 0.0:
+        return None
+    return FrozenCalibration(n_outputs, len(config["robot.joints"]), block,
+                             config["uncertainty.noise_time_constant"])

@@ -1,7 +1,8 @@
 """The checkpoint format of :class:`~semiparam_ros.core.estimator.online.OnlineEstimator`.
 
 A checkpoint is one ``.npz`` (:mod:`semiparam_ros.core.checkpoint`): the learners' arrays (``model.*``),
-the noise estimate (``noise.*``), the contact gate (``gate.*``), a tared payload (``payload.*``) and the
+the noise estimate (``noise.*``), the served σ's calibration (``calibration.*``), the contact gate
+(``gate.*``), a tared payload (``payload.*``) and the
 metadata (``meta.*``: format version, structural fingerprint, samples learned, configuration, URDF, the
 robot's identity and the software versions). This module writes and checks the metadata; the estimator
 assembles the learned parts.
@@ -24,7 +25,7 @@ from semiparam_ros.errors import CheckpointError
 
 #: Format version written to ``meta.version``; an older one is read through
 #: :func:`~semiparam_ros.core.estimator.migration.migrate`, a newer one is refused.
-CHECKPOINT_VERSION = 2
+CHECKPOINT_VERSION = 3
 
 
 def software_versions() -> dict[str, str]:

@@ -1059,12 +1059,12 @@ def test_a_checkpoint_carries_the_period_it_was_learned_at(tmp_path):
 def test_a_version_1_checkpoint_is_migrated_and_a_current_one_missing_arrays_is_refused(config, tmp_path):
     """Format 1 wrote no noise estimate, no gate and no robot in early checkpoints: read through the one
     migration, such a file predicts as the model that wrote it, starts σ and the gate afresh, and says what
-    it did once. The same arrays missing from a current (version 2) checkpoint are a corrupt file."""
+    it did once. The same arrays missing from a later (version 2) checkpoint are a corrupt file."""
     from semiparam_ros.core.checkpoint import atomic_save_npz as save_npz
     from semiparam_ros.core.checkpoint import load_npz
     from semiparam_ros.core.estimator.state import CHECKPOINT_VERSION
 
-    assert CHECKPOINT_VERSION == 2
+    assert CHECKPOINT_VERSION == 3
     est = OnlineEstimator(config)
     feed(est, rich_stream().messages[:400])
     est.save(tmp_path / "now.npz")
@@ -1082,7 +1082,7 @@ def test_a_version_1_checkpoint_is_migrated_and_a_current_one_missing_arrays_is_
     assert "version 1" in notes and "noise estimate" in notes and "contact gate" in notes
     assert "names no robot" in notes
     loaded.save(tmp_path / "again.npz")  # written in today's format
-    assert int(load_npz(tmp_path / "again.npz")["meta.version"]) == 2
+    assert int(load_npz(tmp_path / "again.npz")["meta.version"]) == CHECKPOINT_VERSION
     save_npz(tmp_path / "v2_missing.npz", dict(old, **{"meta.version": np.array(2)}))
     with pytest.raises(CheckpointError):
         OnlineEstimator(config).load(tmp_path / "v2_missing.npz")
