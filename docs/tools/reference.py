@@ -101,6 +101,9 @@ _CHECKPOINT_GROUPS = {
                     "around a reversal, in motion) the histogram of a frozen copy's normalized errors on "
                     "later motion (`weights`, ln z bins 0.05 wide), the one-step noise s² of that state "
                     "(`s2`, NaN before a sample in it) and the samples scored"),
+    "stick": ("Friction that remembers (joint torques): the time-weighted sums behind each joint's "
+              "coefficient c = b / (a + 0.5 s) [N·m], and where the measured path left each joint's stick "
+              "state (`z` in [-1, 1], the last position `q` [rad])"),
     "gate": "The contact gate's warm-up and counters",
     "payload": "A tared payload learner (present after `~/payload/tare`)",
     "meta": "Format version, structural fingerprint, samples learned, the whole configuration (JSON), the "

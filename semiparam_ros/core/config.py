@@ -257,6 +257,12 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   min_exclusive=True, max=10.0,
                   structural=True, kinds=("P", "SP"),
                   only_if=(("parametric.friction", True), ("robot.output", "joint_torques"))),
+    ParameterSpec("parametric.stick_displacement", "double", 3e-3,
+                  "friction that remembers: pre-sliding displacement delta of each joint's stick state, a "
+                  "Dahl element of its path (core/learners/stick.py) [rad]; the torque it holds beyond the "
+                  "static Coulomb column (at rest after a move) is learned per joint and added to the "
+                  "prediction; 0 = a static model of (q, dq, ddq) only", min=0.0, max=1.0,
+                  only_if=(("robot.output", "joint_torques"),)),
     ParameterSpec("parametric.offsets", "bool", True,
                   "joint_torques: learn a constant torque offset per joint [N·m]"),
     ParameterSpec("parametric.armature", "bool", False,

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from semiparam_ros.core.kinds import OutputKind
+from semiparam_ros.core.learners.stick import StickState
 from semiparam_ros.core.validation import MAX_ABS_INPUT
 from semiparam_ros.errors import ConfigurationError, RejectedSampleError
 from semiparam_ros.serving.learned_model import EXCLUDABLE, EXCLUDE_SOURCES, LearnedModel
@@ -234,6 +235,9 @@ class FeedForward:
         self.effort_limits = limits[self._out_index]
         self._limits = limits  # in the model's joint order
         self._index_cache: dict[tuple[str, ...], np.ndarray] = {}
+        # consecutive per-cycle desired states are one path: friction that remembers carries its stick
+        # state from one to the next (from the measured path's at the first)
+        self._history: StickState | None = None
         self.counts: dict[str, int] = {"published": 0, "fallback.not_ready": 0, "fallback.std": 0,
                                        "missing_velocities": 0, "missing_accelerations": 0, "clamped": 0,
                                        **{f"drops.{r}": 0 for r in DROP_REASONS}}
@@ -337,9 +341,11 @@ class FeedForward:
             return None
         stamp, p, v, a = point
         q, dq, ddq = p[index], v[index], a[index]
+        if self._history is None:
+            self._history = self.model.stick_state()
         try:
             parts = self.model.predict_parts(q, dq, ddq, exclude=self.exclude,
-                                             exclude_source=self.exclude_source)
+                                             exclude_source=self.exclude_source, history=self._history)
         except RejectedSampleError as err:  # e.g. a regressor overflow at an absurd state
             self._drop("non_finite", f"the model refused the state: {err}")
             return None

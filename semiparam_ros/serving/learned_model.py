@@ -42,6 +42,7 @@ Example:
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,6 +59,7 @@ from semiparam_ros.core.estimator.state import learner_kind, read_config
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
 from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.core.learners.parametric import ParametricModel
+from semiparam_ros.core.learners.stick import StickFriction, StickState
 from semiparam_ros.core.learners.uncertainty import predict_with_variance
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, ExcitationReport
 from semiparam_ros.core.rigid_body.payload import PayloadEstimate
@@ -65,7 +67,8 @@ from semiparam_ros.core.rigid_body.plausible import PlausibleLinks, plausible_li
 from semiparam_ros.core.validation import check_finite_array
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 
-__all__ = ["EXCLUDABLE", "EXCLUDE_SOURCES", "LearnedModel", "ModelPrediction", "load_model"]
+__all__ = ["EXCLUDABLE", "EXCLUDE_SOURCES", "CheckpointMigrationWarning", "LearnedModel", "ModelPrediction",
+           "load_model"]
 
 #: Terms a feed-forward may leave out for a robot that compensates them itself.
 EXCLUDABLE = ("gravity", "friction")
@@ -112,11 +115,12 @@ class LearnedModel:
     def __init__(self, estimator: OnlineEstimator, *, model: Model | None = None,
                  noise_s2: np.ndarray | None = None,
                  calibration: tuple[np.ndarray, np.ndarray | None] | None = None,
-                 solve: bool = True) -> None:
+                 stick: StickFriction | None = None, solve: bool = True) -> None:
         self.estimator = estimator
         self._frozen = model
         self._frozen_s2 = noise_s2
         self._frozen_calibration = calibration
+        self._frozen_stick = stick
         self._scales: tuple[int, np.ndarray] | None = None  # the live calibration's, by scores counted
         self._consistent: tuple[tuple[int, int], ConsistentEstimate] | None = None
         self._attached: ConsistentEstimate | None = None
@@ -143,9 +147,11 @@ class LearnedModel:
         regressor: use it from the thread that drives the estimator.
         """
         s2 = self._noise_s2()
+        stick = self._stick()
         return LearnedModel(self.estimator, model=self._model().copy(),
                             noise_s2=None if s2 is None else s2.copy(),
                             calibration=self._calibration(copy=True),
+                            stick=None if stick is None else stick.copy(),
                             solve=self._solve)
 
     def attach_consistent(self, estimate: ConsistentEstimate | None) -> None:
@@ -277,6 +283,18 @@ class LearnedModel:
 
     def _noise_s2(self) -> np.ndarray | None:
         return self.estimator.noise.s2 if self._frozen is None else self._frozen_s2
+
+    def _stick(self) -> StickFriction | None:
+        return self.estimator.stick if self._frozen is None else self._frozen_stick
+
+    def stick_state(self) -> StickState | None:
+        """Return where the measured path left each joint's stick state (a copy), or None without one.
+
+        What a controller's sequence of desired states starts from (``history`` of :meth:`predict_parts`):
+        friction that remembers (:mod:`semiparam_ros.core.learners.stick`).
+        """
+        stick = self._stick()
+        return None if stick is None else stick.state.copy()
 
     def sigma_scales(self) -> np.ndarray:
         """Return the served σ's scale per output and motion state, (t, 3).
@@ -436,8 +454,14 @@ class LearnedModel:
         return np.where(np.isnan(served), one_step, served)
 
     def predict_parts(self, q: Any, dq: Any, ddq: Any, *, consistent: bool | None = None,
-                      exclude: Sequence[str] = (), exclude_source: str = "model") -> ModelPrediction:
+                      exclude: Sequence[str] = (), exclude_source: str = "model",
+                      history: StickState | None = None) -> ModelPrediction:
         """Return the model and its parts at one state or N states.
+
+        N states are one time sequence: with friction that remembers (joint torques,
+        ``parametric.stick_displacement`` > 0) each joint's stick state is carried along the rows, from
+        ``history`` or else from where the measured path left it (:meth:`stick_state`), and the torque it
+        holds is part of the rigid-body part and the total.
 
         Args:
             q: Positions (n,) or (N, n) [rad].
@@ -449,8 +473,11 @@ class LearnedModel:
                 ``parametric.consistent`` of the configuration (on by default; a model that may not
                 solve here — the node's served copy — uses it once its worker's solution is attached).
             exclude: Terms left out of the total and the rigid-body part (:meth:`excluded`): ``gravity``
-                and/or ``friction``, for a robot that compensates them itself. σ is unchanged.
+                and/or ``friction`` (with the torque the stick state holds, :meth:`stick_torque`), for a
+                robot that compensates them itself. σ is unchanged.
             exclude_source: Whose gravity is left out: ``model`` or ``urdf`` (:meth:`excluded`).
+            history: Where the sequence starts (changed: it ends at the last row), e.g. a controller's
+                previous desired state; None: the measured path's state, unchanged.
 
         Returns:
             Total, rigid-body part, residual and σ, each (t,) or (N, t).
@@ -463,8 +490,11 @@ class LearnedModel:
         assert pred.variance is not None  # every path returns it
         std = self._std(np.asarray(pred.variance), X)
         total, rigid, residual = pred.total, pred.parametric, pred.residual
+        n = self._n
+        held = self._stick_torque(X[:, :n], X[:, n:2 * n], history)
+        if held is not None and "friction" not in exclude:
+            total, rigid = total + held, rigid + held
         if exclude:
-            n = self._n
             left_out = self.excluded(X[:, :n], X[:, n:2 * n], exclude, source=exclude_source,
                                      consistent=consistent)
             total, rigid = total - left_out, rigid - left_out
@@ -578,6 +608,37 @@ class LearnedModel:
                 out += self._friction_torques(check_finite_array("dq", dq), params)
         return out
 
+    def stick_torque(self, q: Any, dq: Any, history: StickState | None = None) -> np.ndarray:
+        """Return the torque the joints' stick state holds along a path of states [N·m].
+
+        Friction that remembers, ``c_j (z_j − tanh(q̇_j/v_s))`` with z carried along the rows
+        (:mod:`semiparam_ros.core.learners.stick`):
+        the part of the prediction's friction beyond :meth:`friction`; zeros without it (a wrench,
+        ``parametric.stick_displacement: 0``).
+
+        Args:
+            q: Positions (n,) or (N, n) in time order [rad].
+            dq: Velocities, same shape [rad/s].
+            history: Where the path starts (changed: it ends at the last row); None: the measured path's.
+
+        Raises:
+            RejectedSampleError: Wrong shapes or non-finite values.
+        """
+        qa, dqa = check_finite_array("q", q), check_finite_array("dq", dq)
+        if qa.shape != dqa.shape or qa.shape[-1] != self._n:
+            raise RejectedSampleError(f"q and dq must have one shape (…, {self._n}), got {qa.shape}, "
+                                      f"{dqa.shape}")
+        held = self._stick_torque(np.atleast_2d(qa), np.atleast_2d(dqa), history)
+        out = np.zeros((qa.reshape(-1, self._n).shape[0], len(self.output_names))) if held is None else held
+        return out[0] if qa.ndim == 1 else out
+
+    def _stick_torque(self, q: np.ndarray, dq: np.ndarray, history: StickState | None) -> np.ndarray | None:
+        stick = self._stick()
+        if stick is None:
+            return None
+        start = history if history is not None else stick.state.copy()
+        return stick.torque(stick.features(q, dq, start))
+
     def cad(self, q: Any, dq: Any, ddq: Any) -> np.ndarray:
         """Return the CAD model: RNEA with the URDF's inertial parameters, no friction or offsets [N·m].
 
@@ -610,6 +671,10 @@ def load_model(path: str | os.PathLike[str]) -> LearnedModel:
     Raises:
         CheckpointError: Missing, truncated, corrupt or foreign file; a checkpoint of an older version
             without its configuration; a state that does not fit its own configuration.
+
+    Warns:
+        CheckpointMigrationWarning: Once, for a checkpoint of an older format (what it lacked, e.g. the
+            calibration of σ for new motion, and what is served instead).
     """
     state = load_npz(Path(path).expanduser())
     config, urdf, versions = read_config(path, state)
@@ -619,6 +684,12 @@ def load_model(path: str | os.PathLike[str]) -> LearnedModel:
     except (ConfigurationError, OSError) as err:
         raise CheckpointError(f"{path}: cannot rebuild the model it holds: {err}") from err
     estimator.load_state(state, str(path))
+    if estimator.migration_notes:  # an older format: what it lacks and what is served instead, once
+        warnings.warn("; ".join(estimator.migration_notes), CheckpointMigrationWarning, stacklevel=2)
     model = LearnedModel(estimator)
     model.versions = versions
     return model
+
+
+class CheckpointMigrationWarning(UserWarning):
+    """A checkpoint of an older format was read: the message says what it lacked and what is used instead."""

@@ -177,7 +177,8 @@ def test_injected_torque_is_whole_in_a_frozen_residual_and_one_sample_in_persist
 
 def test_node_step_sees_an_injected_torque_with_the_gate_and_equals_test_then_train_without(tmp_path):
     """The node's own step around a trained SP: gate off (and no consistent rigid body, which the bare
-    learner does not solve), its predictions are test-then-train's (the same learner, predict then
+    learner does not solve, nor friction that remembers, which it does not keep), its predictions
+    are test-then-train's (the same learner, predict then
     learn); gate on, a 1 N·m step (≫ 5σ at this noise, shorter than gate.max_contact_duration) is not
     learned, so the residual shows it whole."""
     from helpers.bags import ur5_config, write_ur5_torque_bag
@@ -193,7 +194,8 @@ def test_node_step_sees_an_injected_torque_with_the_gate_and_equals_test_then_tr
     test, _ = load_samples(tmp_path / "test", config)
     sp = build_models(config, ("SP",), sample_period_s=train.sample_period_s)["SP"]
     test_then_train(sp, train.X, train.Y)
-    off = config.with_overrides({"gate.enabled": False, "parametric.consistent": False})
+    off = config.with_overrides({"gate.enabled": False, "parametric.consistent": False,
+                                 "parametric.stick_displacement": 0.0})
     ref = test_then_train(sp.copy(), test.X, test.Y)[0]
     got = _node_predictions(sp, off, test, test.Y)
     # the same arithmetic up to where the deferred update is applied (a fused pass): cond(R)·ε-level

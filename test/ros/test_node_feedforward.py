@@ -145,9 +145,10 @@ def test_feedforward_gravity_and_parts_over_dds(ros_env, checkpoint, tmp_path):
     got = {_stamp(m): m for m in states.snapshot()}
     assert set(got) == set(sent), (sorted(got), sorted(sent))  # the bad ones were never answered
     assert len(commands.snapshot()) == len(stds.snapshot()) == len(sent)
-    for stamp, (q, dq, ddq) in sent.items():
+    history = model.stick_state()  # consecutive desired states are one path (friction that remembers)
+    for stamp, (q, dq, ddq) in sorted(sent.items()):
         msg = got[stamp]
-        expected = model.predict(q, dq, ddq, consistent=False)[0]
+        expected = model.predict_parts(q, dq, ddq, consistent=False, history=history).total
         assert list(msg.name) == out_order
         scale = 1 + np.abs(expected).max()
         np.testing.assert_allclose(msg.effort, expected[back], rtol=0, atol=1e-9 * scale)
@@ -271,10 +272,11 @@ def test_feedforward_uses_the_consistent_projection_solved_in_a_worker(ros_env, 
         np.testing.assert_allclose([got.com.x, got.com.y, got.com.z], com, rtol=1e-5, atol=1e-9)
     urdf = tmp_path / "copy_identified.urdf"
     assert urdf.is_file() and "<inertial>" in urdf.read_text() and "dynamics" in urdf.read_text()
-    for msg in states.snapshot():
+    history, twin = model.stick_state(), model.stick_state()  # desired states are one path
+    for msg in sorted(states.snapshot(), key=_stamp):
         q, dq, ddq = sent[_stamp(msg)]
-        expected = model.predict(q, dq, ddq, consistent=True)[0]
-        unconstrained = model.predict(q, dq, ddq, consistent=False)[0]
+        expected = model.predict_parts(q, dq, ddq, consistent=True, history=history).total
+        unconstrained = model.predict_parts(q, dq, ddq, consistent=False, history=twin).total
         scale = 1 + np.abs(expected).max()
         np.testing.assert_allclose(msg.effort, expected, rtol=0, atol=1e-6 * scale)
         assert np.abs(np.asarray(msg.effort) - unconstrained).max() > 1e-6 * scale  # not the other one

@@ -107,8 +107,10 @@ def test_vectorised_equals_single_states(panda):
     rng = np.random.default_rng(1)
     q, dq, ddq = _states(rng, 7, 50)
     batch = model.predict_parts(q, dq, ddq)
+    history = model.stick_state()  # the rows are one path: friction that remembers carries it along them
+    assert history is not None
     for i in range(50):
-        one = model.predict_parts(q[i], dq[i], ddq[i])
+        one = model.predict_parts(q[i], dq[i], ddq[i], history=history)
         scale = 1.0 + np.abs(one.total).max()
         # same mathematics, BLAS-3 instead of one forward substitution: rounding ≈ cond(R)·ε relative
         for a, b in ((batch.total[i], one.total), (batch.rigid_body[i], one.rigid_body),
@@ -272,12 +274,14 @@ def test_left_out_terms_are_those_of_the_prediction(panda):
     q, dq, ddq = _states(rng, 7, 30)
     zeros = np.zeros_like(q)
     rest = model.predict_parts(q, zeros, zeros).rigid_body
-    offsets = rest - model.gravity(q)
+    offsets = rest - model.gravity(q) - model.stick_torque(q, zeros)  # the stick state: the path's
     np.testing.assert_allclose(offsets, np.broadcast_to(offsets[0], offsets.shape), rtol=0,
                                atol=1e-9 * (1 + np.abs(rest).max()))
     total, std = model.predict(q, dq, ddq)
-    for exclude, minus in ((("gravity",), model.gravity(q)), (("friction",), model.friction(dq)),
-                           (("gravity", "friction"), model.gravity(q) + model.friction(dq))):
+    friction = model.friction(dq) + model.stick_torque(q, dq)
+    assert np.abs(model.stick_torque(q, dq)).max() > 0
+    for exclude, minus in ((("gravity",), model.gravity(q)), (("friction",), friction),
+                           (("gravity", "friction"), model.gravity(q) + friction)):
         left, left_std = model.predict(q, dq, ddq, exclude=exclude)
         np.testing.assert_allclose(left, total - minus, rtol=0, atol=1e-9 * (1 + np.abs(total).max()))
         np.testing.assert_array_equal(left_std, std)

@@ -162,13 +162,14 @@ class FrozenCalibration:
         """Drop the frozen copy (a new recording: its stamps say nothing of the copy's age)."""
         self._copy: Any = None
         self._copy_s2: np.ndarray | None = None
+        self._copy_stick: np.ndarray | None = None
         self._last_ns: int | None = None
         self._frozen_ns = 0
         self._next_score_ns = 0
 
     # ------------------------------------------------------------------ learning
     def observe(self, stamp_ns: int, x: np.ndarray, y: np.ndarray, model: Any, error: np.ndarray,
-                variance: np.ndarray) -> None:
+                variance: np.ndarray, stick: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Score the frozen copy on a sample when one is due, and freeze a new copy when a block is over.
 
         Called after the model learned the sample. The copy is frozen only once the model predicts with a
@@ -181,6 +182,8 @@ class FrozenCalibration:
             model: The live learner (copied, never changed).
             error: The model's one-step a-priori error at the sample (its fast correction left out).
             variance: The relative posterior variance v of that prediction (t,).
+            stick: The stick friction's feature φ at the sample and its coefficient c now (joint torques
+                with friction that remembers: the copy predicts with its c, frozen with it), or None.
         """
         states = motion_states(x[None, :], self.n_joints, self.n_outputs)[0]
         self._update_noise(stamp_ns, states, error, variance)
@@ -190,6 +193,7 @@ class FrozenCalibration:
         if self._copy is None or age >= self.block_s:
             if _predicts_with_residual(model):
                 self._copy, self._copy_s2 = model.copy(), self.s2.copy()
+                self._copy_stick = None if stick is None else stick[1].copy()
                 self._frozen_ns = stamp_ns
                 self._next_score_ns = stamp_ns + round(0.25 * self.block_s * 1e9)
             return
@@ -198,6 +202,8 @@ class FrozenCalibration:
         self._next_score_ns = stamp_ns + round(SCORE_PERIOD_S * 1e9)
         assert self._copy_s2 is not None  # set with the copy
         total, v = model_alone(self._copy, x)
+        if stick is not None and self._copy_stick is not None:
+            total = total + self._copy_stick * stick[0]
         sigma = np.sqrt(self._copy_s2[np.arange(self.n_outputs), states] * (1.0 + v))
         with np.errstate(divide="ignore", invalid="ignore"):
             z = np.abs(y - total) / sigma

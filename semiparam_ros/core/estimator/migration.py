@@ -23,7 +23,8 @@ Version 1 (before the format was versioned by migration) → 2, by the arrays th
 
 Version 2 → 3: ``calibration.*`` (the served σ's scales for new motion,
 :mod:`semiparam_ros.core.estimator.calibration`) absent: empty histograms, i.e. the served σ is the one-step
-σ, as before.
+σ, as before; ``stick.*`` (friction that remembers, :mod:`semiparam_ros.core.learners.stick`) absent:
+c = 0, no torque held, as before.
 """
 
 from __future__ import annotations
@@ -151,12 +152,15 @@ def _consistent_v1(state: dict[str, np.ndarray], new: dict[str, np.ndarray], pre
 def _v2_to_v3(state: dict[str, np.ndarray], fresh: Callable[[], dict[str, np.ndarray]]
               ) -> tuple[dict[str, np.ndarray], list[str]]:
     new = fresh()
-    added = {k: v for k, v in new.items() if k.startswith("calibration.")}
-    if not added:  # the loading configuration calibrates nothing (uncertainty.calibration_block: 0)
-        return state, []
-    state.update(added)
-    return state, ["it carries no calibration of σ for new motion: the served σ is the one-step σ until "
-                   "the model has learned another block"]
+    notes = []
+    for group, note in (("calibration.", "it carries no calibration of σ for new motion: the served σ is the "
+                                         "one-step σ until the model has learned another block"),
+                        ("stick.", "it carries no friction that remembers: none until the model learns")):
+        added = {k: v for k, v in new.items() if k.startswith(group)}
+        if added:  # (none when the loading configuration has no such part)
+            state.update(added)
+            notes.append(note)
+    return state, notes
 
 
 _STEPS: dict[int, Step] = {1: _v1_to_v2, 2: _v2_to_v3}

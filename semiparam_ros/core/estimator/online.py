@@ -43,7 +43,8 @@ from semiparam_ros.core.estimator.state import (
 from semiparam_ros.core.estimator.units import EffortUnitsCheck
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.learners._step_kernels import joined_within
-from semiparam_ros.core.learners.contract import Prediction, RigidBodyUser
+from semiparam_ros.core.learners.contract import Prediction, PredictionContext, RigidBodyUser
+from semiparam_ros.core.learners.stick import StickFriction
 from semiparam_ros.core.learners.uncertainty import NoiseScale
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, consistent_parameters
@@ -141,6 +142,9 @@ class OnlineEstimator:
         #: What a frozen copy of the model scored on later motion: the served σ's scale per output and
         #: motion state (None with ``uncertainty.calibration_block: 0``).
         self.calibration = _calibration(config, self.model.n_outputs)
+        #: Friction that remembers: each joint's stick state and the torque it holds (joint torques with
+        #: ``parametric.stick_displacement`` > 0, else None).
+        self.stick = _stick(config)
         self.gate = ContactGate(gate_config(config))
         self.gate_enabled = bool(config["gate.enabled"])
         self.forgetting: float | None = None  # β from adaptation.time_constant, once the rate is measured
@@ -227,8 +231,15 @@ class OnlineEstimator:
         x, y = self._check_sample(sample)
         model = self.model
         model.prediction_age_s = self.age_at(sample.stamp_ns)
+        stick = self.stick
+        phi: np.ndarray | None = None
+        held: np.ndarray | None = None  # the torque the stick state holds
+        if stick is not None:
+            phi = stick.step(sample.q, sample.dq)
+            held = stick.torque(phi)
+        target = y if held is None else y - held  # what the learners learn
         if skip_learning and self.learning_enabled:
-            prediction = model.predict_held(x)
+            prediction = _plus(model.predict_held(x), held)
             assert prediction.variance is not None  # a held prediction carries it
             std = self.noise.std(prediction.variance)
             self.noise.skip(sample.stamp_ns)
@@ -236,8 +247,12 @@ class OnlineEstimator:
             return StepResult(sample, prediction, time.perf_counter() - start, False, std, None)
         # a priori, with the relative variance v = z A⁻¹ zᵀ of each output (the state is not changed)
         ahead = model.predict_ahead_checked(x)
-        prediction = ahead.prediction
+        prediction = _plus(ahead.prediction, held)
         variance = prediction.variance
+        # the stick torque is regressed on the learned rigid body's error (a residual memorizes each rest's
+        # torque at its position within samples and would leave nothing; the learned π̂, not the served
+        # projection, so that what the learners learn does not depend on when a projection was solved)
+        rigid_error = None if stick is None else y - _learned_rigid(model, ahead)
         assert variance is not None  # a context always carries it
         verdict = None
         if self.learning_enabled and self.gate_enabled:
@@ -246,7 +261,7 @@ class OnlineEstimator:
             verdict = self.gate.decide(sample.stamp_ns, error, std, float(variance.max()))
             learned = verdict.learn
             if learned:
-                model.learn_ahead_checked(ahead, y)
+                model.learn_ahead_checked(ahead, target)
                 self.n_samples_learned += 1
         else:
             # gate off: exactly the paper's predict-then-learn (bit-identical predictions); the consistent
@@ -254,9 +269,9 @@ class OnlineEstimator:
             learned = self.learning_enabled
             if learned:
                 if self.traits.learns_context:
-                    model.learn_ahead_checked(ahead, y)
+                    model.learn_ahead_checked(ahead, target)
                 else:
-                    prediction = model.predict_learn_one(x, y)
+                    prediction = _plus(model.predict_learn_one(x, target), held)
                 self.n_samples_learned += 1
             std = self.noise.std(variance)
             error = y - prediction.total
@@ -270,8 +285,11 @@ class OnlineEstimator:
             correction = prediction.correction
             model_error = error if correction is None else error + correction
             self.noise.update(sample.stamp_ns, model_error, variance)
+            if learned and stick is not None and phi is not None and rigid_error is not None:
+                stick.learn(sample.stamp_ns, phi, rigid_error)
             if learned and self.calibration is not None:
-                self.calibration.observe(sample.stamp_ns, x, y, model, model_error, variance)
+                self.calibration.observe(sample.stamp_ns, x, y, model, model_error, variance,
+                                         None if stick is None or phi is None else (phi, stick.coefficient))
         else:
             self.noise.skip(sample.stamp_ns)
         return StepResult(sample, prediction, time.perf_counter() - start, learned, std, verdict)
@@ -528,6 +546,8 @@ class OnlineEstimator:
         self.gate.restart_stream()
         if self.calibration is not None:
             self.calibration.restart_stream()
+        if self.stick is not None:
+            self.stick.restart_stream()
         self._last_learned_ns = None
         self._projected_at = None
 
@@ -546,6 +566,8 @@ class OnlineEstimator:
         self.noise.reset()
         if self.calibration is not None:
             self.calibration.reset()
+        if self.stick is not None:
+            self.stick.reset()
         self.gate.reset()
 
     def save(self, path: str | Path) -> None:
@@ -576,6 +598,8 @@ class OnlineEstimator:
         state.update(self.noise.state_dict("noise."))
         if self.calibration is not None:
             state.update(self.calibration.state_dict("calibration."))
+        if self.stick is not None:
+            state.update(self.stick.state_dict("stick."))
         state.update(self.gate.state_dict("gate."))
         if self.payload is not None:
             state.update(self.payload.state_dict("payload."))
@@ -616,12 +640,15 @@ class OnlineEstimator:
         noise = NoiseScale(self.model.n_outputs, self.noise.time_constant_s)
         gate = ContactGate(self.gate.config)
         calibration = _calibration(self.config, self.model.n_outputs)
+        stick = _stick(self.config)
         payload = None
         try:
             model.load_state_dict(state, "model.")
             noise.load_state_dict(state, "noise.")
             if calibration is not None and "calibration.weights" in state:
                 calibration.load_state_dict(state, "calibration.")
+            if stick is not None and "stick.a" in state:
+                stick.load_state_dict(state, "stick.")
             gate.load_state_dict(state, "gate.")
             if "payload.reference" in state:  # a tare was made
                 payload = PayloadLearner.from_state_dict(self.regressor, state, "payload.")
@@ -649,6 +676,7 @@ class OnlineEstimator:
         self.migration_notes = notes
         self.noise = noise
         self.calibration = calibration
+        self.stick = stick
         self.gate = gate
         self.payload = payload
         self.n_samples_learned = n_learned
@@ -661,3 +689,29 @@ def _calibration(config: EstimatorConfig, n_outputs: int) -> FrozenCalibration |
         return None
     return FrozenCalibration(n_outputs, len(config["robot.joints"]), block,
                              config["uncertainty.noise_time_constant"])
+
+
+def _stick(config: EstimatorConfig) -> StickFriction | None:
+    """Return the stick friction of a configuration (joint torques with a displacement > 0, else None)."""
+    displacement = float(config["parametric.stick_displacement"])
+    if config.output_kind != OutputKind.JOINT_TORQUES or displacement <= 0.0:
+        return None
+    memory = float(config["adaptation.time_constant"])
+    return StickFriction(len(config["robot.joints"]), displacement, config["parametric.coulomb_velocity"],
+                         memory if memory > 0.0 else 20.0)
+
+
+def _plus(prediction: Prediction, held: np.ndarray | None) -> Prediction:
+    """Add the torque the stick state holds to the rigid-body part and the total of a prediction."""
+    if held is None:
+        return prediction
+    return Prediction(prediction.parametric + held, prediction.residual, prediction.total + held,
+                      prediction.variance, prediction.correction)
+
+
+def _learned_rigid(model: Model, ahead: PredictionContext) -> np.ndarray:
+    """Return the learned rigid body Φ(x) π̂ at a context's state (NP: its whole prediction)."""
+    par = rigid_body_part(model)
+    if par is None or ahead.Phi is None:
+        return np.asarray(ahead.prediction.total)
+    return np.asarray(ahead.Phi @ par.parameters)

@@ -108,7 +108,9 @@ class ServedModel:
     """A loaded model presented as a frozen model: ``predict_model(x)`` is ``served.predict`` at x.
 
     It never learns (``learn_one`` raises): put it in the protocol's ``frozen`` and ``trained`` names and
-    in the horizon table's frozen column only.
+    in the horizon table's frozen column only. Consecutive ``predict_model`` calls are one path (a test
+    stream, one sample at a time): friction that remembers carries its stick state from one to the next,
+    from where the training path left it; ``predict_many`` is a path of its own from there.
 
     Args:
         served: The model, e.g. from :func:`learn_served` or
@@ -119,12 +121,13 @@ class ServedModel:
     def __init__(self, served: LearnedModel) -> None:
         self.served = served
         self._n = len(served.joints)
+        self._history = served.stick_state()
 
     def predict_model(self, x: Any) -> np.ndarray:
         """Return the served model at one state x = [q, q̇, q̈] (t,)."""
         xv = np.asarray(x, dtype=np.float64)
         n = self._n
-        return self.served.predict(xv[:n], xv[n:2 * n], xv[2 * n:])[0]
+        return self.served.predict_parts(xv[:n], xv[n:2 * n], xv[2 * n:], history=self._history).total
 
     predict_one = predict_model
 

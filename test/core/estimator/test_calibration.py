@@ -31,7 +31,7 @@ from semiparam_ros.core.estimator.calibration import (
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.errors import CheckpointError, ConfigurationError
 from semiparam_ros.eval.protocol.slices import motion_slices
-from semiparam_ros.serving.learned_model import load_model
+from semiparam_ros.serving.learned_model import CheckpointMigrationWarning, load_model
 from semiparam_ros.sim.point_to_point import PointToPointArm
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -197,8 +197,10 @@ def test_a_checkpoint_without_calibration_serves_the_one_step_sigma_and_says_so(
     old = {k: v for k, v in state.items() if not k.startswith("calibration.")}
     old["meta.version"] = np.array(2)
     atomic_save_npz(folder / "v2.npz", old)
-    model = load_model(folder / "v2.npz")
+    with pytest.warns(CheckpointMigrationWarning, match="calibration of σ"):
+        model = load_model(folder / "v2.npz")
     assert any("calibration" in note for note in model.estimator.migration_notes)
+    assert any("friction that remembers" in note for note in model.estimator.migration_notes)
     assert np.isnan(model.sigma_scales()).all()
     n = len(config["robot.joints"])
     one_step = load_model(folder / "block_0.npz")

@@ -42,6 +42,7 @@ import semiparam_ros.core.checkpoint as checkpoint_module
 from semiparam_ros.core.config import EstimatorConfig, load_config
 from semiparam_ros.core.estimator.build import build_model, build_pipeline, build_regressor
 from semiparam_ros.core.estimator.online import OnlineEstimator, StepResult
+from semiparam_ros.core.learners.stick import StickFriction
 from semiparam_ros.core.stream.messages import JointStateData, Sample, WrenchData
 from semiparam_ros.errors import CheckpointError, ConfigurationError, RejectedSampleError
 from semiparam_ros.io.bags import iter_samples
@@ -733,6 +734,7 @@ def test_joint_torque_stream_one_data_path(config):
     est = OnlineEstimator(cfg)
     reg = est.regressor
     assert reg.n_outputs == 4
+    assert est.stick is not None  # friction that remembers: composed by hand below
     model, data = reg.pinocchio_model, reg.pinocchio_model.createData()
     traj = make_trajectory(reg, seed=5)
     t = np.arange(1, 401) * DT_NS * 1e-9
@@ -755,12 +757,20 @@ def test_joint_torque_stream_one_data_path(config):
 
     samples = pipeline_samples(cfg, msgs)
     hand = build_model(cfg, "SP")
+    stick = StickFriction(4, cfg["parametric.stick_displacement"], cfg["parametric.coulomb_velocity"],
+                          est.stick.time_constant_s)
     assert len(results) == len(samples) > 380
     for r, s in zip(results, samples, strict=True):
-        p = hand.predict_one(s.x)
-        hand.learn_one(s.x, s.y)
-        for part in ("parametric", "residual", "total"):
-            np.testing.assert_allclose(getattr(r.prediction, part), getattr(p, part), rtol=0, atol=1e-9)
+        phi = stick.step(s.q, s.dq)
+        held = stick.torque(phi)  # joins the rigid-body part; the learner learns y − it
+        ahead = hand.predict_ahead(s.x)  # a priori; the stick learns the learned rigid body's error Φπ̂
+        p = ahead.prediction
+        stick.learn(s.stamp_ns, phi, s.y - ahead.Phi @ hand.parametric.parameters)
+        hand.learn_ahead(ahead, s.y - held)
+        for part, want in (("parametric", p.parametric + held), ("residual", p.residual),
+                           ("total", p.total + held)):
+            np.testing.assert_allclose(getattr(r.prediction, part), want, rtol=0, atol=1e-9)
+    assert np.abs(stick.coefficient).max() > 0.01
     # labels are the efforts of the configured joints, in the configured order, at the sample stamp
     k = np.array([(r.sample.stamp_ns - T0_NS) // DT_NS - 1 for r in results])
     np.testing.assert_array_equal(np.array([r.sample.y for r in results]), tau[k])
@@ -996,9 +1006,12 @@ def test_the_rigid_body_model_predicts_with_the_consistent_projection_it_serves(
     assert theta is not None
     np.testing.assert_array_equal(est.model.parameters, twin.model.parameters)  # learning unchanged
     last = samples[-1]
+    stick = est.stick  # friction that remembers: the torque its state holds joins the rigid body
+    c = stick.coefficient.copy()  # as predicted, before the sample is learned
     got = est.step(last).prediction
     Phi = est.model.regressor(np.concatenate([last.q, last.dq, last.ddq]))
-    np.testing.assert_allclose(got.total, Phi @ theta, rtol=1e-12, atol=1e-12)
+    held = c * (stick.state.z - np.tanh(last.dq / stick.coulomb_velocity))
+    np.testing.assert_allclose(got.total, Phi @ theta + held, rtol=1e-12, atol=1e-12)
     assert np.abs(got.total - twin.step(last).prediction.total).max() > 1e-6  # not the learned π̂
     # the projection of the final state, solved the same way, is what a new solution would set
     rigid, R, lam = est.rigid_body_state()
