@@ -25,6 +25,7 @@ import numpy as np
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.contract import Prediction
+from semiparam_ros.core.learners.stick import StickState
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.eval.protocol.options import CASCADE_SP, JOINT_SP
@@ -220,6 +221,7 @@ class NodeLearner:
         self._last_ns: int | None = None
         self._restart = False  # the next sample begins another recording
         self._n = len(estimator.config["robot.joints"])
+        self._path: StickState | None = None  # the path of predict_one's states (friction that remembers)
 
     def _sample(self, x: Any, y: Any, stamp_ns: int | None) -> Sample:
         if stamp_ns is None:  # no stamp given: one nominal period after the previous sample
@@ -250,6 +252,10 @@ class NodeLearner:
     def predict_one(self, x: Any, *, stamp_ns: int | None = None) -> Prediction:
         """Return the learned model's prediction at x (rigid-body part, residual, corrections).
 
+        With friction that remembers, consecutive calls are one path (the delay line's samples, in order):
+        the torque the joints' stick state holds is carried along them from where the learned stream left
+        it, as the node's step adds it.
+
         Args:
             x: The state ``[q, q̇, q̈]``.
             stamp_ns: The predicted sample's stamp [ns]: the model's fast correction fades with the age of
@@ -259,7 +265,16 @@ class NodeLearner:
         model = self.estimator.model
         if stamp_ns is not None:
             model.prediction_age_s = self.estimator.age_at(int(stamp_ns))
-        return model.predict_one(x)
+        prediction = model.predict_one(x)
+        stick = self.estimator.stick
+        if stick is None:
+            return prediction
+        if self._path is None:
+            self._path = stick.state.copy()
+        xv, n = np.asarray(x, dtype=np.float64), self._n
+        held = stick.torque(stick.features(xv[None, :n], xv[None, n:2 * n], self._path)[0])
+        return Prediction(prediction.parametric + held, prediction.residual, prediction.total + held,
+                          prediction.variance, prediction.correction)
 
     def copy(self) -> NodeLearner:
         """Return an independent copy (the estimator's learned and time-based state)."""
@@ -268,4 +283,5 @@ class NodeLearner:
         twin = NodeLearner.__new__(NodeLearner)
         twin.estimator = copy.deepcopy(est, memo)
         twin._last_ns, twin._n, twin._restart = self._last_ns, self._n, True
+        twin._path = None
         return twin
