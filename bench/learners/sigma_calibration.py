@@ -44,10 +44,9 @@ PAIRS = ((("measurements_1",), "measurements_3"), (("measurements_2",), "measure
          (("measurements_1", "measurements_2"), "measurements_3"))
 
 
-def run_pair(config, logs, train_names, test_name, block):
-    """Learn the served model on the training logs with one calibration block; score it on the test log."""
-    cfg = config.with_overrides({"uncertainty.calibration_block": float(block)})
-    node = NodeLearner(OnlineEstimator(cfg, kind="SP"))
+def learn_logs(config, logs, train_names):
+    """The node's SP learned on the training logs in order (one recording each), as ``learn`` learns."""
+    node = NodeLearner(OnlineEstimator(config, kind="SP"))
     for name in train_names:
         node.estimator.start_recording()
         data = logs[name]
@@ -56,6 +55,13 @@ def run_pair(config, logs, train_names, test_name, block):
                 node.learn_one(x, y, stamp_ns=int(stamp))
             except RejectedSampleError:
                 continue
+    return node
+
+
+def run_pair(config, logs, train_names, test_name, block):
+    """Learn the served model on the training logs with one calibration block; score it on the test log."""
+    cfg = config.with_overrides({"uncertainty.calibration_block": float(block)})
+    node = learn_logs(cfg, logs, train_names)
     served = serve(node.estimator)
     test = logs[test_name]
     n = len(served.joints)

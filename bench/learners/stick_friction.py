@@ -24,28 +24,17 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from sigma_calibration import PAIRS, _plain, simulated_logs  # noqa: E402
+from sigma_calibration import PAIRS, _plain, learn_logs, simulated_logs  # noqa: E402
 
 from semiparam_ros.core.config import load_evaluation_config  # noqa: E402
-from semiparam_ros.core.estimator.online import OnlineEstimator  # noqa: E402
-from semiparam_ros.errors import RejectedSampleError  # noqa: E402
 from semiparam_ros.eval.bags.replay import load_samples  # noqa: E402
-from semiparam_ros.eval.models.served import NodeLearner, serve  # noqa: E402
+from semiparam_ros.eval.models.served import serve  # noqa: E402
 from semiparam_ros.eval.protocol.slices import motion_slices  # noqa: E402
 
 
 def run(config, logs, train_names, test_name, delta):
     """Learn the served SP with one δ on the training logs; score it frozen on the test log."""
-    node = NodeLearner(OnlineEstimator(config.with_overrides({"parametric.stick_displacement": delta}),
-                                       kind="SP"))
-    for name in train_names:
-        node.estimator.start_recording()
-        data = logs[name]
-        for stamp, x, y in zip(data.stamps_ns, data.X, data.Y, strict=True):
-            try:
-                node.learn_one(x, y, stamp_ns=int(stamp))
-            except RejectedSampleError:
-                continue
+    node = learn_logs(config.with_overrides({"parametric.stick_displacement": delta}), logs, train_names)
     served = serve(node.estimator)
     test = logs[test_name]
     n = len(served.joints)

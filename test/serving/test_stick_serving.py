@@ -8,16 +8,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.point_to_point import served_ur5
 
-from semiparam_ros.core.config import load_evaluation_config
+from semiparam_ros.core.config import parameter_spec
 from semiparam_ros.core.estimator.build import build_pipeline
-from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.stick import StickState
 from semiparam_ros.eval.protocol.slices import motion_slices
 from semiparam_ros.serving.feedforward import DesiredState, FeedForward, TrajectoryPoint
-from semiparam_ros.serving.learned_model import LearnedModel, load_model
+from semiparam_ros.serving.learned_model import LearnedModel
 from semiparam_ros.sim.arms import arm_spec
-from semiparam_ros.sim.point_to_point import PointToPointArm
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -32,17 +31,9 @@ def _states(config, messages):
 @pytest.fixture(scope="module")
 def ur5(tmp_path_factory):
     """A UR5 at 100 Hz, 60 s of point-to-point moves learned with and without the stick state."""
-    config = load_evaluation_config(ROOT / "config" / "ur5.yaml", {})
-    train = PointToPointArm("ur5", seconds=60.0, rate_hz=100.0, seed=1).states()[0]
-    test = PointToPointArm("ur5", seconds=30.0, rate_hz=100.0, seed=2).states()[0]
     folder = tmp_path_factory.mktemp("stick")
-    served = {}
-    for delta in (0.0, config["parametric.stick_displacement"]):
-        est = OnlineEstimator(config.with_overrides({"parametric.stick_displacement": delta}))
-        for msg in train:
-            est.process(msg)
-        est.save(folder / f"d{delta:g}.npz")
-        served[delta] = (est, load_model(folder / f"d{delta:g}.npz"))
+    default = parameter_spec("parametric.stick_displacement").default
+    config, served, test = served_ur5("parametric.stick_displacement", (0.0, default), folder)
     return config, served, _states(config, test), folder
 
 

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.point_to_point import served_ur5
 
 from semiparam_ros.core.checkpoint import atomic_save_npz, load_npz
-from semiparam_ros.core.config import load_evaluation_config
 from semiparam_ros.core.estimator import calibration
 from semiparam_ros.core.estimator.build import build_pipeline
 from semiparam_ros.core.estimator.calibration import (
@@ -32,7 +32,6 @@ from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.errors import CheckpointError, ConfigurationError
 from semiparam_ros.eval.protocol.slices import motion_slices
 from semiparam_ros.serving.learned_model import CheckpointMigrationWarning, load_model
-from semiparam_ros.sim.point_to_point import PointToPointArm
 
 ROOT = Path(__file__).resolve().parents[3]
 BIN = math.exp(float(_EDGES[1] - _EDGES[0]))  # one bin of the histogram in z: a quantile read is within it
@@ -139,17 +138,8 @@ def _arrays(config, states):
 def p2p_arm(tmp_path_factory):
     """A UR5 at 100 Hz moving point to point with Dahl friction: 60 s learned, 30 s of other moves held out;
     served with and without the calibration."""
-    config = load_evaluation_config(ROOT / "config" / "ur5.yaml", {})
-    train = PointToPointArm("ur5", seconds=60.0, rate_hz=100.0, seed=1).states()[0]
-    test = PointToPointArm("ur5", seconds=30.0, rate_hz=100.0, seed=2).states()[0]
     folder = tmp_path_factory.mktemp("calibration")
-    served = {}
-    for block in (0.0, 20.0):
-        est = OnlineEstimator(config.with_overrides({"uncertainty.calibration_block": block}))
-        for msg in train:
-            est.process(msg)
-        est.save(folder / f"block_{block:g}.npz")
-        served[block] = (est, load_model(folder / f"block_{block:g}.npz"))
+    config, served, test = served_ur5("uncertainty.calibration_block", (0.0, 20.0), folder)
     return config, served, _arrays(config, test), folder
 
 
@@ -193,7 +183,7 @@ def test_the_served_sigma_is_the_scale_times_the_state_noise_and_survives_the_ch
 
 def test_a_checkpoint_without_calibration_serves_the_one_step_sigma_and_says_so(p2p_arm):
     config, _served, (_, X, _, _), folder = p2p_arm
-    state = load_npz(folder / "block_20.npz")
+    state = load_npz(folder / "uncertainty.calibration_block_20.npz")
     old = {k: v for k, v in state.items() if not k.startswith("calibration.")}
     old["meta.version"] = np.array(2)
     atomic_save_npz(folder / "v2.npz", old)
@@ -203,7 +193,7 @@ def test_a_checkpoint_without_calibration_serves_the_one_step_sigma_and_says_so(
     assert any("friction that remembers" in note for note in model.estimator.migration_notes)
     assert np.isnan(model.sigma_scales()).all()
     n = len(config["robot.joints"])
-    one_step = load_model(folder / "block_0.npz")
+    one_step = load_model(folder / "uncertainty.calibration_block_0.npz")
     s2 = model.estimator.noise.s2
     rows = type(model)._model_rows(model, X[:20])
     np.testing.assert_allclose(model.predict(X[:20, :n], X[:20, n:2 * n], X[:20, 2 * n:])[1],
@@ -219,7 +209,7 @@ def test_a_checkpoint_without_calibration_serves_the_one_step_sigma_and_says_so(
 ])
 def test_a_corrupt_calibration_is_refused_and_nothing_changes(p2p_arm, key, value):
     config, _served, _, folder = p2p_arm
-    state = load_npz(folder / "block_20.npz")
+    state = load_npz(folder / "uncertainty.calibration_block_20.npz")
     state[key] = value
     atomic_save_npz(folder / "bad.npz", state)
     est = OnlineEstimator(config)
