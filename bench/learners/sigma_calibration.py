@@ -121,22 +121,27 @@ def _plain(value):
     return value
 
 
+def all_cases(data: Path):
+    """(config, logs, pairs) of the KUKA pairs (when ``data`` holds the logs) and the simulated arms."""
+    cases = []
+    if data.is_dir():
+        config = load_evaluation_config(ROOT / "config" / "kuka_lwr4.yaml",
+                                        {"robot.urdf": str(data / "kuka_lwr4_cogimon.urdf")})
+        logs = {name: load_samples(data / name, config)[0]
+                for name in ("measurements_1", "measurements_2", "measurements_3")}
+        cases.append((config, logs, PAIRS))
+    else:
+        print(f"no data folder {data}: the KUKA LWR4+ logs are not shipped; simulated arms only")
+    return cases + simulated_logs()
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data" / "kuka_lwr4")
     p.add_argument("--blocks", type=float, nargs="+", default=[0.0, 20.0])
     p.add_argument("--json", type=Path, default=ROOT / "bench" / "results" / "sigma_calibration.json")
     args = p.parse_args(argv)
-    cases = []
-    if args.data.is_dir():
-        config = load_evaluation_config(ROOT / "config" / "kuka_lwr4.yaml",
-                                        {"robot.urdf": str(args.data / "kuka_lwr4_cogimon.urdf")})
-        logs = {name: load_samples(args.data / name, config)[0]
-                for name in ("measurements_1", "measurements_2", "measurements_3")}
-        cases.append((config, logs, PAIRS))
-    else:
-        print(f"no data folder {args.data}: the KUKA LWR4+ logs are not shipped; simulated arms only")
-    cases += simulated_logs()
+    cases = all_cases(args.data)
     rows = []
     header = ("| train → test | block [s] | RMSE [N·m] | median σ | coverage all | "
               + " | ".join(SLICES) + " | one-step coverage |")

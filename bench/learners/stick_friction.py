@@ -24,10 +24,8 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from sigma_calibration import PAIRS, _plain, learn_logs, simulated_logs  # noqa: E402
+from sigma_calibration import _plain, all_cases, learn_logs  # noqa: E402
 
-from semiparam_ros.core.config import load_evaluation_config  # noqa: E402
-from semiparam_ros.eval.bags.replay import load_samples  # noqa: E402
 from semiparam_ros.eval.models.served import serve  # noqa: E402
 from semiparam_ros.eval.protocol.slices import motion_slices  # noqa: E402
 
@@ -60,16 +58,7 @@ def main(argv=None) -> int:
     p.add_argument("--deltas", type=float, nargs="+", default=[0.0, 0.001, 0.003, 0.01])
     p.add_argument("--json", type=Path, default=ROOT / "bench" / "results" / "stick_friction.json")
     args = p.parse_args(argv)
-    cases = []
-    if args.data.is_dir():
-        config = load_evaluation_config(ROOT / "config" / "kuka_lwr4.yaml",
-                                        {"robot.urdf": str(args.data / "kuka_lwr4_cogimon.urdf")})
-        logs = {name: load_samples(args.data / name, config)[0]
-                for name in ("measurements_1", "measurements_2", "measurements_3")}
-        cases.append((config, logs, PAIRS))
-    else:
-        print(f"no data folder {args.data}: simulated arms only")
-    cases += simulated_logs()
+    cases = all_cases(args.data)
     print("| train → test | δ [rad] | RMSE [N·m] | at rest | in motion | rest / motion | ±2σ coverage |")
     print("|---|---|---|---|---|---|---|")
     rows = []

@@ -4,8 +4,6 @@ treat states as one path and agree; the checkpoint keeps it; leaving friction ou
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from helpers.point_to_point import served_ur5
@@ -17,8 +15,6 @@ from semiparam_ros.eval.protocol.slices import motion_slices
 from semiparam_ros.serving.feedforward import DesiredState, FeedForward, TrajectoryPoint
 from semiparam_ros.serving.learned_model import LearnedModel
 from semiparam_ros.sim.arms import arm_spec
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def _states(config, messages):

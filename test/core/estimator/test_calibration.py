@@ -9,7 +9,6 @@ motion: the one-step σ covers a fraction of the errors at rest, the calibrated 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,7 +32,6 @@ from semiparam_ros.errors import CheckpointError, ConfigurationError
 from semiparam_ros.eval.protocol.slices import motion_slices
 from semiparam_ros.serving.learned_model import CheckpointMigrationWarning, load_model
 
-ROOT = Path(__file__).resolve().parents[3]
 BIN = math.exp(float(_EDGES[1] - _EDGES[0]))  # one bin of the histogram in z: a quantile read is within it
 
 
