@@ -58,16 +58,22 @@ def learn_logs(config, logs, train_names):
     return node
 
 
+def served_on(node, test):
+    """The node's model written, loaded as a user would (``load_model``) and predicted on the test log."""
+    served = serve(node.estimator)
+    n = len(served.joints)
+    X = test.X
+    total, sigma = served.predict(X[:, :n], X[:, n:2 * n], X[:, 2 * n:])
+    return served, test.Y - total, sigma
+
+
 def run_pair(config, logs, train_names, test_name, block):
     """Learn the served model on the training logs with one calibration block; score it on the test log."""
     cfg = config.with_overrides({"uncertainty.calibration_block": float(block)})
     node = learn_logs(cfg, logs, train_names)
-    served = serve(node.estimator)
     test = logs[test_name]
-    n = len(served.joints)
-    X = test.X
-    total, sigma = served.predict(X[:, :n], X[:, n:2 * n], X[:, 2 * n:])
-    err = test.Y - total
+    served, err, sigma = served_on(node, test)
+    n, X = len(served.joints), test.X
     inside = np.abs(err) <= 2.0 * sigma
     masks = motion_slices(X, n, test.n_outputs, test.sample_period_s)
     cov = slice_coverage(inside, masks)

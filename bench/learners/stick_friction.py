@@ -24,21 +24,17 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from sigma_calibration import _plain, all_cases, learn_logs  # noqa: E402
+from sigma_calibration import _plain, all_cases, learn_logs, served_on  # noqa: E402
 
-from semiparam_ros.eval.models.served import serve  # noqa: E402
 from semiparam_ros.eval.protocol.slices import motion_slices  # noqa: E402
 
 
 def run(config, logs, train_names, test_name, delta):
     """Learn the served SP with one δ on the training logs; score it frozen on the test log."""
     node = learn_logs(config.with_overrides({"parametric.stick_displacement": delta}), logs, train_names)
-    served = serve(node.estimator)
     test = logs[test_name]
-    n = len(served.joints)
-    X = test.X
-    total, sigma = served.predict(X[:, :n], X[:, n:2 * n], X[:, 2 * n:])
-    err = test.Y - total
+    served, err, sigma = served_on(node, test)
+    n, X = len(served.joints), test.X
     rest = motion_slices(X, n, test.n_outputs, test.sample_period_s)["at rest"]
 
     def rms(mask):

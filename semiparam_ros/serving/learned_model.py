@@ -624,20 +624,17 @@ class LearnedModel:
         Raises:
             RejectedSampleError: Wrong shapes or non-finite values.
         """
-        qa, dqa = check_finite_array("q", q), check_finite_array("dq", dq)
-        if qa.shape != dqa.shape or qa.shape[-1] != self._n:
-            raise RejectedSampleError(f"q and dq must have one shape (…, {self._n}), got {qa.shape}, "
-                                      f"{dqa.shape}")
-        held = self._stick_torque(np.atleast_2d(qa), np.atleast_2d(dqa), history)
-        out = np.zeros((qa.reshape(-1, self._n).shape[0], len(self.output_names))) if held is None else held
-        return out[0] if qa.ndim == 1 else out
+        X, single = self._states(q, dq, dq)  # q and q̇ checked as predict checks them (q̈ is not used)
+        n = self._n
+        held = self._stick_torque(X[:, :n], X[:, n:2 * n], history)
+        out = np.zeros((X.shape[0], len(self.output_names))) if held is None else held
+        return out[0] if single else out
 
     def _stick_torque(self, q: np.ndarray, dq: np.ndarray, history: StickState | None) -> np.ndarray | None:
         stick = self._stick()
         if stick is None:
             return None
-        start = history if history is not None else stick.state.copy()
-        return stick.torque(stick.features(q, dq, start))
+        return stick.held(q, dq, history if history is not None else stick.state.copy())
 
     def cad(self, q: Any, dq: Any, ddq: Any) -> np.ndarray:
         """Return the CAD model: RNEA with the URDF's inertial parameters, no friction or offsets [N·m].

@@ -44,7 +44,7 @@ from semiparam_ros.core.estimator.units import EffortUnitsCheck
 from semiparam_ros.core.kinds import OutputKind
 from semiparam_ros.core.learners._step_kernels import joined_within
 from semiparam_ros.core.learners.contract import Prediction, PredictionContext, RigidBodyUser
-from semiparam_ros.core.learners.stick import StickFriction
+from semiparam_ros.core.learners.stick import StickFriction, with_held
 from semiparam_ros.core.learners.uncertainty import NoiseScale
 from semiparam_ros.core.rigid_body.dynamics import RigidBodyRegressor
 from semiparam_ros.core.rigid_body.identification import ConsistentEstimate, consistent_parameters
@@ -239,7 +239,7 @@ class OnlineEstimator:
             held = stick.torque(phi)
         target = y if held is None else y - held  # what the learners learn
         if skip_learning and self.learning_enabled:
-            prediction = _plus(model.predict_held(x), held)
+            prediction = with_held(model.predict_held(x), held)
             assert prediction.variance is not None  # a held prediction carries it
             std = self.noise.std(prediction.variance)
             self.noise.skip(sample.stamp_ns)
@@ -247,7 +247,7 @@ class OnlineEstimator:
             return StepResult(sample, prediction, time.perf_counter() - start, False, std, None)
         # a priori, with the relative variance v = z A⁻¹ zᵀ of each output (the state is not changed)
         ahead = model.predict_ahead_checked(x)
-        prediction = _plus(ahead.prediction, held)
+        prediction = with_held(ahead.prediction, held)
         variance = prediction.variance
         # the stick torque is regressed on the learned rigid body's error (a residual memorizes each rest's
         # torque at its position within samples and would leave nothing; the learned π̂, not the served
@@ -271,7 +271,7 @@ class OnlineEstimator:
                 if self.traits.learns_context:
                     model.learn_ahead_checked(ahead, target)
                 else:
-                    prediction = _plus(model.predict_learn_one(x, target), held)
+                    prediction = with_held(model.predict_learn_one(x, target), held)
                 self.n_samples_learned += 1
             std = self.noise.std(variance)
             error = y - prediction.total
@@ -699,14 +699,6 @@ def _stick(config: EstimatorConfig) -> StickFriction | None:
     memory = float(config["adaptation.time_constant"])
     return StickFriction(len(config["robot.joints"]), displacement, config["parametric.coulomb_velocity"],
                          memory if memory > 0.0 else 20.0)
-
-
-def _plus(prediction: Prediction, held: np.ndarray | None) -> Prediction:
-    """Add the torque the stick state holds to the rigid-body part and the total of a prediction."""
-    if held is None:
-        return prediction
-    return Prediction(prediction.parametric + held, prediction.residual, prediction.total + held,
-                      prediction.variance, prediction.correction)
 
 
 def _learned_rigid(model: Model, ahead: PredictionContext) -> np.ndarray:

@@ -37,9 +37,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from semiparam_ros.core.learners.contract import Prediction
 from semiparam_ros.errors import ConfigurationError
 
-__all__ = ["PRIOR_S", "StickFriction", "StickState"]
+__all__ = ["PRIOR_S", "StickFriction", "StickState", "with_held"]
 
 #: Weight of the prior c = 0, in seconds of samples with |φ| = 1.
 PRIOR_S = 0.5
@@ -134,6 +135,10 @@ class StickFriction:
         """Return ``c φ`` [N·m] for φ of shape (n,) or (N, n)."""
         return self.coefficient * phi
 
+    def held(self, q: np.ndarray, dq: np.ndarray, state: StickState) -> np.ndarray:
+        """Return the torque held along a sequence (N, n) [N·m], advancing ``state`` (:meth:`features`)."""
+        return self.torque(self.features(q, dq, state))
+
     def learn(self, stamp_ns: int, phi: np.ndarray, error: np.ndarray) -> None:
         """Regress the model's a-priori error e (n,) [N·m] on φ (n,) at a stamp [ns] (module docstring)."""
         last, self._last_ns = self._last_ns, stamp_ns
@@ -176,3 +181,11 @@ class StickFriction:
         self.coefficient = b / (a + PRIOR_S)
         self.state = StickState(z.copy(), q.copy() if q.size else None)
         self._last_ns = None
+
+
+def with_held(prediction: Prediction, held: np.ndarray | None) -> Prediction:
+    """Return a prediction with the held torque added to its rigid-body part and total (None: unchanged)."""
+    if held is None:
+        return prediction
+    return Prediction(prediction.parametric + held, prediction.residual, prediction.total + held,
+                      prediction.variance, prediction.correction)

@@ -25,7 +25,7 @@ import numpy as np
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.learners.contract import Prediction
-from semiparam_ros.core.learners.stick import StickState
+from semiparam_ros.core.learners.stick import StickState, with_held
 from semiparam_ros.core.stream.messages import Sample
 from semiparam_ros.errors import RejectedSampleError
 from semiparam_ros.eval.protocol.options import CASCADE_SP, JOINT_SP
@@ -272,9 +272,7 @@ class NodeLearner:
         if self._path is None:
             self._path = stick.state.copy()
         xv, n = np.asarray(x, dtype=np.float64), self._n
-        held = stick.torque(stick.features(xv[None, :n], xv[None, n:2 * n], self._path)[0])
-        return Prediction(prediction.parametric + held, prediction.residual, prediction.total + held,
-                          prediction.variance, prediction.correction)
+        return with_held(prediction, stick.held(xv[None, :n], xv[None, n:2 * n], self._path)[0])
 
     def copy(self) -> NodeLearner:
         """Return an independent copy (the estimator's learned and time-based state)."""
