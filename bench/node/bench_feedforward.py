@@ -199,6 +199,8 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
             "node_cpu_percent": 100.0 * cpu / (wall1 - wall0),
             "samples_learned": int(diag.get("samples_learned", "0")),
             "feedforward_diagnostics": {k: v for k, v in diag.items() if k.startswith("feedforward.")},
+            "learning_diagnostics": {k: v for k, v in diag.items()
+                                     if k.startswith(("learning_skipped", "not_learned", "gate", "drops."))},
             "load_average_1min": os.getloadavg()[0]}
 
 
@@ -212,6 +214,7 @@ def main() -> None:
     p.add_argument("--output", type=Path, default=RESULTS)
     args = p.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_ff_"))
+    print(f"node logs in {tmp}")
     checkpoint = train_checkpoint(tmp, args.train_seconds)
     runs = [run(args.seconds, args.hz, learning, tmp, True, checkpoint)
             for _ in range(args.repeats) for learning in (True, False)]
@@ -219,13 +222,16 @@ def main() -> None:
           "stamped → published p50 / p99 (median of periods) [ms] | learned while serving | "
           "not-ready fallbacks | node CPU |")
     print("|---|---|---|---|---|---|---|---|")
+    def ms(value: float | None, digits: int = 2) -> str:
+        return "–" if value is None else f"{value:.{digits}f}"
+
     for r in runs:
         lat, nl = r["latency_ms"], r["node_latency_ms"]
         learned = "–" if r["learned_while_serving"] is None else f"{100 * r['learned_while_serving']:.1f} %"
         mode = "learning" if r["learning"] else "not learning"
         print(f"| {mode} at {r['hz']:g} Hz | {r['desired_sent']} | {100 * r['answered_within_2ms']:.1f} % | "
-              f"{lat['p50']:.2f} / {lat['p99']:.2f} / {lat['max']:.1f} | "
-              f"{nl['p50_median_of_periods']:.2f} / {nl['p99_median_of_periods']:.2f} | {learned} | "
+              f"{ms(lat.get('p50'))} / {ms(lat.get('p99'))} / {ms(lat.get('max'), 1)} | "
+              f"{ms(nl['p50_median_of_periods'])} / {ms(nl['p99_median_of_periods'])} | {learned} | "
               f"{r['fallback_not_ready']} | {r['node_cpu_percent']:.0f} % |")
     out = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/node/bench_feedforward.py",
            "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),

@@ -469,6 +469,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._fast_n = 0                               # samples in them
         self._weight_cache: tuple[np.ndarray, np.ndarray] | None = None  # (s², σ²/ν₀) until the next learn
         self._fast_mask: np.ndarray | None = None      # _fast_useful() until the next learn
+        self._shift_cache: tuple[tuple[int, bytes], np.ndarray] | None = None  # _rigid_shift's last Ω
 
     #: The fast rigid-body correction fades like the local tracker but over this many times its distances
     #: (it is a rigid-body correction, valid further from where it was learned than a local error).
@@ -516,16 +517,31 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._reference = np.array(theta, dtype=np.float64)
         self._since_reference = 0
 
+    def _rigid_shift(self, change: np.ndarray) -> np.ndarray:
+        """``Ω = A⁻¹ B_E S`` (D, t): what predicting with θ_ref + ``change`` takes off the residual's weights.
+
+        S scatters ``change`` over the learned entries (as :meth:`_rereference`), so ``φΩ`` is
+        ``Σ_e (φA⁻¹B_E)_e change_{c(e)}`` per output: two triangular solves with t right-hand sides, cached
+        until the residual learns again (a served copy predicts with one projection for its whole life, and
+        a per-cycle answer is then one product with Ω instead of two solves with the D × D factor).
+        """
+        rls = self.nonparametric.rls
+        key = (rls.n_steps, change.tobytes())
+        cached = self._shift_cache
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        scatter = np.zeros((self._phi_entries.size, self.n_outputs))
+        scatter[np.arange(self._phi_entries.size), self._entry_rows] = change[self._entry_cols]
+        R = rls.R
+        shift = solve_triangular(R, solve_triangular(R, self._cross.with_pending() @ scatter, trans="T",
+                                                     lower=False, check_finite=False),
+                                 lower=False, check_finite=False)
+        self._shift_cache = (key, shift)
+        return shift
+
     def _entries_residual(self, phi: np.ndarray, change: np.ndarray) -> np.ndarray:
         """``Σ_e (φA⁻¹B_E)_e change_{c(e)}`` per output row (N, t): what other parameters take off r."""
-        rls = self.nonparametric.rls
-        R = rls.R
-        a = solve_triangular(R, solve_triangular(R, phi.T, trans="T", lower=False, check_finite=False),
-                             lower=False, check_finite=False)  # A⁻¹φᵀ (D, N)
-        pe = (a.T @ self._cross.with_pending()) * change[self._entry_cols]  # (N, E)
-        out = np.zeros((phi.shape[0], self.n_outputs))
-        np.add.at(out.T, self._entry_rows, pe.T)
-        return out
+        return phi @ self._rigid_shift(change)
 
     #: Window [s] of the smoothed error that measures how long the residual's errors stay correlated (at
     #: least :attr:`SCALE_MIN_SAMPLES` samples): a correlation longer than it counts as this long.
@@ -1107,7 +1123,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._scale_model, self._recent_rigid = scales[3:3 + t].copy(), scales[3 + t:3 + 2 * t].copy()
         self._fast_errors = scales[3 + 2 * t:3 + 4 * t].reshape(2, t).copy()
         self._corr = scales[3 + 4 * t:].reshape(2, t).copy()
-        self._weight_cache = self._fast_mask = None
+        self._weight_cache = self._fast_mask = self._shift_cache = None
         if reference[p + 1] != 0.0:
             # it predicted with the learned parameters, or with a rigid body set by use_rigid, which is not
             # restored (solved again from the state): the learned parameters until then
