@@ -11,9 +11,12 @@ desired state: the round trip, publish call → receipt of ``/estimator/feedforw
 (this process's clock: the transport both ways and this client's own scheduling included), and the node's
 own measure, stamp → feed-forward published (``feedforward.age_*`` of its diagnostics: transport in, the
 wait behind learning, the prediction, the publish), and the share of the joint states learned while it
-answers. Runs learning on and off side by side (``--repeats`` pairs, alternating); prints a table and
-writes ``bench/results/bench_feedforward.json``. Targets: ≥ 99 % answered within 2 ms and node-side
-p99 < 0.5 ms (or learning on within 1.2× of off), ≥ 95 % of the samples learned while serving.
+answers. Runs learning on and off side by side (``--repeats`` pairs, alternating), then the floor: a bare
+rclpy node answering each desired state at once without a model (``echo_node.py``, unless ``--no-floor``).
+The motion is computed before streaming, so the client only publishes; the CPU of the node's process
+tree and of the client are reported. Prints a table and writes ``bench/results/bench_feedforward.json``.
+Targets: ≥ 99 % answered within 2 ms and node-side p99 < 0.5 ms (or learning on within 1.2× of off),
+≥ 95 % of the samples learned while serving.
 
     PYTHONPATH=$PWD .venv/bin/python bench/node/bench_feedforward.py [--seconds 20] [--hz 1000] [--repeats 2]
 """
@@ -48,6 +51,22 @@ def _percentiles(values: list[float]) -> dict[str, float]:
             "p99": float(np.percentile(a, 99)), "p999": float(np.percentile(a, 99.9)), "max": float(a.max())}
 
 
+#: Who answers the desired states: the estimator node, or a bare rclpy node that answers at once (the floor).
+DESIGNS = {"node": "estimator", "echo": "bare rclpy echo (floor)"}
+
+
+def _cpu(processes: list) -> float:
+    """CPU time [s] (user + system) of these processes."""
+    total = 0.0
+    for process in processes:
+        try:
+            times = process.cpu_times()
+        except psutil.NoSuchProcess:
+            continue
+        total += times.user + times.system
+    return total
+
+
 def train_checkpoint(tmp: Path, seconds: float) -> Path:
     """Learn a simulated Panda recording with the node's defaults (D = 500) into a checkpoint."""
     from semiparam_ros.core.config import load_config
@@ -63,7 +82,7 @@ def train_checkpoint(tmp: Path, seconds: float) -> Path:
 
 
 def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool = True,
-        checkpoint: Path | None = None) -> dict:
+        checkpoint: Path | None = None, design: str = "node") -> dict:
     """Start the node, stream joint states and desired states, return the measured latencies."""
     import rclpy
     from builtin_interfaces.msg import Duration
@@ -83,7 +102,7 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
     n = len(joints)
 
     domain, env = private_domain(tmp, 13, 7 if learning else 0)
-    log_path = tmp / f"node_{'learning' if learning else 'frozen'}_{int(consistent)}.log"
+    log_path = tmp / f"node_{'learning' if learning else 'frozen'}_{int(consistent)}_{design}.log"
     log = open(log_path, "w")
     cmd = [sys.executable, "-m", "semiparam_ros.ros.main", "--ros-args", "--params-file",
            str(CONFIG), "-p", f"learning_enabled:={'true' if learning else 'false'}",
@@ -93,6 +112,8 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
         copy = tmp / f"warm_{'learning' if learning else 'frozen'}_{time.monotonic_ns()}.npz"
         copy.write_bytes(checkpoint.read_bytes())
         cmd += ["-p", f"checkpoint.path:={copy}", "-p", "checkpoint.period:=0.0"]
+    if design == "echo":  # the floor: a bare rclpy node answering at once, no model
+        cmd = [sys.executable, str(REPO / "bench" / "node" / "echo_node.py")]
     proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
     ps = psutil.Process(proc.pid)
 
@@ -132,13 +153,18 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
         count = int(seconds * hz)
         base_ns = 1_000_000_000_000
         w = 2 * np.pi * np.array([0.11, 0.13, 0.17, 0.19, 0.23, 0.29, 0.31])
-        cpu0, wall0 = ps.cpu_times(), time.perf_counter()
-        start = time.perf_counter()
+        motion = []  # computed before streaming: the client only publishes, as a controller would
         for k in range(count):
             t = k * period
             q, dq, ddq = 0.5 * np.sin(w * t), 0.5 * w * np.cos(w * t), -0.5 * w * w * np.sin(w * t)
             q[3] -= 1.5
-            tau = regressor.regressor(q, dq, ddq) @ cad + 0.05 * rng.standard_normal(n)
+            motion.append((q, dq, ddq, regressor.regressor(q, dq, ddq) @ cad + 0.05 * rng.standard_normal(n)))
+        family = [ps, *ps.children(recursive=True)]  # the answer process and the projection worker too
+        me = psutil.Process()
+        cpu0, mine0, wall0 = _cpu(family), _cpu([me]), time.perf_counter()
+        start = time.perf_counter()
+        for k, (q, dq, ddq, tau) in enumerate(motion):
+            t = k * period
             stamp = base_ns + k * 1_000_000
             js = JointState()
             js.header.stamp.sec, js.header.stamp.nanosec = divmod(stamp, 10**9)
@@ -161,7 +187,7 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
             ds_pub.publish(ds)
         play_s = time.perf_counter() - start
         time.sleep(1.5)
-        cpu1, wall1 = ps.cpu_times(), time.perf_counter()
+        cpu1, mine1, wall1 = _cpu(family), _cpu([me]), time.perf_counter()
     finally:
         proc.send_signal(signal.SIGINT)
         try:
@@ -183,10 +209,11 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
                 if "feedforward.age_p99_ms" in d]
     node_p50 = [float(d["feedforward.age_p50_ms"]) for d in all_diag[2:]
                 if "feedforward.age_p50_ms" in d]
-    cpu = (cpu1.user - cpu0.user) + (cpu1.system - cpu0.system)
+    cpu = cpu1 - cpu0
     learned_before = int(all_diag[0].get("samples_learned", "0")) if all_diag else 0
     warm = checkpoint is not None
-    return {"learning": learning, "consistent": consistent, "hz": hz, "seconds": seconds, "play_s": play_s,
+    return {"design": DESIGNS[design], "learning": learning,
+            "consistent": consistent, "hz": hz, "seconds": seconds, "play_s": play_s,
             "warm_start": warm, "desired_sent": len(sent), "feedforward_received": len(latency),
             "answered_within_2ms": within_2ms, "joint_states_sent": count,
             "learned_while_serving": (int(diag.get("samples_learned", "0")) - learned_before) / count
@@ -197,6 +224,7 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
                                 "p99_median_of_periods": float(np.median(node_p99)) if node_p99 else None,
                                 "p99_max_of_periods": max(node_p99, default=None)},
             "node_cpu_percent": 100.0 * cpu / (wall1 - wall0),
+            "client_cpu_percent": 100.0 * (mine1 - mine0) / (wall1 - wall0),
             "samples_learned": int(diag.get("samples_learned", "0")),
             "feedforward_diagnostics": {k: v for k, v in diag.items() if k.startswith("feedforward.")},
             "learning_diagnostics": {k: v for k, v in diag.items()
@@ -212,16 +240,21 @@ def main() -> None:
     p.add_argument("--train-seconds", type=float, default=30.0,
                    help="simulated Panda recording learned into the checkpoint the node warm-starts from")
     p.add_argument("--output", type=Path, default=RESULTS)
+    p.add_argument("--no-floor", dest="floor", action="store_false",
+                   help="skip the floor: a bare rclpy node (bench/node/echo_node.py) answering each desired "
+                        "state at once, no model, in the same run")
     args = p.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_ff_"))
     print(f"node logs in {tmp}")
     checkpoint = train_checkpoint(tmp, args.train_seconds)
-    runs = [run(args.seconds, args.hz, learning, tmp, True, checkpoint)
-            for _ in range(args.repeats) for learning in (True, False)]
-    print("| node (warm start) | desired states | within 2 ms | round trip p50 / p99 / max [ms] | "
-          "stamped → published p50 / p99 (median of periods) [ms] | learned while serving | "
-          "not-ready fallbacks | node CPU |")
-    print("|---|---|---|---|---|---|---|---|")
+    designs = ("node", "echo") if args.floor else ("node",)
+    runs = [run(args.seconds, args.hz, learning, tmp, True, checkpoint, design)
+            for _ in range(args.repeats) for design in designs
+            for learning in ((False,) if design == "echo" else (True, False))]
+    print("| answered by | node (warm start) | desired states | within 2 ms | "
+          "round trip p50 / p99 / max [ms] | stamped → published p50 / p99 (median of periods) [ms] | "
+          "learned while serving | not-ready fallbacks | node CPU | client CPU |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     def ms(value: float | None, digits: int = 2) -> str:
         return "–" if value is None else f"{value:.{digits}f}"
 
@@ -229,10 +262,12 @@ def main() -> None:
         lat, nl = r["latency_ms"], r["node_latency_ms"]
         learned = "–" if r["learned_while_serving"] is None else f"{100 * r['learned_while_serving']:.1f} %"
         mode = "learning" if r["learning"] else "not learning"
-        print(f"| {mode} at {r['hz']:g} Hz | {r['desired_sent']} | {100 * r['answered_within_2ms']:.1f} % | "
+        print(f"| {r['design']} | {mode} at {r['hz']:g} Hz | {r['desired_sent']} | "
+              f"{100 * r['answered_within_2ms']:.1f} % | "
               f"{ms(lat.get('p50'))} / {ms(lat.get('p99'))} / {ms(lat.get('max'), 1)} | "
               f"{ms(nl['p50_median_of_periods'])} / {ms(nl['p99_median_of_periods'])} | {learned} | "
-              f"{r['fallback_not_ready']} | {r['node_cpu_percent']:.0f} % |")
+              f"{r['fallback_not_ready']} | {r['node_cpu_percent']:.0f} % | "
+              f"{r['client_cpu_percent']:.0f} % |")
     out = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/node/bench_feedforward.py",
            "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                        "processor": platform.processor() or platform.machine()},

@@ -470,6 +470,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._weight_cache: tuple[np.ndarray, np.ndarray] | None = None  # (s², σ²/ν₀) until the next learn
         self._fast_mask: np.ndarray | None = None      # _fast_useful() until the next learn
         self._shift_cache: tuple[tuple[int, bytes], np.ndarray] | None = None  # _rigid_shift's last Ω
+        self._served_cache: tuple[Any, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
 
     #: The fast rigid-body correction fades like the local tracker but over this many times its distances
     #: (it is a rigid-body correction, valid further from where it was learned than a local error).
@@ -673,11 +674,10 @@ class ConsistentSemiparametricModel(TwoStageModel):
             >>> m.model_variance(0.5).tolist()  # nothing learned yet: v itself
             [0.5]
         """
-        s2, noise = self.error_scales()
         g = self.residual_weight(v, served=True)
+        s2, noise, c = self._served_scales()
         v_arr = np.asarray(v, dtype=np.float64)[..., None]
         nu = np.clip(self.nonparametric.rls.lam * v_arr, 0.0, 1.0)
-        c = self.correlation_samples()
         extra = (1.0 - g) ** 2 * s2 * (1.0 - nu) + g * g * c * noise * v_arr + s2 * nu
         fallback = np.broadcast_to(v_arr, extra.shape)
         return np.divide(extra, noise, out=np.array(fallback, dtype=np.float64), where=noise > 0.0)
@@ -710,7 +710,22 @@ class ConsistentSemiparametricModel(TwoStageModel):
         if cache is None:
             s2, noise = self.error_scales()
             cache = self._weight_cache = (s2, noise / self.novelty_scale)
-        return (cache[0], cache[1] * self.correlation_samples()) if served else cache
+        return (cache[0], cache[1] * self._served_scales()[2]) if served else cache
+
+    def _served_scales(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(s², σ², c)`` of the model used alone, kept while the weight's scales are the same object.
+
+        Every path that changes the error statistics replaces (or clears) the weight's scales, so their
+        identity says when these are stale: a served copy, which learns nothing, computes them once.
+        """
+        token = self._weight_cache
+        cached = self._served_cache
+        if token is not None and cached is not None and cached[0] is token:
+            return cached[1]
+        s2, noise = self.error_scales()
+        scales = (s2, noise, self.correlation_samples())
+        self._served_cache = (token, scales)
+        return scales
 
     def error_scales(self) -> tuple[np.ndarray, np.ndarray]:
         """``(s², σ²)`` (t,) each: the rigid-body part's systematic error and the residual's noise variances.
@@ -1123,7 +1138,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._scale_model, self._recent_rigid = scales[3:3 + t].copy(), scales[3 + t:3 + 2 * t].copy()
         self._fast_errors = scales[3 + 2 * t:3 + 4 * t].reshape(2, t).copy()
         self._corr = scales[3 + 4 * t:].reshape(2, t).copy()
-        self._weight_cache = self._fast_mask = self._shift_cache = None
+        self._weight_cache = self._fast_mask = self._shift_cache = self._served_cache = None
         if reference[p + 1] != 0.0:
             # it predicted with the learned parameters, or with a rigid body set by use_rigid, which is not
             # restored (solved again from the state): the learned parameters until then

@@ -358,6 +358,41 @@ def test_residual_keeps_only_the_regressor_entries_that_are_not_zero(monkeypatch
         reduced.load_state_dict(full.state_dict())
 
 
+def test_what_a_served_prediction_keeps_is_recomputed_after_learning():
+    """``predict_model`` with other rigid parameters keeps Ω = A⁻¹B_E S and the served scales (s², σ², c)
+    between calls; after more samples are learned (or a reset) its answers are those of a copy that never
+    kept anything."""
+    import copy
+
+    m = model()
+    X, Y = data(300, 11)
+    for x, y in zip(X[:200], Y[:200], strict=True):
+        m.learn_one(x, y)
+    m.use_rigid(m.parametric.parameters)  # a fixed reference: only learning changes what is kept
+    other = m.parametric.parameters + np.array([0.3, -0.2, 0.1])
+    Xt, _ = data(5, 12)
+
+    def uncached(model_):
+        fresh = copy.deepcopy(model_)
+        fresh._shift_cache = fresh._served_cache = None
+        return fresh
+
+    before = [m.predict_model(x, other) for x in Xt]
+    for x, y in zip(X[200:], Y[200:], strict=True):  # Ω and the scales change with what is learned
+        m.learn_one(x, y)
+    after = [m.predict_model(x, other) for x in Xt]
+    reference = uncached(m)
+    for x, old, new in zip(Xt, before, after, strict=True):
+        want = reference.predict_model(x, other)
+        np.testing.assert_allclose(new.total, want.total, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(new.variance, want.variance, rtol=1e-12, atol=1e-15)
+        assert not np.allclose(old.total, new.total, rtol=1e-9, atol=0.0)
+    m.reset()
+    for x in Xt:
+        np.testing.assert_allclose(m.predict_model(x, other).total, uncached(m).predict_model(x, other).total,
+                                   rtol=1e-12, atol=1e-12)
+
+
 def test_predicting_with_other_rigid_parameters_moves_the_residual_with_them():
     """``rigid`` = the learned parameters gives the learned prediction; other parameters move the
     rigid-body part by Φ(π' − π̂) and the weighted residual by −g·E[Φ](π' − π̂)."""
