@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Contact evaluation (issue 13, item 6): simulate contacts-then-pickup logs (iCub F/T sensor, seeds 0..3;
+# Contact evaluation: simulate contacts-then-pickup logs (iCub F/T sensor, seeds 0..3;
 # Panda joint torques at 100 Hz, seed 0), run `evaluate contacts` on each with the shipped
 # configuration (gate on and off in one run), and fill docs/templates/contacts.md.in with the numbers
 # (semiparam_ros/eval/contacts_page.py).

@@ -8,5 +8,5 @@ tuned=(--set parametric.lam=0.01 --set nonparametric.lam=0.001 --set nonparametr
        --set adaptation.time_constant=0.0 --set gate.enabled=false)
 # The paper's learners, set explicitly so that the reproduction does not depend on the package defaults:
 # the rigid-body stage starts from zero parameters on raw regressor columns (the defaults are the URDF
-# prior and column scaling: issue 12), no forgetting and every sample learned (the shipped configuration
-# adapts and gates contacts: issue 13, docs/adaptation.md).
+# prior and column scaling), no forgetting and every sample learned (the shipped configuration
+# adapts and gates contacts: docs/adaptation.md).

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# P, NP and SP on the real KUKA LWR4+ joint-torque logs (issue 12, item 6): train on measurements_1, test
+# P, NP and SP on the real KUKA LWR4+ joint-torque logs: train on measurements_1, test
 # on measurements_3 with the project's protocol (10 parts, "at regime" = second half of each part), beside
 # the CAD model, batch least-squares identification with friction (frozen and updated online), each learner
 # frozen after training, P without friction, and persistence; plus the injected external-torque test.

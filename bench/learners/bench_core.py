@@ -74,7 +74,7 @@ REFIT_WINDOW = 1000
 RESULTS = pathlib.Path(__file__).resolve().parent / "results" / "bench_core.json"
 RESULTS_PU = RESULTS.with_name("bench_core_predict_update.json")
 TARGETS_US = {500: 60.0, 1000: 250.0}
-#: the learner before the last pass on issue 15 item 1 (``--predict-update-only`` runs it side by side;
+#: the learner before its predict-then-update pass (``--predict-update-only`` runs it side by side;
 #: 13c2755 is the code before item 1's work)
 KERNEL_BASELINE = "f23efe1"
 
@@ -293,7 +293,7 @@ def time_interleaved(steps: dict[str, Callable[[int], object]], calls: int, repe
 
 
 def predict_update_only(path: pathlib.Path, baseline: str = KERNEL_BASELINE) -> int:
-    """The predict-then-update comparison (issue 15's target), old learner next to new, saved to ``path``.
+    """The predict-then-update comparison (its target), old learner next to new, saved to ``path``.
 
     For D ∈ {500, 1000} and β ∈ {1 (the target's setting), 0.9995 (the node's: a regularizer row per
     step)}, four steps alternate in short repeats on the same rows: ``predict_update`` and the habit

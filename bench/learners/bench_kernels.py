@@ -11,7 +11,7 @@ Per call of ``qr_rls_steps`` with one data row (6 outputs) on a factor that has 
 β = 1 (no regularizer row) and β = 0.9995 (the node's: scale + one regularizer row per step, so the
 columns right of its coordinate carry two active rows). The four kernels of old and new alternate in
 short repeats; medians of the mean µs per call. The ratio ``update+query / update+tracker`` is the
-kernel's share of issue 15's predict-then-update target (the Python side adds ≈ 2–4 µs to the habit).
+kernel's share of the predict-then-update target (the Python side adds ≈ 2–4 µs to the habit).
 One BLAS thread. Usage::
 
     PYTHONPATH=$PWD .venv/bin/python bench/learners/bench_kernels.py [--baseline REV] [--json PATH]

@@ -52,7 +52,7 @@ CONFIG = ROOT / "config" / "icub_right_arm.yaml"
 BAG = ROOT / "bags" / "icub_xy"
 DEFAULT_BASELINE = "13c2755"  # last commit before the one-pass step
 OLD = "_old_semiparam_ros"
-TARGETS_US = {500: 150.0, 1000: 330.0}  # gate on, in-process median (issue 15, helper brief)
+TARGETS_US = {500: 150.0, 1000: 330.0}  # gate on, in-process median (the step's targets)
 
 
 def load_baseline(rev: str, tmp: pathlib.Path) -> types.ModuleType:

@@ -15,7 +15,7 @@ separate process (``python -m semiparam_ros.ros.main --executor E`` with
   bounds the p99 of the whole run), and the core step time (predict + learn);
 * CPU% of the node process (psutil; 100 % = one core) and queue drops.
 
-Targets (issue 15): at D = 1000 ≥ 99.9 % learned, node p99 < 2 ms, node CPU ≤ 80 %; at D = 500 CPU ≤ 50 %.
+Targets: at D = 1000 ≥ 99.9 % learned, node p99 < 2 ms, node CPU ≤ 80 %; at D = 500 CPU ≤ 50 %.
 The load average of the machine is recorded before and after every run: on a shared machine, compare
 the columns of one run, not runs of different days. Prints markdown tables and writes
 ``bench/results/bench_node.json``. ``--quick`` plays 3 s instead of 15 s (the full run takes ≈ 3 min).

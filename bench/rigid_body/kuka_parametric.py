@@ -1,4 +1,4 @@
-"""Per-joint torque error of the rigid-body stage (P) on the real KUKA LWR4+ logs (issue 12, item E).
+"""Per-joint torque error of the rigid-body stage (P) on the real KUKA LWR4+ logs.
 
 Train on measurements_1, then test-then-train on measurements_3 (each test sample is predicted before it
 is learned). Variants: friction + offsets on/off, prior urdf/zero, column scaling on/off, and the

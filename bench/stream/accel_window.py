@@ -1,4 +1,4 @@
-"""Choose acceleration.window_s by measurement (issue 12, item 2).
+"""Choose acceleration.window_s by measurement.
 
 Two measurements, printed as tables:
 1. Simulated smooth joint trajectories (sums of sines up to 1.5 Hz, the band of excitation trajectories),

@@ -1,4 +1,4 @@
-"""Causal low-delay q̈ (Kalman: constant jerk or snap) against the centred Savitzky–Golay (issue 15, item 3).
+"""Causal low-delay q̈ (Kalman: constant jerk or snap) against the centred Savitzky–Golay.
 
 Every estimate comes from the streaming estimators of ``semiparam_ros.core.stream.acceleration`` (the node's
 code). Two errors per estimator, both as RMS of (estimate − reference) relative to the RMS of the reference:

@@ -127,7 +127,7 @@ def test_protocol_matches_hand_written_loop() -> None:
         assert stats.groups["force"].regime.std == pytest.approx(np.std(force), rel=1e-10)
         assert stats.rmse("torque") == pytest.approx(np.mean(torque), rel=1e-10)
         assert stats.rmse("force", "first") == pytest.approx(np.mean(force0), rel=1e-10)
-        # JSON keeps issue 6's fields; the initial segment's name follows first_s (0.1 s here, not 3 s)
+        # JSON keeps its earlier fields; the initial segment's name follows first_s (0.1 s here, not 3 s)
         js = doc["models"][kind]
         assert js["force_rmse"] == stats.rmse("force") and js["torque_rmse"] == stats.rmse("torque")
         assert js["force_rmse_first_0.1s"] == pytest.approx(np.mean(force0), rel=1e-10)
@@ -533,7 +533,7 @@ def test_reproduction_fast_variant_on_committed_bags(committed_protocol_report) 
 
 
 def test_restated_sp_criterion_on_committed_bags(committed_protocol_report_4) -> None:
-    """Issue 14, item 11 (replaces the strict "SP's mean ≤ NP's" of issue 6, which SP and NP tie on at the
+    """The restated SP criterion (it replaces a strict "SP's mean ≤ NP's", which SP and NP tie on at the
     noise floor): SP not significantly worse than NP at regime (paired over the parts: p ≥ 0.05 or SP
     ahead) and SP ahead over the first 3 s. The joint fit meets it in both groups; for the paper's cascade
     the evaluation of each part of the criterion is checked against scipy's paired t-test on the parts."""

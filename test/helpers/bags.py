@@ -14,7 +14,7 @@ ROOT = REPO
 CONFIG = ROOT / "config" / "icub_right_arm.yaml"
 
 
-# --------------------------------------------------------------------------- joint torques (issue 12, item 1)
+# --------------------------------------------------------------------------- joint torques
 UR5_URDF = "example-robot-data://robots/ur_description/urdf/ur5_robot.urdf"
 
 

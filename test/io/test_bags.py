@@ -346,7 +346,7 @@ def test_garbage_files_and_folders_raise(tmp_path, good_bag):
 
 
 # ---------------------------------------------------------------------------------------------------
-# truncated and corrupt bags: read what is there (issue 14)
+# truncated and corrupt bags: read what is there
 # ---------------------------------------------------------------------------------------------------
 
 BIG_NAMES = tuple(f"joint_{i:03d}" for i in range(120))

@@ -1,4 +1,4 @@
-"""Baselines and the real-log comparison (issue 12, item 6), each against an independent computation."""
+"""Baselines and the real-log comparison, each against an independent computation."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Joint-torque arms (issue 12): URDF prior, friction/offset columns, column scaling, parameter files."""
+"""Joint-torque arms: URDF prior, friction/offset columns, column scaling, parameter files."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""acceleration.window_s: a window in seconds, sized at the measured joint-state rate (issue 12, item 2)."""
+"""acceleration.window_s: a window in seconds, sized at the measured joint-state rate."""
 
 from __future__ import annotations
 

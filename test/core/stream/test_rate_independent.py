@@ -1,4 +1,4 @@
-"""Warm-up and diagnostics window in seconds, converted at the measured sample rate (issue 12, open end 3)."""
+"""Warm-up and diagnostics window in seconds, converted at the measured sample rate."""
 
 from __future__ import annotations
 
