@@ -48,9 +48,10 @@ def weighted_residual(raw: np.ndarray, s2: np.ndarray, spread: np.ndarray, lam: 
 
 
 @njit(cache=True, nogil=True)
-def fast_total(model_total: np.ndarray, c: np.ndarray, v: np.ndarray, noise: np.ndarray, kappa_fast: float,
-               useful: np.ndarray, kappa: float, used: np.ndarray, applied: np.ndarray, fast: np.ndarray,
-               total: np.ndarray, rigid: np.ndarray, residual: np.ndarray, correction: np.ndarray) -> None:
+def fast_total(model_total: np.ndarray, c: np.ndarray, v: np.ndarray, noise: np.ndarray,
+               kappa_fast: np.ndarray, useful: np.ndarray, kappa: np.ndarray, used: np.ndarray,
+               applied: np.ndarray, fast: np.ndarray, total: np.ndarray, rigid: np.ndarray,
+               residual: np.ndarray, correction: np.ndarray) -> None:
     """Write the model plus its fast corrections into ``applied``, ``fast`` and ``total`` (t,), and the parts.
 
     ``applied = κ_f c``; ``fast = model + [useful] w·applied`` with ``w = max(0, 1 − 9 r̂ v / c²)`` (0 where
@@ -61,9 +62,9 @@ def fast_total(model_total: np.ndarray, c: np.ndarray, v: np.ndarray, noise: np.
         c: (t,) the fast rigid-body correction Φδ_f at x.
         v: (t,) its relative predictive variance.
         noise: (t,) r̂, the white-noise variance of the model's error.
-        kappa_fast: κ_f, the fast correction's fade at x.
+        kappa_fast: (t,) κ_f, the fast correction's fade at x, per output.
         useful: (t,) bool, where the fast correction is used.
-        kappa: κ, the local tracker's fade at x.
+        kappa: (t,) κ, the local tracker's fade at x, per output.
         used: (t,) b̂, the local tracker's estimate.
         applied: (t,) output.
         fast: (t,) output.
@@ -73,7 +74,7 @@ def fast_total(model_total: np.ndarray, c: np.ndarray, v: np.ndarray, noise: np.
         correction: (t,) output, the fast corrections.
     """
     for k in range(model_total.shape[0]):
-        a = kappa_fast * c[k]
+        a = kappa_fast[k] * c[k]
         applied[k] = a
         w = 0.0
         if useful[k]:
@@ -82,7 +83,7 @@ def fast_total(model_total: np.ndarray, c: np.ndarray, v: np.ndarray, noise: np.
             if c2 > nk:
                 w = 1.0 - nk / c2
         fast[k] = model_total[k] + w * a
-        total[k] = fast[k] + kappa * used[k]
+        total[k] = fast[k] + kappa[k] * used[k]
         residual[k] = total[k] - rigid[k]
         correction[k] = total[k] - model_total[k]
 

@@ -74,11 +74,13 @@ from the samples the model learns (the contact gate's refusals are held out of t
   ``κ = exp(−½ Σ_j [((q_j − q_b,j)/ℓ_q)² + ((q̇_j − q̇_b,j)/ℓ_q̇)²])``: one step later κ ≈ 1, at a state far
   from the last learned one (a model h seconds old, a desired state, a new motion) κ → 0.
 
-Both parts also fade with the **age** of the learned state, by ``α = exp(−a/τ_f)`` (:meth:`age_fade`;
-a = :attr:`prediction_age_s`, the sample period times the samples between the newest learned sample and
-the predicted one, set by the estimator from the stamps): one sample after a learned one α = 1; through
-a contact the gate holds out, or for a model queried h seconds after its last update, the correction of
-errors that old fades out with the memory it was learned with.
+Both parts also fade with the **age** of the learned state, per output by ``α = exp(−a/τ)``
+(:meth:`age_fades`; a = :attr:`prediction_age_s`, the sample period times the samples between the newest
+learned sample and the predicted one, set by the estimator from the stamps; τ = min(τ_f, ½(1 + c)T), the
+shorter of the correction's memory and the time the output's errors stay correlated): one sample after a
+learned one α = 1; through a contact the gate holds out, or for a model queried h seconds after its last
+update, the correction of errors that old fades out — at once where the errors are white, over the
+memory it was learned with where they persist (a payload, a drift).
 
 Prediction: ``model(x) + α(w Φ(x)δ_f + κ b̂)``; a frozen model is ``model(x)`` (:meth:`predict_model`),
 its residual weighted for the error it has on other motion: the residual's errors stay correlated over
@@ -95,7 +97,6 @@ torques); ℓ_q in rad, ℓ_q̇ in rad/s.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -457,6 +458,9 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._reference_samples = self._reference_count(sample_period_s)
         self._recent_beta = self._scale_forgetting(sample_period_s)
         self._corr_beta = self._correlation_forgetting(sample_period_s)
+        self._period_s = float(sample_period_s)  # T [s]: what the age fade counts c's samples in
+        self._no_fade = np.ones(t)
+        self._no_fade.flags.writeable = False
         self._reset_scales()
 
     def _reset_scales(self) -> None:
@@ -573,6 +577,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._recent_beta = self._scale_forgetting(sample_period_s)
         self._corr_beta = self._correlation_forgetting(sample_period_s)
         self._reference_samples = self._reference_count(sample_period_s)
+        self._period_s = float(sample_period_s)
         return beta
 
     # ------------------------------------------------------------------ prediction
@@ -757,10 +762,11 @@ class ConsistentSemiparametricModel(TwoStageModel):
         if not self.use_tracker:
             return Prediction(yp, r, model_total, var, np.zeros(self.n_outputs)), model_total, phi, 0.0
         kappa_state = self.tracker.weight(xv)
-        fade = self.age_fade()
-        kappa = kappa_state * fade
-        # the same fade over FAST_FADE × the distances
-        kappa_fast = kappa_state ** (1.0 / self.FAST_FADE ** 2) * fade
+        fades = self.age_fades()
+        kappa = kappa_state * float(fades.max())  # the tracker's weight of this state when learned
+        # per output; the fast correction the same over FAST_FADE × the distances
+        kappas = kappa_state * fades
+        kappas_fast = kappa_state ** (1.0 / self.FAST_FADE ** 2) * fades
         P, v = self.fast.predict(Phi, return_variance=True, checked=True)
         assert v is not None  # asked for
         useful = self._fast_mask
@@ -770,30 +776,39 @@ class ConsistentSemiparametricModel(TwoStageModel):
         applied, fast, total = np.empty(t), np.empty(t), np.empty(t)
         residual, correction = np.empty(t), np.empty(t)
         # fast = model + [useful]·max(0, 1 − 9r̂v/c²)·κ_f c, total = fast + κ b̂ and the parts (one call)
-        fast_total(model_total, np.ascontiguousarray(P[:, 0]), v, self.tracker.noise_variance(), kappa_fast,
-                   useful, kappa, self.tracker.used_estimate, applied, fast, total, yp, residual, correction)
+        fast_total(model_total, np.ascontiguousarray(P[:, 0]), v, self.tracker.noise_variance(), kappas_fast,
+                   useful, kappas, self.tracker.used_estimate, applied, fast, total, yp, residual, correction)
         self._fast_candidate = applied
         return Prediction(yp, residual, total, var, correction), fast, phi, kappa
 
-    def age_fade(self) -> float:
-        """Weight of both fast corrections for the age of the learned state: ``exp(−a/τ_f)``.
+    def age_fades(self) -> np.ndarray:
+        """Weight of both fast corrections per output for the age of the learned state: ``exp(−a/τ)`` (t,).
 
         a = :attr:`prediction_age_s` [s] (the sample period times the samples between the newest learned
-        sample and the predicted one), τ_f = ``tracker_time_constant`` [s], the fast correction's memory:
-        an error learned a few τ_f ago says little about the error now (a contact the gate holds out, a
-        model queried 1 s after its last update). 1 when the previous sample was learned.
+        sample and the predicted one). An output's error learned a while ago says something about its
+        error now only as long as that output's errors stay correlated: τ = min(τ_f, ½(1 + c)T), τ_f =
+        ``tracker_time_constant`` [s] (the correction's memory), c the output's
+        :meth:`correlation_samples` (how many consecutive samples its errors stay correlated; ½(1 + c)
+        samples is the time constant of a first-order process with that c) and T the sample period [s].
+        Errors that are white (an output at its noise floor) fade within a sample or two; a payload's or a
+        drift's, correlated for as long as c can measure (about 2 s), over τ_f. 1 when the previous sample
+        was learned.
 
         Example:
             >>> m = ConsistentSemiparametricModel(lambda x: x[None, :1], 1, 3, 1, n_features=8,
-            ...                                   tracker_time_constant=0.3)
-            >>> m.age_fade()
-            1.0
-            >>> m.prediction_age_s = 0.3  # one memory τ_f after the newest learned sample
-            >>> round(m.age_fade(), 4)
-            0.3679
+            ...                                   tracker_time_constant=0.3, sample_period_s=0.01)
+            >>> m.age_fades().tolist()
+            [1.0]
+            >>> m.prediction_age_s = 0.01  # one sample missed, errors not known to be correlated (c = 1)
+            >>> np.round(m.age_fades(), 4).tolist()  # exp(−0.01 / (½ · 2 · 0.01))
+            [0.3679]
         """
         age = self.prediction_age_s
-        return math.exp(-age / self.tracker_time_constant) if age > 0.0 else 1.0
+        if age <= 0.0:
+            return self._no_fade
+        c = self._served_scales()[2]
+        tau = np.minimum(self.tracker_time_constant, 0.5 * (1.0 + c) * self._period_s)
+        return np.exp(-age / tau)
 
     def predict_one(self, x: Any, *, return_variance: bool = False) -> Prediction:
         """Predict ``model(x) + α(wΦ(x)δ_f + κ b̂)`` with its parts (``correction`` = the last terms).

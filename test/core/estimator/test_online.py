@@ -434,9 +434,12 @@ def test_learning_disabled_predicts_without_changing_state(config, regressor):
     frozen = est.model.copy()
     est.learning_enabled = False
     results = [est.step(Sample(s.stamp_ns, s.q, s.dq, s.ddq, s.y + offset)) for s in later[100:300]]
-    # the fast correction fades with the age of the newest learned sample: exp(−a/τ_f), a = T × the
-    # samples since it less one (recomputed here from the stamps)
-    period, tau = est.sample_period_s, config["semiparametric.tracker_time_constant"]
+    # the fast correction fades with the age of the newest learned sample: exp(−a/τ) per output, a = T ×
+    # the samples since it less one (recomputed here from the stamps), τ = min(τ_f, ½(1 + c)T) with c the
+    # samples its errors stay correlated (a step of the output: correlated, τ_f on some outputs)
+    period = est.sample_period_s
+    c = frozen.correlation_samples()
+    tau = np.minimum(config["semiparametric.tracker_time_constant"], 0.5 * (1.0 + c) * period)
     corrections = []
     for r in results:
         assert not r.learned

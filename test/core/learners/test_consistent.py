@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -596,3 +597,30 @@ def test_a_checkpoint_that_regressed_every_regressor_entry_is_converted_exactly(
     old["nonparametric.rls.M"] = old["nonparametric.rls.M"][:, :-1]  # a damaged one is refused
     with pytest.raises(CheckpointError):
         model(tracker=True).load_state_dict(through_migration(old, tracker=True))
+
+
+def test_an_old_correction_fades_over_the_time_the_errors_stay_correlated():
+    """The fast correction of a model queried a seconds after its last update is weighted exp(−a/τ) per
+    output, τ = min(τ_f, ½(1 + c)T): white errors (c ≈ 1, here a random state sequence) leave nothing of it
+    0.1 s later, while an offset the model keeps missing (errors correlated over many samples) keeps it
+    over about the correction's memory τ_f."""
+    period = 0.01
+    X, Y = data(600, 21)
+    white = model(tracker=True, sample_period_s=period)
+    offset = model(tracker=True, sample_period_s=period)
+    for k, (x, y) in enumerate(zip(X, Y, strict=True)):
+        white.learn_one(x, y)
+        offset.learn_one(x, y + (np.array([0.5, -0.3]) if k >= 400 else 0.0))
+    c_white, c_offset = white.correlation_samples(), offset.correlation_samples()
+    assert np.all(c_white < 3.0) and np.all(c_offset > 30.0)
+    tau_f = white.tracker_time_constant
+    for m, c in ((white, c_white), (offset, c_offset)):
+        m.prediction_age_s = 0.1
+        want = np.exp(-0.1 / np.minimum(tau_f, 0.5 * (1.0 + c) * period))
+        np.testing.assert_allclose(m.age_fades(), want, rtol=1e-12)
+    assert np.all(white.age_fades() < 1e-3)  # white errors: nothing of an old correction is left
+    assert np.all(offset.age_fades() > 0.5)  # persistent errors: most of it is kept (τ_f: 0.72)
+    x = X[-1] + 0.01
+    fresh, old = copy.deepcopy(offset), offset
+    fresh.prediction_age_s = 0.0
+    assert np.abs(old.predict_one(x).correction).max() < np.abs(fresh.predict_one(x).correction).max()

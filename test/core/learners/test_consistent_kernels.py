@@ -57,7 +57,7 @@ def test_fast_total_is_the_model_plus_the_weighted_corrections(seed):
     c[0] = 0.0
     useful = rng.uniform(size=t) < 0.7
     used = rng.normal(size=t)
-    kappa_fast, kappa = float(rng.uniform()), float(rng.uniform())
+    kappa_fast, kappa = rng.uniform(size=t), rng.uniform(size=t)
     applied, fast, total = np.empty(t), np.empty(t), np.empty(t)
     rigid, residual, correction = rng.normal(size=t), np.empty(t), np.empty(t)
     fast_total(model, c, v, noise, kappa_fast, useful, kappa, used, applied, fast, total, rigid, residual,
