@@ -27,8 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from semiparam_ros import load_model
+from semiparam_ros.cli.evaluate import parse_overrides
 from semiparam_ros.core.config import load_config
 from semiparam_ros.core.stream.messages import JointStateData
+from semiparam_ros.eval.bags.replay import load_samples
 from semiparam_ros.serving.bag_learning import learn_bags
 from semiparam_ros.serving.learned_model import LearnedModel
 from semiparam_ros.sim.arms import ArmScenarioConfig, simulate_arm
@@ -46,6 +48,11 @@ def main() -> None:
     p.add_argument("--quick", action="store_true", help="10 s / 20 s: a smoke run (not the reported one)")
     p.add_argument("--json", type=Path, default=ROOT / "bench" / "results" / "closed_loop.json")
     p.add_argument("--figure", type=Path, default=ROOT / "docs" / "figures" / "closed_loop.png")
+    p.add_argument("--skip-live", action="store_true",
+                   help="leave out the live-model row (not the default; it predicts with a model that "
+                        "changes every tick and takes minutes)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a parameter of config/panda.yaml (repeatable), e.g. to compare a choice")
     args = p.parse_args()
     if args.quick:
         args.duration, args.train_duration = 10.0, 20.0
@@ -57,7 +64,8 @@ def main() -> None:
     rec = simulate_arm(ArmScenarioConfig(name="panda_excitation", robot="panda", duration=args.train_duration,
                                          rate=rate, seed=0))
     bag = write_recording(rec, work / "panda_excitation")
-    config = load_config(ROOT / "config" / "panda.yaml").with_overrides({"learning_enabled": True})
+    config = load_config(ROOT / "config" / "panda.yaml").with_overrides(
+        {"learning_enabled": True, **parse_overrides(args.overrides)})
     t0 = time.perf_counter()
     _, report = learn_bags([bag], config, checkpoint=work / "panda.npz")
     learn_s = time.perf_counter() - t0
@@ -74,10 +82,21 @@ def main() -> None:
     t1 = time.perf_counter()
     frozen_ff, frozen_std = model.predict(qd, dqd, ddqd)  # every desired state in one call
     batch_s = time.perf_counter() - t1
+    joints = tuple(model.joints)
     cad_ff = model.cad(qd, dqd, ddqd)
     true_ff = plant.inverse_dynamics(qd, dqd, ddqd)  # the plant's own inverse dynamics: the floor
+    floor_ff = _identification_floor(model, (rec.q, rec.dq, rec.ddq), rec.measured_torques, qd, dqd, ddqd)
+    samples = load_samples(bag, config)[0]  # what the learner saw: the pipeline's q̈ and alignment
+    n = len(joints)
+    pipeline_ff = _identification_floor(
+        model, (samples.X[:, :n], samples.X[:, n:2 * n], samples.X[:, 2 * n:]), samples.Y, qd, dqd, ddqd)
+    ff_error = {"learned (frozen)": _rms(frozen_ff - true_ff),
+                "batch LS, the pipeline's samples": _rms(pipeline_ff - true_ff),
+                "batch LS, true training states": _rms(floor_ff - true_ff), "CAD": _rms(cad_ff - true_ff)}
+    print("feed-forward error against the true model's along the reference, RMS per joint [N·m]:")
+    for name, values in ff_error.items():
+        print(f"  {name:32s} " + " ".join(f"{v:.4f}" for v in values))
 
-    joints = tuple(model.joints)
     refresh = float(config["feedforward.refresh_period"])  # the node's default
 
     def online_law(refresh_s: float) -> tuple:
@@ -100,17 +119,29 @@ def main() -> None:
                     served[0] = live.snapshot()
                 served[0].attach_consistent(consistent)
 
-        return (lambda k, tk, q, dq, ddq, *_: served[0].predict(q, dq, ddq)[0]), feed
+        path: list = [None]  # consecutive desired states are one path, as the node's feed-forward carries it
+
+        def law(k: int, tk: float, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, *_: object) -> np.ndarray:
+            if path[0] is None:
+                path[0] = served[0].stick_state()
+            return served[0].predict_parts(q, dq, ddq, history=path[0]).total
+
+        return law, feed
 
     laws = {
         "PD": (lambda k, *_: np.zeros(len(joints)), None),
         "PD + CAD feed-forward": (lambda k, *_: cad_ff[k], None),
         "PD + true-model feed-forward (the plant's own inverse dynamics)": (lambda k, *_: true_ff[k], None),
         "PD + learned feed-forward (frozen)": (lambda k, *_: frozen_ff[k], None),
+        "PD + batch least squares on the samples the learner saw (the pipeline's q̈)":
+            (lambda k, *_: pipeline_ff[k], None),
+        "PD + batch least squares on the training recording's true states (the identification floor)":
+            (lambda k, *_: floor_ff[k], None),
         f"PD + learned feed-forward (learning online, served copy refreshed every {refresh:g} s)":
             online_law(refresh),
-        "PD + learned feed-forward (learning online, live model: not the default)": online_law(0.0),
     }
+    if not args.skip_live:
+        laws["PD + learned feed-forward (learning online, live model: not the default)"] = online_law(0.0)
     results = {}
     for name, (law, measured) in laws.items():
         t2 = time.perf_counter()
@@ -141,7 +172,8 @@ def main() -> None:
         "machine": {"python": platform.python_version(), "processor": platform.processor(),
                     "node": platform.node()},
         "command": "PYTHONPATH=$PWD .venv/bin/python bench/node/closed_loop.py",
-        "robot": "panda", "rate_hz": rate, "duration_s": args.duration, "skip_s": skip_s,
+        "overrides": args.overrides, "robot": "panda", "rate_hz": rate, "duration_s": args.duration,
+        "skip_s": skip_s,
         "train": {"bag": "panda_excitation (simulate_arm, seed 0)", "duration_s": args.train_duration,
                   "samples_learned": report.learned, "learn_wall_s": learn_s,
                   "realtime_factor": report.realtime_factor},
@@ -149,6 +181,7 @@ def main() -> None:
         "gains": {"rule": "K_p = m w^2, K_d = 2 m w, w = 2 pi 2 Hz, m = CAD mass-matrix diagonal at q_d(0)",
                   "kp": kp.tolist(), "kd": kd.tolist()},
         "frozen_std_median_Nm": np.median(frozen_std, axis=0).tolist(),
+        "feedforward_error_rms_Nm": {k: v.tolist() for k, v in ff_error.items()},
         "vectorised_feedforward_s": batch_s,
         "results": {k: {kk: vv for kk, vv in v.items() if kk != "_run"} for k, v in results.items()},
         "learned_vs_cad_ratio": cad / frozen,
@@ -159,6 +192,27 @@ def main() -> None:
     args.json.write_text(json.dumps(out, indent=2))
     _figure(results, joints, skip_s, args.figure)
     print(f"wrote {args.json} and {args.figure}")
+
+
+def _rms(error: np.ndarray) -> np.ndarray:
+    """Per-joint RMS of (N, n) errors."""
+    return np.sqrt(np.mean(error ** 2, axis=0))
+
+
+def _identification_floor(model: LearnedModel, states: tuple[np.ndarray, np.ndarray, np.ndarray],
+                          tau: np.ndarray, qd: np.ndarray, dqd: np.ndarray, ddqd: np.ndarray) -> np.ndarray:
+    """The feed-forward of the best linear-in-parameters fit of training states and torques.
+
+    Least squares of the measured torques [N·m] on the learner's own regressor (inertial parameters,
+    friction, offsets) at the given (q, q̇, q̈) (every sample at once, the minimum-norm solution: the
+    identifiable combinations are unique), evaluated at the reference. At the recording's *true* states:
+    what any learner of the rigid-body part could reach from these 60 s of noisy torques; at the
+    pipeline's samples: the same with the q̈ the learner saw.
+    """
+    regressor = model.estimator.regressor
+    Phi = regressor.regressor(*states)
+    theta = np.linalg.lstsq(Phi.reshape(-1, Phi.shape[-1]), tau.reshape(-1), rcond=None)[0]
+    return regressor.regressor(qd, dqd, ddqd) @ theta
 
 
 def _inside_training_range(rec: object, qd: np.ndarray, dqd: np.ndarray) -> float:
