@@ -516,30 +516,33 @@ class ConsistentSemiparametricModel(TwoStageModel):
         """
         change = theta - self._reference
         if self._scale_weight > 0.0 and self._phi_entries.size and np.any(change != 0.0):
-            scatter = np.zeros((self._phi_entries.size, self.n_outputs))
-            scatter[np.arange(self._phi_entries.size), self._entry_rows] = change[self._entry_cols]
-            self.nonparametric.rls.shift_rhs(self._cross.settled() @ scatter)
+            self.nonparametric.rls.shift_rhs(self._cross.settled() @ self._scatter(change))
         self._reference = np.array(theta, dtype=np.float64)
         self._since_reference = 0
+
+    def _scatter(self, change: np.ndarray) -> np.ndarray:
+        """Return S (E, t): a change of the rigid-body parameters (p,) put on the learned entries' outputs."""
+        scatter = np.zeros((self._phi_entries.size, self.n_outputs))
+        scatter[np.arange(self._phi_entries.size), self._entry_rows] = change[self._entry_cols]
+        return scatter
 
     def _rigid_shift(self, change: np.ndarray) -> np.ndarray:
         """``Ω = A⁻¹ B_E S`` (D, t): what predicting with θ_ref + ``change`` takes off the residual's weights.
 
-        S scatters ``change`` over the learned entries (as :meth:`_rereference`), so ``φΩ`` is
-        ``Σ_e (φA⁻¹B_E)_e change_{c(e)}`` per output: two triangular solves with t right-hand sides, cached
-        until the residual learns again (a served copy predicts with one projection for its whole life, and
-        a per-cycle answer is then one product with Ω instead of two solves with the D × D factor).
+        S scatters ``change`` over the learned entries (:meth:`_scatter`, as :meth:`_rereference`), so
+        ``φΩ`` is ``Σ_e (φA⁻¹B_E)_e change_{c(e)}`` per output: two triangular solves with t right-hand
+        sides, cached until the residual learns again (a served copy predicts with one projection for its
+        whole life, and a per-cycle answer is then one product with Ω instead of two solves with the D × D
+        factor).
         """
         rls = self.nonparametric.rls
         key = (rls.n_steps, change.tobytes())
         cached = self._shift_cache
         if cached is not None and cached[0] == key:
             return cached[1]
-        scatter = np.zeros((self._phi_entries.size, self.n_outputs))
-        scatter[np.arange(self._phi_entries.size), self._entry_rows] = change[self._entry_cols]
         R = rls.R
-        shift = solve_triangular(R, solve_triangular(R, self._cross.with_pending() @ scatter, trans="T",
-                                                     lower=False, check_finite=False),
+        rhs = self._cross.with_pending() @ self._scatter(change)  # B_E S (D, t)
+        shift = solve_triangular(R, solve_triangular(R, rhs, trans="T", lower=False, check_finite=False),
                                  lower=False, check_finite=False)
         self._shift_cache = (key, shift)
         return shift
