@@ -30,6 +30,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
+from semiparam_ros.cli.evaluate import parse_overrides  # noqa: E402
 from semiparam_ros.core.config import load_evaluation_config  # noqa: E402
 from semiparam_ros.core.estimator.build import build_pipeline  # noqa: E402
 from semiparam_ros.core.estimator.online import OnlineEstimator  # noqa: E402
@@ -103,11 +104,11 @@ def arrays_of(config, states):
     return SampleArrays.from_samples(samples)
 
 
-def simulated_logs():
+def simulated_logs(overrides: dict | None = None):
     """(config, logs, pairs) of the simulated point-to-point arms."""
     out = []
     for robot, rate in (("panda", 1000.0), ("ur5", 100.0)):
-        config = load_evaluation_config(ROOT / "config" / f"{robot}.yaml", {})
+        config = load_evaluation_config(ROOT / "config" / f"{robot}.yaml", dict(overrides or {}))
         train = PointToPointArm(robot, seconds=60.0, rate_hz=rate, seed=1).states()[0]
         test = PointToPointArm(robot, seconds=30.0, rate_hz=rate, seed=2).states()[0]
         logs = {f"{robot} P2P seed 1": arrays_of(config, train),
@@ -127,18 +128,19 @@ def _plain(value):
     return value
 
 
-def all_cases(data: Path):
+def all_cases(data: Path, overrides: dict | None = None):
     """(config, logs, pairs) of the KUKA pairs (when ``data`` holds the logs) and the simulated arms."""
     cases = []
     if data.is_dir():
         config = load_evaluation_config(ROOT / "config" / "kuka_lwr4.yaml",
-                                        {"robot.urdf": str(data / "kuka_lwr4_cogimon.urdf")})
+                                        {"robot.urdf": str(data / "kuka_lwr4_cogimon.urdf"),
+                                         **(overrides or {})})
         logs = {name: load_samples(data / name, config)[0]
                 for name in ("measurements_1", "measurements_2", "measurements_3")}
         cases.append((config, logs, PAIRS))
     else:
         print(f"no data folder {data}: the KUKA LWR4+ logs are not shipped; simulated arms only")
-    return cases + simulated_logs()
+    return cases + simulated_logs(overrides)
 
 
 def main(argv=None) -> int:
@@ -146,8 +148,10 @@ def main(argv=None) -> int:
     p.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data" / "kuka_lwr4")
     p.add_argument("--blocks", type=float, nargs="+", default=[0.0, 20.0])
     p.add_argument("--json", type=Path, default=ROOT / "bench" / "results" / "sigma_calibration.json")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a parameter of every arm's configuration (repeatable), to compare a choice")
     args = p.parse_args(argv)
-    cases = all_cases(args.data)
+    cases = all_cases(args.data, parse_overrides(args.overrides))
     rows = []
     header = ("| train → test | block [s] | RMSE [N·m] | median σ | coverage all | "
               + " | ".join(SLICES) + " | one-step coverage |")

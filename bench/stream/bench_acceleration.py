@@ -52,8 +52,10 @@ class Variant:
 
 
 VARIANTS = (
-    Variant("savgol 0.08 s (default)", {"method": "savgol", "window_s": 0.08, "polyorder": 2}),
+    Variant("savgol 0.08 s quadratic (before)", {"method": "savgol", "window_s": 0.08, "polyorder": 2}),
     Variant("savgol 0.04 s", {"method": "savgol", "window_s": 0.04, "polyorder": 2}),
+    Variant("savgol 0.08 s cubic", {"method": "savgol", "window_s": 0.08, "polyorder": 3}),
+    Variant("savgol 0.12 s cubic (default)", {"method": "savgol", "window_s": 0.12, "polyorder": 3}),
     Variant("finite_difference 0.02 s, 20 Hz", {"method": "finite_difference", "window_s": 0.02,
                                                 "cutoff_hz": 20.0}),
     Variant("kalman jerk 4 Hz", {"method": "kalman", "kalman_model": "jerk", "bandwidth_hz": 4.0}),
@@ -68,8 +70,9 @@ VARIANTS = (
     Variant("kalman snap 8 Hz", {"method": "kalman", "kalman_model": "snap", "bandwidth_hz": 8.0}),
     Variant("kalman snap 10 Hz", {"method": "kalman", "kalman_model": "snap", "bandwidth_hz": 10.0}),
 )
-SP_VARIANTS = ("savgol 0.08 s (default)", "finite_difference 0.02 s, 20 Hz", "kalman jerk 8 Hz",
-               "kalman jerk 12 Hz", "kalman snap 5 Hz", "kalman snap 6 Hz", "kalman snap 8 Hz")
+SP_VARIANTS = ("savgol 0.08 s quadratic (before)", "savgol 0.08 s cubic", "savgol 0.12 s cubic (default)",
+               "finite_difference 0.02 s, 20 Hz", "kalman jerk 8 Hz", "kalman jerk 12 Hz", "kalman snap 5 Hz",
+               "kalman snap 6 Hz", "kalman snap 8 Hz")
 
 
 def stream(stamps: np.ndarray, dq: np.ndarray, config: AccelerationConfig):

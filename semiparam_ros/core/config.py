@@ -181,18 +181,21 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "a window, no phase lag), causal filtered finite difference, or causal constant-jerk "
                   "Kalman filter (no delay, no low-frequency lag, noisier; see acceleration.bandwidth_hz)",
                   choices=("savgol", "finite_difference", "kalman")),
-    ParameterSpec("acceleration.window_s", "double", 0.08,
+    ParameterSpec("acceleration.window_s", "double", 0.12,
                   "length of the acceleration estimator window [s], converted to samples at the joint-state "
                   "rate measured on the first 20 stamps (savgol: 2·round(window_s/(2Δt)) + 1 samples; the "
-                  "estimate is window_s/2 late: 40 ms by default; 0.08 s = 9 samples at 100 Hz, 81 at 1 kHz)",
+                  "estimate is window_s/2 late: 60 ms by default; 0.12 s = 13 samples at 100 Hz, 121 at "
+                  "1 kHz)",
                   min=0.0, max=10.0, min_exclusive=True),
     ParameterSpec("acceleration.window", "integer", 0,
                   "window in samples (odd for savgol), overriding acceleration.window_s; 0 = use window_s "
                   "(a fixed sample count means a different time span at every rate: prefer window_s)",
                   min=0, max=2001),
-    ParameterSpec("acceleration.polyorder", "integer", 2,
-                  "polynomial degree of the savgol estimator (< the window in samples); 2 is exact for "
-                  "constant jerk over the window", min=1, max=10),
+    ParameterSpec("acceleration.polyorder", "integer", 3,
+                  "polynomial degree of the savgol estimator (< the window in samples); 3 is exact for "
+                  "constant snap over the window, and its q̈ has no gain bias of order (ω·window_s/2)²/10 "
+                  "at frequency ω, which a degree of 2 (or 1) has and a learner cannot average away",
+                  min=1, max=10),
     ParameterSpec("acceleration.cutoff_hz", "double", 20.0,
                   "low-pass cut-off of the finite-difference estimator [Hz]", min=0.0, max=10000.0,
                   min_exclusive=True),

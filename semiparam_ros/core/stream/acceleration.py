@@ -40,10 +40,19 @@ Rate-independent window (``window_s``). A window given in seconds is converted t
 intervals ``Δt`` fixes ``window = 2·round(window_s / (2Δt)) + 1`` (odd, ≥ 3) for ``savgol`` and
 ``round(window_s / Δt) + 1`` (≥ 2) for ``finite_difference``, and the held samples are then fed to that
 estimator, so they are decided as usual (only later). The median ignores a few jittered or dropped stamps;
-the window then stays fixed (a rate change later is absorbed by the true-stamp fit). ``window_s = 0.08``
-(the node's default) is 9 samples at 100 Hz, 17 at 200 Hz and 81 at 1 kHz; the savgol estimate then
-refers to the stamp ``window_s / 2 = 40 ms`` before the newest joint state. Measurements behind the
-default: ``bench/stream/accel_window.py`` (``bench/results/accel_window.md``).
+the window then stays fixed (a rate change later is absorbed by the true-stamp fit). ``window_s = 0.12``
+(the node's default) is 13 samples at 100 Hz, 25 at 200 Hz and 121 at 1 kHz; the savgol estimate then
+refers to the stamp ``window_s / 2 = 60 ms`` before the newest joint state.
+
+Degree of the savgol fit. On a symmetric window the slope of a degree-2 fit equals that of a degree-1
+fit: an average of q̈ over the window with weights ∝ h² − s² (h = window_s/2), which passes a component
+of angular frequency ω with the gain ``1 − (ωh)²/10 + O((ωh)⁴)``. That is a *systematic* error of q̈
+(−0.7 % at ωh = 0.26, a 1 Hz component in a 0.08 s window), which a learner fitting τ = Φ(q, q̇, q̈)θ
+cannot average away: it bends the inertial parameters and so every feed-forward. A degree-3 fit (the
+node's default, ``polyorder=3``) has a gain error of order (ωh)⁴ instead, at a larger noise for one
+window; the default window is longer to keep the noise near that of the degree-2 fit in 0.08 s.
+Measurements behind the defaults: ``bench/stream/accel_window.py`` (``--polyorder``) and
+docs/acceleration.md.
 """
 
 from __future__ import annotations

@@ -244,7 +244,7 @@ def test_shipped_parameter_files_validate_and_run(path):
         msg = JointStateData(T0_NS + i * 1_000_000, joints, q[i], dq[i], np.full(len(joints), 0.5))
         results += est.process(msg)
     window = est.pipeline.estimator.window
-    assert window == 81  # 0.08 s at 1 kHz
+    assert window == 2 * round(cfg["acceleration.window_s"] / 2e-3) + 1  # window_s at 1 kHz (0.12 s: 121)
     assert len(results) == len(t) - window // 2 - (window // 2)  # every decided sample but the warm-up
     assert est.n_dropped == window // 2
     assert all(np.isfinite(r.prediction.total).all() for r in results)

@@ -19,7 +19,8 @@ from semiparam_ros.core.stream.acceleration import (
 )
 
 T0 = 7 * 10**9
-WINDOW_S = 0.08  # the parameter's default
+WINDOW_S = 0.08  # 9 samples at 100 Hz: the window of the iCub file (the paper's protocol)
+DEFAULT_WINDOW_S, DEFAULT_POLYORDER = 0.12, 3  # the node's defaults (acceleration.window_s, .polyorder)
 # v(t) = Σ a_k sin(ω_k t + φ_k): smooth joint velocities [rad/s] with content up to 1.5 Hz (excitation band)
 AMPS = np.array([0.4, 0.25, 0.15])
 FREQS = np.array([0.3, 0.8, 1.5])  # Hz
@@ -66,6 +67,37 @@ def test_window_s_estimates_a_smooth_signal_within_the_derived_bias(rate_hz):
     assert bound < 0.01 * np.abs(truth).max()
 
 
+@pytest.mark.parametrize("rate_hz", [100.0, 1000.0])
+def test_the_default_cubic_fit_has_no_gain_bias_where_the_quadratic_has_one(rate_hz):
+    """Noise-free, at the node's defaults. The degree-3 fit's slope at the centre is exact for velocities
+    of degree ≤ 4 (the odd weights of a symmetric window), so by Taylor's theorem its error is at most
+    max|v⁽⁵⁾| Σ|wᵢ||tᵢ|⁵/120, wᵢ its derivative weights (computed here by an independent least squares,
+    ``numpy.linalg.lstsq`` of the Vandermonde matrix). The degree-2 fit of the same window instead
+    attenuates each component by the gain G(ωh) = Σ tᵢ sin(ωtᵢ) / (ω Σ tᵢ²), whose error 1 − G ≈ (ωh)²/10
+    is systematic; the cubic's bound is below a tenth of that error."""
+    dt = 1.0 / rate_hz
+    t = np.arange(0, 10.0, dt)
+    stamps = T0 + np.round(t * 1e9).astype(np.int64)
+    cubic = AccelerationConfig(window_s=DEFAULT_WINDOW_S, polyorder=DEFAULT_POLYORDER)
+    got_t, got = estimate_accelerations(stamps, velocity(t), cubic)
+    m = samples_for_window(DEFAULT_WINDOW_S, dt, "savgol", DEFAULT_POLYORDER)
+    offs = (np.arange(m) - m // 2) * dt
+    vander = np.vander(offs, DEFAULT_POLYORDER + 1, increasing=True)
+    weights = np.linalg.lstsq(vander, np.eye(m), rcond=None)[0][1]  # the fitted slope at t = 0
+    w = 2 * np.pi * FREQS
+    bound = (AMPS * w**5).sum() * (np.abs(weights) * np.abs(offs) ** 5).sum() / 120
+    truth = velocity((got_t - T0) * 1e-9, deriv=1)
+    assert np.abs(got[:, 0] - truth).max() <= bound * (1 + 1e-6) + 1e-9
+    # the quadratic of the same window: its error is the gain's, component by component
+    q_t, quad = estimate_accelerations(stamps, velocity(t), AccelerationConfig(window=m, polyorder=2))
+    gain = np.array([(offs * np.sin(wk * offs)).sum() / (wk * (offs**2).sum()) for wk in w])
+    arg = w * ((q_t - T0) * 1e-9)[:, None] + PHASES + np.pi / 2
+    expected = (AMPS * w * gain * np.sin(arg)).sum(axis=1)
+    np.testing.assert_allclose(quad[:, 0], expected, rtol=0, atol=1e-9 * np.abs(expected).max() + 1e-12)
+    quad_error = np.abs(quad[:, 0] - velocity((q_t - T0) * 1e-9, deriv=1)).max()
+    assert bound < 0.1 * quad_error
+
+
 def test_window_s_equals_the_fixed_sample_window_at_the_measured_rate():
     """Same decisions (stamps and values, bit for bit) as a fixed window of the sample count it chose,
     with a jittered 1 kHz stream: the held samples are replayed into that estimator."""
@@ -101,7 +133,8 @@ def test_config_window_in_samples_still_overrides_window_s():
     fixed = build_pipeline(EstimatorConfig.from_flat({**base, "acceleration.window": 11}))
     assert fixed.acceleration.window_s is None and fixed.acceleration.window == 11
     adaptive = build_pipeline(EstimatorConfig.from_flat(base))
-    assert adaptive.acceleration.window_s == WINDOW_S
+    assert adaptive.acceleration.window_s == DEFAULT_WINDOW_S
+    assert adaptive.acceleration.polyorder == DEFAULT_POLYORDER
     with pytest.raises(ValueError, match=r"acceleration\.window"):
         EstimatorConfig.from_flat({**base, "acceleration.window": 2})
     with pytest.raises(ValueError, match=r"acceleration\.window_s"):
