@@ -127,20 +127,25 @@ def test_replay_predicts_with_the_consistent_projection_solved_on_the_nodes_sche
 
 @needs_kuka
 def test_the_served_sigma_covers_the_frozen_models_error_on_other_motion():
-    """Learned on log 1 with the defaults, loaded as a user would and used frozen on logs 2 (the same
-    range, another motion) and 3 (faster, mostly outside the training range): ±2σ holds 80–99 % of the
-    errors on both (σ too narrow where the residual's correlated errors were counted as independent
-    samples, too wide where the state is novel and the model abstains to its rigid body)."""
+    """Learned on one log with the defaults, loaded as a user would and used frozen on log 3 (another,
+    faster motion, mostly outside the training range): ±2σ holds 80–99 % of the errors, learned on log 1
+    and on log 2 (σ too narrow where the residual's correlated errors were counted as independent
+    samples, too wide where the state is novel and the model abstains to its rigid body). On log 2, which
+    runs log 1's trajectory again (≤ 0.006 rad apart), the σ calibrated for new motion is wide by design:
+    only its lower bound is asserted (0.990 measured with the defaults of 2026-12-06)."""
     cfg = load_config(REPO / "config" / "kuka_lwr4.yaml").with_overrides(
         {"robot.urdf": str(KUKA / "kuka_lwr4_cogimon.urdf")})
-    train, _ = load_samples(KUKA / "measurements_1", cfg)
-    served = learn_served(cfg, train)
     n = len(cfg["robot.joints"])
-    for log in ("measurements_2", "measurements_3"):
-        test, _ = load_samples(KUKA / log, cfg)
+    logs = {name: load_samples(KUKA / name, cfg)[0] for name in ("measurements_1", "measurements_2",
+                                                                  "measurements_3")}
+    for train, test_name, upper in (("measurements_1", "measurements_3", 0.99),
+                                    ("measurements_2", "measurements_3", 0.99),
+                                    ("measurements_1", "measurements_2", 1.0)):
+        served = learn_served(cfg, logs[train])
+        test = logs[test_name]
         total, std = served.predict(test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:])
         inside = np.abs(test.Y - total) <= 2.0 * std
         coverage = float(np.mean(inside))
-        assert 0.80 <= coverage <= 0.99, (log, coverage)
+        assert 0.80 <= coverage <= upper, (train, test_name, coverage)
         # what real_robots reports per joint
         np.testing.assert_array_equal(ServedModel(served).coverage(test.X, test.Y), inside.mean(axis=0))
