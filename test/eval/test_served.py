@@ -138,10 +138,11 @@ def test_the_served_sigma_covers_the_frozen_models_error_on_other_motion():
     n = len(cfg["robot.joints"])
     logs = {name: load_samples(KUKA / name, cfg)[0] for name in ("measurements_1", "measurements_2",
                                                                   "measurements_3")}
+    served_by = {train: learn_served(cfg, logs[train]) for train in ("measurements_1", "measurements_2")}
     for train, test_name, upper in (("measurements_1", "measurements_3", 0.99),
                                     ("measurements_2", "measurements_3", 0.99),
                                     ("measurements_1", "measurements_2", 1.0)):
-        served = learn_served(cfg, logs[train])
+        served = served_by[train]
         test = logs[test_name]
         total, std = served.predict(test.X[:, :n], test.X[:, n:2 * n], test.X[:, 2 * n:])
         inside = np.abs(test.Y - total) <= 2.0 * std
