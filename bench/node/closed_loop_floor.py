@@ -30,6 +30,18 @@ ROOT = Path(__file__).resolve().parents[2]
 TEST_SEED = 20261126  # the closed loop's reference
 
 
+def _ff_errors(phi: np.ndarray, taus: list[np.ndarray], reference: np.ndarray,
+               true_ff: np.ndarray) -> np.ndarray:
+    """RMS feed-forward error [N·m] per joint (k, n) of the least-squares fit of each of k torque sets.
+
+    One ``lstsq`` with the k torque sets as right-hand sides (the regressor is factored once).
+    """
+    rhs = np.stack([tau.reshape(-1) for tau in taus], axis=1)
+    theta = np.linalg.lstsq(phi, rhs, rcond=None)[0]  # (p, k)
+    ff = np.einsum("Njp,pk->kNj", reference, theta)
+    return np.sqrt(np.mean((ff - true_ff) ** 2, axis=1))
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--draws", type=int, default=8, help="independent torque-noise draws per duration")
@@ -47,15 +59,11 @@ def main() -> None:
         rec = simulate_arm(ArmScenarioConfig(name="panda_excitation", robot="panda", duration=duration,
                                              rate=1000.0, seed=0))
         phi = regressor.regressor(rec.q, rec.dq, rec.ddq).reshape(-1, reference.shape[-1])
-
-        def ff_error(tau: np.ndarray) -> np.ndarray:
-            theta = np.linalg.lstsq(phi, tau.reshape(-1), rcond=None)[0]  # noqa: B023 (used at once)
-            return np.sqrt(np.mean((reference @ theta - true_ff) ** 2, axis=0))
-
-        noise_free = ff_error(rec.true_torques)
-        draws = np.array([ff_error(rec.true_torques + sigma * np.random.default_rng(seed).standard_normal(
-            rec.true_torques.shape)) for seed in range(args.draws)])
-        recorded = ff_error(rec.measured_torques)
+        shape = rec.true_torques.shape
+        noisy = [rec.true_torques + sigma * np.random.default_rng(seed).standard_normal(shape)
+                 for seed in range(args.draws)]
+        errors = _ff_errors(phi, [rec.true_torques, rec.measured_torques, *noisy], reference, true_ff)
+        noise_free, recorded, draws = errors[0], errors[1], errors[2:]
         rows[f"{duration:g} s"] = {"noise_free": noise_free.tolist(), "draws_mean": draws.mean(0).tolist(),
                                    "draws_min": draws.min(0).tolist(), "draws_max": draws.max(0).tolist(),
                                    "the_recording": recorded.tolist()}

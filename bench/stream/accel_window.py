@@ -20,15 +20,13 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import butter, filtfilt, savgol_filter
 
+from semiparam_ros.core.stream.acceleration import samples_for_window
+
 GRID_S = (0.02, 0.04, 0.06, 0.08, 0.1, 0.12, 0.16, 0.2)
 
 
-def window_samples(window_s: float, dt: float) -> int:
-    return max(3, 2 * round(window_s / (2 * dt)) + 1)
-
-
 def sg_ddq(dq: np.ndarray, window_s: float, dt: float, polyorder: int = 2) -> np.ndarray:
-    window = max(window_samples(window_s, dt), polyorder + 1 + polyorder % 2)
+    window = samples_for_window(window_s, dt, "savgol", polyorder)  # the node's conversion
     return savgol_filter(dq, window, polyorder, deriv=1, delta=dt, axis=0, mode="interp")
 
 
@@ -48,7 +46,7 @@ def simulated(rate: float, sigma_v: float, seed: int = 0, polyorder: int = 2) ->
     out = {}
     for ws in GRID_S:
         est = sg_ddq(noisy, ws, dt, polyorder)
-        m = window_samples(ws, dt)
+        m = samples_for_window(ws, dt)
         sl = slice(m, -m)
         out[ws] = float(np.sqrt(np.mean((est[sl] - ddq[sl]) ** 2)) / np.sqrt(np.mean(ddq[sl] ** 2)))
     return out
@@ -71,7 +69,7 @@ def kuka(root: Path, polyorder: int = 2) -> tuple[dict[float, float], dict[float
         ref = np.gradient(filtfilt(b, a, dq, axis=0), dt, axis=0)
         for ws in GRID_S:
             ddq = sg_ddq(dq, ws, dt, polyorder)
-            m = window_samples(GRID_S[-1], dt)
+            m = samples_for_window(GRID_S[-1], dt)
             sl = slice(m, -m)
             pred = reg.wrench(q[sl], dq[sl], ddq[sl])
             torque_err[ws].append(float(np.sqrt(np.mean((tau[sl] - pred) ** 2))))
@@ -101,7 +99,7 @@ def main() -> None:
         print("| window_s | samples | torque RMSE | q̈ vs reference |")
         print("|---|---|---|---|")
         for ws in GRID_S:
-            print(f"| {ws:g} | {window_samples(ws, 1 / rate)} | {terr[ws]:.4f} | {rerr[ws]:.4f} |")
+            print(f"| {ws:g} | {samples_for_window(ws, 1 / rate)} | {terr[ws]:.4f} | {rerr[ws]:.4f} |")
 
 
 if __name__ == "__main__":
