@@ -6,8 +6,11 @@ remembers, against the same model without them (side by side, one process).
 The SP is learned on the real KUKA LWR4+ log 1 (``learn``'s path), written and loaded once per setting:
 defaults; ``uncertainty.calibration_block: 0`` (one-step σ); ``parametric.stick_displacement: 0`` (static
 friction); both off. For each, the median and 99th percentile wall time of ``FeedForward.compute`` on
-consecutive desired states of log 3 (one per call, as ``~/desired_state`` at 1 kHz), one BLAS thread.
-Prints a table and writes ``bench/results/bench_cycle_cost.json``.
+consecutive desired states of log 3 (one per call, as ``~/desired_state`` at 1 kHz), one BLAS thread, on
+two models: ``load_model``'s (the general path, what the node's served copy ran before it had its own) and
+its frozen copy, what the node serves (``LearnedModel.snapshot``: a single state is one compiled call,
+``ConsistentSemiparametricModel.frozen_model_one``). Prints a table and writes
+``bench/results/bench_cycle_cost.json``.
 """
 
 from __future__ import annotations
@@ -55,8 +58,9 @@ def main(argv=None) -> int:
     n = len(base["robot.joints"])
     states = [test.X[k] for k in range(min(args.calls, len(test.X)))]
     rows = []
-    print("| setting | median [µs] | p99 [µs] | ratio of medians to both off |")
-    print("|---|---|---|---|")
+    print("| setting | model | median [µs] | p99 [µs] | ratio of medians to both off | "
+          "median of the per-call ratios to loaded |")
+    print("|---|---|---|---|---|---|")
     times = {}
     with tempfile.TemporaryDirectory() as folder:
         for name, overrides in SETTINGS.items():
@@ -65,20 +69,28 @@ def main(argv=None) -> int:
                 node.learn_one(x, y, stamp_ns=int(stamp))
             path = Path(folder) / "model.npz"
             node.estimator.save(path)
-            ff = FeedForward(load_model(path))
-            names = ff.joints
-            elapsed = []
+            loaded = load_model(path)
+            # load_model's model, and the frozen copy the node serves (one compiled call per state),
+            # call by call in turn so that the machine's drifts hit both alike
+            models = {"loaded": FeedForward(loaded), "served copy": FeedForward(loaded.snapshot())}
+            names = models["loaded"].joints
+            elapsed: dict[str, list[float]] = {served: [] for served in models}
             for x in states:
                 desired = DesiredState(0, names, (TrajectoryPoint(0, x[:n], x[n:2 * n], x[2 * n:]),))
-                start = time.perf_counter()
-                ff.compute(desired, now_ns=0)
-                elapsed.append(time.perf_counter() - start)
-            times[name] = np.array(elapsed) * 1e6
-    for name, t in times.items():
-        row = {"setting": name, "median_us": float(np.median(t)), "p99_us": float(np.percentile(t, 99)),
-               "ratio": float(np.median(t) / np.median(times["both off"]))}
+                for served, ff in models.items():
+                    start = time.perf_counter()
+                    ff.compute(desired, now_ns=0)
+                    elapsed[served].append(time.perf_counter() - start)
+            for served, values in elapsed.items():
+                times[(name, served)] = np.array(values) * 1e6
+    for (name, served), t in times.items():
+        row = {"setting": name, "model": served, "median_us": float(np.median(t)),
+               "p99_us": float(np.percentile(t, 99)),
+               "ratio": float(np.median(t) / np.median(times[("both off", served)])),
+               "served_over_loaded": float(np.median(t / times[(name, "loaded")]))}
         rows.append(row)
-        print(f"| {name} | {row['median_us']:.1f} | {row['p99_us']:.1f} | {row['ratio']:.2f} |")
+        print(f"| {name} | {served} | {row['median_us']:.1f} | {row['p99_us']:.1f} | {row['ratio']:.2f} | "
+              f"{row['served_over_loaded']:.2f} |")
     args.json.write_text(json.dumps({"date": time.strftime("%Y-%m-%d"), "calls": len(states), "rows": rows},
                                     indent=1))
     return 0

@@ -82,7 +82,7 @@ def train_checkpoint(tmp: Path, seconds: float) -> Path:
 
 
 def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool = True,
-        checkpoint: Path | None = None, design: str = "node") -> dict:
+        checkpoint: Path | None = None, design: str = "node", overrides: tuple[str, ...] = ()) -> dict:
     """Start the node, stream joint states and desired states, return the measured latencies."""
     import rclpy
     from builtin_interfaces.msg import Duration
@@ -108,6 +108,9 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
            str(CONFIG), "-p", f"learning_enabled:={'true' if learning else 'false'}",
            "-p", "diagnostics.period:=0.5",
            "-p", f"parametric.consistent:={'true' if consistent else 'false'}"]
+    for item in overrides:  # --set name=value: a node parameter
+        name, _, value = item.partition("=")
+        cmd += ["-p", f"{name}:={value}"]
     if checkpoint is not None:  # a copy: the node writes its final checkpoint there
         copy = tmp / f"warm_{'learning' if learning else 'frozen'}_{time.monotonic_ns()}.npz"
         copy.write_bytes(checkpoint.read_bytes())
@@ -240,6 +243,8 @@ def main() -> None:
     p.add_argument("--train-seconds", type=float, default=30.0,
                    help="simulated Panda recording learned into the checkpoint the node warm-starts from")
     p.add_argument("--output", type=Path, default=RESULTS)
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="a node parameter for the estimator's runs (repeatable), e.g. overload.max_delay=0.0")
     p.add_argument("--no-floor", dest="floor", action="store_false",
                    help="skip the floor: a bare rclpy node (bench/node/echo_node.py) answering each desired "
                         "state at once, no model, in the same run")
@@ -248,7 +253,7 @@ def main() -> None:
     print(f"node logs in {tmp}")
     checkpoint = train_checkpoint(tmp, args.train_seconds)
     designs = ("node", "echo") if args.floor else ("node",)
-    runs = [run(args.seconds, args.hz, learning, tmp, True, checkpoint, design)
+    runs = [run(args.seconds, args.hz, learning, tmp, True, checkpoint, design, tuple(args.set))
             for _ in range(args.repeats) for design in designs
             for learning in ((False,) if design == "echo" else (True, False))]
     print("| answered by | node (warm start) | desired states | within 2 ms | "
@@ -273,7 +278,7 @@ def main() -> None:
                        "processor": platform.processor() or platform.machine()},
            "target": ">= 99 % answered within 2 ms and node-side p99 < 0.5 ms (or learning on within 1.2x of "
                      "off), >= 95 % of the samples learned while serving",
-           "runs": runs}
+           "parameters": args.set, "runs": runs}
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(out, indent=2))
     print(f"wrote {args.output}")

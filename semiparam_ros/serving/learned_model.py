@@ -53,7 +53,7 @@ import numpy as np
 from semiparam_ros.core.checkpoint import load_npz
 from semiparam_ros.core.config import EstimatorConfig
 from semiparam_ros.core.estimator.build import Model, build_regressor, rigid_body_part, traits_of
-from semiparam_ros.core.estimator.calibration import STATES, motion_states
+from semiparam_ros.core.estimator.calibration import STATES, motion_states, served_sigma_one
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.core.estimator.state import learner_kind, read_config
 from semiparam_ros.core.learners.consistent import ConsistentSemiparametricModel
@@ -126,6 +126,8 @@ class LearnedModel:
         self._attached: ConsistentEstimate | None = None
         self._solve = bool(solve)
         self._weights: np.ndarray | None = None  # the projection's prior weights (cached: 64 regressor rows)
+        self._one: tuple[tuple[int, bytes | None], Any] | None = None  # a frozen copy's compiled single state
+        self._sigma_one: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # its σ's arrays
         #: Software versions that wrote the checkpoint (empty for a live estimator).
         self.versions: dict[str, Any] = {}
         regressor = estimator.regressor
@@ -408,6 +410,13 @@ class LearnedModel:
         rigid = self._served_rigid(model, consistent)
         if traits.combination == "consistent":
             model = cast(ConsistentSemiparametricModel, model)
+            if X.shape[0] == 1 and self._frozen is not None:  # a served copy: one compiled call
+                key = (id(model), None if rigid is None else rigid.tobytes())
+                if self._one is None or self._one[0] != key:
+                    self._one = (key, model.frozen_model_one(rigid))
+                x = X[0]
+                yp, r, var = self._one[1](x, model.parametric.phi_fresh(x))
+                return Prediction(yp[None], r[None], (yp + r)[None], var[None])
             if X.shape[0] == 1:
                 pred = model.predict_model(X[0], rigid)
                 return Prediction(pred.parametric[None], pred.residual[None], pred.total[None],
@@ -441,6 +450,20 @@ class LearnedModel:
 
     def _std(self, variance: np.ndarray, X: np.ndarray) -> np.ndarray:
         """σ at the rows of X: c_m sqrt(s²_m (1 + v)), m each output's motion state (one-step σ without)."""
+        if X.shape[0] == 1 and self._frozen is not None:  # a served copy at one state: one compiled call
+            arrays = self._sigma_one
+            if arrays is None:
+                s2 = self._noise_s2()
+                t = variance.shape[1]
+                scales, per_state = self._calibration()
+                nan = np.full((t, len(STATES)), np.nan)
+                arrays = self._sigma_one = (
+                    np.full(t, np.inf) if s2 is None else np.array(s2, dtype=np.float64),
+                    nan if per_state is None else np.array(scales, dtype=np.float64),
+                    nan if per_state is None else np.array(per_state, dtype=np.float64))
+            out = np.empty(variance.shape[1])
+            served_sigma_one(np.ascontiguousarray(variance[0], dtype=np.float64), X[0], self._n, *arrays, out)
+            return out[None]
         relative = 1.0 + np.fmax(variance, 0.0)
         s2 = self._noise_s2()
         one_step = np.full(variance.shape, np.inf) if s2 is None else np.sqrt(s2 * relative)

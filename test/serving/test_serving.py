@@ -102,8 +102,13 @@ def test_learned_model_recovers_the_true_robot(panda):
     assert (err < 0.1 + 0.01 * np.sqrt(np.mean(true_gravity**2, axis=0))).all(), err
 
 
-def test_vectorised_equals_single_states(panda):
+@pytest.mark.parametrize("served", [False, True], ids=["loaded", "served copy"])
+def test_vectorised_equals_single_states(panda, served):
+    """N states in one call equal N single calls, on a loaded model and on its frozen served copy (whose
+    single states are one compiled call, :meth:`frozen_model_one`, and the N-state path numpy's)."""
     model = load_model(panda["ckpt"])
+    if served:
+        model = model.snapshot()
     rng = np.random.default_rng(1)
     q, dq, ddq = _states(rng, 7, 50)
     batch = model.predict_parts(q, dq, ddq)

@@ -53,13 +53,14 @@ import math
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from semiparam_ros.core.estimator.build import traits_of
 from semiparam_ros.core.learners.uncertainty import predict_with_variance
 from semiparam_ros.errors import ConfigurationError
 
 __all__ = ["MEMORY_S", "MIN_WEIGHT", "REST_VELOCITY", "REVERSAL_WINDOW_S", "SCORE_PERIOD_S", "STATES",
-           "FrozenCalibration", "model_alone", "motion_states"]
+           "FrozenCalibration", "model_alone", "motion_states", "served_sigma_one"]
 
 #: The motion states, in the order of :meth:`FrozenCalibration.scales`' columns.
 STATES = ("at rest", "reversal", "motion")
@@ -101,6 +102,53 @@ def motion_states(X: np.ndarray, n_joints: int, n_outputs: int) -> np.ndarray:
         state = np.where(arm_rest, 0, np.where(arm_reversal, 1, 2))
         return np.repeat(state, n_outputs, axis=1)
     return np.where(rest, 0, np.where(reversal, 1, 2))
+
+
+@njit(cache=True, nogil=True)
+def served_sigma_one(variance: np.ndarray, x: np.ndarray, n_joints: int, s2: np.ndarray, scales: np.ndarray,
+                     per_state: np.ndarray, out: np.ndarray) -> None:
+    """Write the served σ at one state, ``c_m sqrt(s²_m (1 + v))``, into ``out`` in one compiled call.
+
+    m is each output's motion state at x (:func:`motion_states`, the same rules and order); where
+    ``c_m s²_m`` is NaN (nothing scored) the one-step ``sqrt(s² (1 + v))``. ``1 + fmax(v, 0)`` as the
+    numpy path (a NaN v counts as 0).
+
+    Args:
+        variance: (t,) the relative variance v.
+        x: (3n,) the state ``[q, q̇, q̈]`` [rad, rad/s, rad/s²].
+        n_joints: n.
+        s2: (t,) the one-step noise variance (+inf: none yet, σ = +inf).
+        scales: (t, 3) the scales c per motion state (NaN: none).
+        per_state: (t, 3) the noise variances s²_m per motion state (NaN: none).
+        out: (t,) output σ.
+    """
+    t = variance.shape[0]
+    n = n_joints
+    arm_rest, arm_reversal = True, False
+    for j in range(n):
+        speed = abs(x[n + j])
+        rest = speed < REST_VELOCITY
+        arm_rest = arm_rest and rest
+        if not rest and speed < REVERSAL_WINDOW_S * abs(x[2 * n + j]):
+            arm_reversal = True
+    arm_state = 0 if arm_rest else (1 if arm_reversal else 2)
+    for k in range(t):
+        vk = variance[k]
+        if not vk >= 0.0:
+            vk = 0.0
+        relative = 1.0 + vk
+        if t == n:
+            speed = abs(x[n + k])
+            if speed < REST_VELOCITY:
+                state = 0
+            elif speed < REVERSAL_WINDOW_S * abs(x[2 * n + k]):
+                state = 1
+            else:
+                state = 2
+        else:
+            state = arm_state
+        served = scales[k, state] * math.sqrt(per_state[k, state] * relative)
+        out[k] = math.sqrt(s2[k] * relative) if math.isnan(served) else served
 
 
 def model_alone(model: Any, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

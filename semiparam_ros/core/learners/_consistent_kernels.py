@@ -10,12 +10,16 @@ formulas (no ``fastmath``). The tests compare every kernel with a numpy implemen
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
+from semiparam_ros.core.learners._kernels import solve_predict
+
 __all__ = [
-    "fast_total", "saving_step", "saving_update", "scale_step", "scale_update", "shrunk_choice",
-    "significant_saving", "stage_pending", "state_weight", "tracker_step", "tracker_update",
+    "fast_total", "model_alone_one", "saving_step", "saving_update", "scale_step", "scale_update",
+    "shrunk_choice", "significant_saving", "stage_pending", "state_weight", "tracker_step", "tracker_update",
     "weighted_residual",
 ]
 
@@ -360,3 +364,99 @@ def stage_pending(pending_phi: np.ndarray, pending_entries: np.ndarray, pending_
     for i in range(entries.shape[0]):
         pending_entries[k, i] = Phi_flat[entries[i]]
     pending_beta[k] = beta
+
+
+@njit(cache=True, nogil=True)
+def model_alone_one(x: np.ndarray, Phi: np.ndarray, rigid: np.ndarray, Mp: np.ndarray, Mn: np.ndarray,
+                    mean: np.ndarray, scale: np.ndarray, omega: np.ndarray, offset: np.ndarray,
+                    amplitude: float, shift: np.ndarray, s2: np.ndarray, spread: np.ndarray,
+                    noise: np.ndarray, c: np.ndarray, lam: float, ready: bool, yp: np.ndarray,
+                    r: np.ndarray, var: np.ndarray) -> None:
+    """Write the consistent SP's model used alone at one state into ``yp``, ``r`` and ``var``, in one call.
+
+    The formulas of ``predict_model`` (the served weight g and ``model_variance``), for a model with no
+    pending update:
+
+    * ``ŷ_P = Φπ``; ``var = diag(Φ A_P⁻¹ Φᵀ) + m(v)`` (``‖R_P⁻ᵀ Φ_kᵀ‖²`` per output row k);
+    * ``φ = a cos(((x − μ)/s) Ω + b)``; ``p = φ R⁻¹ d`` and ``v = ‖R⁻ᵀ φᵀ‖²`` (one forward sweep);
+      ``raw = p − φ·shift`` (``shift`` (D, t) the rigid-body change's share, or (0, t): none);
+    * ``S = s² clip(1 − λv, 0, 1)``, ``g = S / (S + spread·v)`` (1 where that is 0), ``r = g·raw``;
+    * ``m(v) = [(1 − g)² S + g² c σ² v + s² ν] / σ²`` (ν = clip(λv, 0, 1); v itself where σ² = 0).
+
+    Not ready (the residual's standardizer in warm-up): ``r = 0`` and ``var = diag(Φ A_P⁻¹ Φᵀ)``.
+
+    Args:
+        x: (3n,) the state ``[q, q̇, q̈]``.
+        Phi: (t, p) the regressor at x (learner units).
+        rigid: (p,) the rigid-body parameters π.
+        Mp: (p, p + 1) ``[R_P | d_P]`` of the rigid-body learner (only R_P is read for the variance).
+        Mn: (D, D + t) ``[R | d]`` of the residual learner.
+        mean: (3n,) the standardizer's μ.
+        scale: (3n,) the standardizer's s.
+        omega: (3n, D) the frequencies Ω.
+        offset: (D,) the phases b [rad].
+        amplitude: a = √(2/D).
+        shift: (D, t), or (0, t) for none.
+        s2: (t,) the rigid-body part's systematic error variance s².
+        spread: (t,) the served weight's c σ²/ν₀.
+        noise: (t,) the residual's noise variance σ².
+        c: (t,) the samples over which the residual's errors stay correlated.
+        lam: λ of the residual learner.
+        ready: Whether the residual is active.
+        yp: (t,) output ŷ_P.
+        r: (t,) output g·r.
+        var: (t,) output, the relative variance.
+    """
+    t, p = Phi.shape
+    for k in range(t):
+        acc = 0.0
+        for j in range(p):
+            acc += Phi[k, j] * rigid[j]
+        yp[k] = acc
+    tmp = np.empty((t, Mp.shape[1] - Mp.shape[0]))
+    solve_predict(Mp, Phi, tmp, var)
+    if not ready:
+        for k in range(t):
+            r[k] = 0.0
+        return
+    n, d = omega.shape
+    phase = np.zeros(d)
+    for i in range(n):
+        z = (x[i] - mean[i]) / scale[i]
+        row = omega[i]
+        for j in range(d):
+            phase[j] += z * row[j]
+    phi = np.empty((1, d))
+    for j in range(d):
+        phi[0, j] = amplitude * math.cos(phase[j] + offset[j])
+    P = np.empty((1, t))
+    vv = np.empty(1)
+    solve_predict(Mn, phi, P, vv)
+    v = vv[0]
+    nu = lam * v
+    if nu < 0.0:
+        nu = 0.0
+    elif nu > 1.0:
+        nu = 1.0
+    keep = 1.0 - lam * v
+    if keep < 0.0:
+        keep = 0.0
+    elif keep > 1.0:
+        keep = 1.0
+    has_shift = shift.shape[0] == d
+    for k in range(t):
+        raw = P[0, k]
+        if has_shift:
+            acc = 0.0
+            for j in range(d):
+                acc += phi[0, j] * shift[j, k]
+            raw -= acc
+        signal = s2[k] * keep
+        total = signal + spread[k] * v
+        g = signal / total if total > 0.0 else 1.0
+        r[k] = raw * g
+        if noise[k] > 0.0:
+            extra = ((1.0 - g) ** 2 * s2[k] * (1.0 - nu) + g * g * c[k] * noise[k] * v + s2[k] * nu)
+            var[k] += extra / noise[k]
+        else:
+            var[k] += v

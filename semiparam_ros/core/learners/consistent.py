@@ -97,6 +97,7 @@ torques); ℓ_q in rad, ℓ_q̇ in rad/s.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -104,6 +105,7 @@ from scipy.linalg import solve_triangular
 
 from semiparam_ros.core.learners._consistent_kernels import (
     fast_total,
+    model_alone_one,
     saving_step,
     scale_step,
     shrunk_choice,
@@ -914,6 +916,69 @@ class ConsistentSemiparametricModel(TwoStageModel):
     def reference_parameters(self) -> np.ndarray:
         """θ_ref (learner units): the rigid body the model's own predictions use (``rigid=None``)."""
         return self._reference.copy()
+
+    def frozen_model_one(self, rigid: np.ndarray | None = None
+                         ) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Return :meth:`predict_model` at one state as one compiled call, for a model that learns no more.
+
+        What a served copy answers a controller's per-cycle desired state with: the learned state, the
+        served scales and the rigid-body change's share of the residual (``shift``, :meth:`_rigid_shift`)
+        are copied once, so each call is the regressor's Φ (the caller's) and
+        :func:`~semiparam_ros.core.learners._consistent_kernels.model_alone_one`. Equal to
+        :meth:`predict_model` to rounding (the same formulas; the residual's change of parameters as one
+        product with ``shift``). A pending update is applied first (as the next prediction would).
+
+        Args:
+            rigid: Rigid-body parameters (learner units) as in :meth:`predict_model`; None: θ_ref.
+
+        Returns:
+            ``f(x, Φ) → (ŷ_P, g·r, relative variance)``, each (t,), for a checked x (3n,) and its
+            checked C-contiguous regressor Φ (t, p). Valid while the model is not changed (a copy from
+            :meth:`copy`); after a change, call this again.
+
+        Raises:
+            RejectedSampleError: A wrong size or non-finite ``rigid``.
+
+        Example:
+            >>> m = ConsistentSemiparametricModel(lambda x: x[None, :1], 1, 3, 1, n_features=8, prior=[2.0])
+            >>> f = m.frozen_model_one()
+            >>> x = np.array([3.0, 0.0, 0.0])
+            >>> yp, r, var = f(x, np.array([[3.0]]))
+            >>> float(yp[0]), float(r[0])  # Φπ₀ = 6, nothing learned: r = 0
+            (6.0, 0.0)
+            >>> bool(np.isclose(var[0], m.predict_model(x).variance[0]))  # the prior's variance at x
+            True
+        """
+        rigid_checked = checked_rigid(rigid, self.n_params)
+        par, npm = self.parametric, self.nonparametric
+        par.rls._flush()
+        npm.rls._flush()
+        theta = (self._reference if rigid_checked is None else rigid_checked).copy()
+        t, d = self.n_outputs, npm.rls.n_features
+        shift = np.zeros((0, t))
+        ready = bool(npm.standardizer.ready)
+        std, rff = npm.standardizer, npm.rff
+        mean, scale = std.mean_.copy(), std.scale_.copy()
+        if ready:
+            omega = np.ascontiguousarray(rff.omega_, dtype=np.float64)
+            offset = np.ascontiguousarray(rff.offset_, dtype=np.float64)
+            amplitude = float(rff.feature_scale)
+            if rigid_checked is not None:
+                shift = np.ascontiguousarray(self._rigid_shift(rigid_checked - self._reference))
+        else:
+            omega, offset, amplitude = np.zeros((self.n_inputs, d)), np.zeros(d), 0.0
+        s2, spread = self._weight_scales(served=True)
+        _, noise, c = self._served_scales()
+        s2, spread, noise, c = (np.array(a, dtype=np.float64) for a in (s2, spread, noise, c))
+        Mp, Mn, lam = par.rls._M.copy(), npm.rls._M.copy(), float(npm.rls.lam)
+
+        def one(x: np.ndarray, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            yp, r, var = np.empty(t), np.empty(t), np.empty(t)
+            model_alone_one(x, Phi, theta, Mp, Mn, mean, scale, omega, offset, amplitude, shift, s2, spread,
+                            noise, c, lam, ready, yp, r, var)
+            return yp, r, var
+
+        return one
 
     def predict_model_many(self, X: Any, rigid: np.ndarray | None = None) -> Prediction:
         """:meth:`predict_model` of N inputs at once (arrays of shape (N, t); ``variance`` included).

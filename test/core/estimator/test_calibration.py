@@ -26,6 +26,7 @@ from semiparam_ros.core.estimator.calibration import (
     SCORE_PERIOD_S,
     FrozenCalibration,
     motion_states,
+    served_sigma_one,
 )
 from semiparam_ros.core.estimator.online import OnlineEstimator
 from semiparam_ros.errors import CheckpointError, ConfigurationError
@@ -51,6 +52,34 @@ def test_motion_states_follow_each_joint_for_torques_and_the_arm_for_a_wrench():
     for i in range(N):
         want = 0 if (expected[i] == 0).all() else (1 if (expected[i] == 1).any() else 2)
         assert (arm[i] == want).all()
+
+
+@pytest.mark.parametrize("t", [3, 6])
+def test_the_compiled_served_sigma_is_the_scaled_one_step_sigma_of_each_outputs_state(t):
+    """``served_sigma_one`` against the formula with numpy's motion states: ``c_m sqrt(s²_m (1 + v))``,
+    the one-step ``sqrt(s² (1 + v))`` where a state has no scale (NaN), +inf without a noise estimate, a
+    negative or NaN v counted as 0."""
+    rng = np.random.default_rng(4)
+    n, N = 3, 400
+    dq = rng.choice([0.0, 0.005, 0.05, 0.5, -0.5], size=(N, n))
+    ddq = rng.choice([0.0, 1.0, -5.0], size=(N, n))
+    X = np.hstack([rng.normal(size=(N, n)), dq, ddq])
+    V = rng.uniform(-0.1, 3.0, size=(N, t))
+    V[::17, 0] = np.nan
+    s2 = rng.uniform(0.1, 2.0, t)
+    scales = rng.uniform(0.5, 3.0, (t, 3))
+    per_state = rng.uniform(0.1, 2.0, (t, 3))
+    scales[0, 0] = np.nan  # output 0 at rest: no scale of its own
+    states = motion_states(X, n, t)
+    for s2_in in (s2, np.full(t, np.inf)):
+        for i in range(N):
+            out = np.empty(t)
+            served_sigma_one(V[i], X[i], n, s2_in, scales, per_state, out)
+            relative = 1.0 + np.fmax(np.nan_to_num(V[i], nan=0.0), 0.0)
+            m = states[i]
+            want = scales[np.arange(t), m] * np.sqrt(per_state[np.arange(t), m] * relative)
+            want = np.where(np.isnan(want), np.sqrt(s2_in * relative), want)
+            np.testing.assert_allclose(out, want, rtol=4 * np.finfo(float).eps)
 
 
 def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:

@@ -624,3 +624,68 @@ def test_an_old_correction_fades_over_the_time_the_errors_stay_correlated():
     fresh, old = copy.deepcopy(offset), offset
     fresh.prediction_age_s = 0.0
     assert np.abs(old.predict_one(x).correction).max() < np.abs(fresh.predict_one(x).correction).max()
+
+
+def _served_formula(m: ConsistentSemiparametricModel, x: np.ndarray, rigid: np.ndarray | None):
+    """``predict_model``'s formulas computed here with numpy: (ŷ_P, g·r, variance) and bounds on rounding."""
+    npm, lam, eps = m.nonparametric, m.nonparametric.rls.lam, np.finfo(float).eps
+    Phi = regressor(x)
+    theta = m.reference_parameters if rigid is None else rigid
+    yp = Phi @ theta
+    var_p = m.parametric.predict_phi(Phi, True)[1]
+    phi = npm.features_of(x)
+    P, v = npm.rls.predict(phi, return_variance=True, checked=True)
+    v = float(v[0])
+    change = np.zeros_like(theta) if rigid is None else rigid - m.reference_parameters
+    shift = m._rigid_shift(change)  # A⁻¹ B_E S: the residual's share of the change (two solves)
+    raw = P[0] - phi[0] @ shift
+    s2, noise = m.error_scales()
+    c = m.correlation_samples()
+    nu = min(max(lam * v, 0.0), 1.0)
+    signal = s2 * (1 - nu)
+    total = signal + c * noise / m.novelty_scale * v
+    g = np.where(total > 0, signal / np.where(total > 0, total, 1.0), 1.0)
+    extra = ((1 - g) ** 2 * s2 * (1 - nu) + g ** 2 * c * noise * v + s2 * nu)
+    var = var_p + np.where(noise > 0, extra / np.where(noise > 0, noise, 1.0), v)
+    d = phi.shape[1]
+    # orders of summation differ: n terms sum to within n·ε·Σ|terms| (twice for safety)
+    bound_y = 2 * (Phi.shape[1] + 1) * eps * (np.abs(Phi) @ np.abs(theta))
+    bound_r = 2 * (d + 1) * eps * (np.abs(phi[0]) @ np.abs(shift)) + 8 * eps * np.abs(g * raw)
+    return yp, g * raw, var, bound_y, bound_r
+
+
+@pytest.mark.parametrize("with_rigid", [False, True])
+def test_the_frozen_single_state_call_is_predict_models_formula(with_rigid):
+    """``frozen_model_one`` (one compiled call) gives ``predict_model``'s ŷ_P, g·r and variance, computed
+    here from the model's statistics by the formulas, within the rounding of its sums; before the residual
+    is ready it is the rigid-body part with its variance; it is a copy (later learning does not move it)."""
+    fresh = model(standardizer=Standardizer(6, warmup=50))
+    x0 = np.array([0.3, -0.2, 0.5, 0.1, 0.0, 0.2])
+    yp, r, var = fresh.frozen_model_one()(x0, np.ascontiguousarray(regressor(x0)))
+    assert not fresh.nonparametric.standardizer.ready
+    np.testing.assert_allclose(yp, fresh.predict_model(x0).parametric, rtol=1e-14)
+    assert np.all(r == 0.0)
+    np.testing.assert_allclose(var, fresh.parametric.predict_phi(regressor(x0), True)[1], rtol=1e-14)
+    m = model(novelty_scale=0.5)
+    X, Y = data(400, 11)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    rigid = m.parametric.parameters + np.array([0.2, -0.1, 0.05]) if with_rigid else None
+    one = m.frozen_model_one(rigid)
+    Xt, _ = data(20, 12, spread=1.5)
+    for x in Xt:
+        yp, r, var = one(x, np.ascontiguousarray(regressor(x)))
+        want_y, want_r, want_var, bound_y, bound_r = _served_formula(m, x, rigid)
+        assert np.all(np.abs(yp - want_y) <= bound_y + 1e-300)
+        assert np.all(np.abs(r - want_r) <= bound_r + 1e-300)
+        np.testing.assert_allclose(var, want_var, rtol=1e-12)
+        ref = m.predict_model(x, rigid)
+        np.testing.assert_allclose(yp + r, ref.total, rtol=1e-12, atol=float(np.max(bound_y + bound_r)))
+    before = one(Xt[0], np.ascontiguousarray(regressor(Xt[0])))
+    for x, y in zip(*data(50, 13), strict=True):
+        m.learn_one(x, y)
+    after = one(Xt[0], np.ascontiguousarray(regressor(Xt[0])))
+    for a, b in zip(before, after, strict=True):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(RejectedSampleError):
+        m.frozen_model_one(np.array([np.nan, 0.0, 0.0]))
