@@ -19,6 +19,7 @@ Targets: ≥ 99 % answered within 2 ms and node-side p99 < 0.5 ms (or learning o
 ≥ 95 % of the samples learned while serving.
 
     PYTHONPATH=$PWD .venv/bin/python bench/node/bench_feedforward.py [--seconds 20] [--hz 1000] [--repeats 2]
+        [--set NAME=VALUE] [--compare-with DIR]
 """
 
 from __future__ import annotations
@@ -81,8 +82,18 @@ def train_checkpoint(tmp: Path, seconds: float) -> Path:
     return tmp / "trained.npz"
 
 
+def _revision(checkout: Path) -> str:
+    """The short commit of a checkout (its folder name when it is no git checkout)."""
+    try:
+        return subprocess.run(["git", "-C", str(checkout), "rev-parse", "--short", "HEAD"], check=True,
+                              capture_output=True, text=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return checkout.name
+
+
 def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool = True,
-        checkpoint: Path | None = None, design: str = "node", overrides: tuple[str, ...] = ()) -> dict:
+        checkpoint: Path | None = None, design: str = "node", overrides: tuple[str, ...] = (),
+        checkout: Path = REPO) -> dict:
     """Start the node, stream joint states and desired states, return the measured latencies."""
     import rclpy
     from builtin_interfaces.msg import Duration
@@ -117,7 +128,9 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
         cmd += ["-p", f"checkpoint.path:={copy}", "-p", "checkpoint.period:=0.0"]
     if design == "echo":  # the floor: a bare rclpy node answering at once, no model
         cmd = [sys.executable, str(REPO / "bench" / "node" / "echo_node.py")]
-    proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
+    if checkout != REPO:  # the node of another checkout (python -m puts its folder first on the path)
+        env = dict(env, PYTHONPATH=str(checkout))
+    proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=checkout)
     ps = psutil.Process(proc.pid)
 
     context, node, executor = client(domain, "bench_feedforward")
@@ -212,10 +225,16 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
                 if "feedforward.age_p99_ms" in d]
     node_p50 = [float(d["feedforward.age_p50_ms"]) for d in all_diag[2:]
                 if "feedforward.age_p50_ms" in d]
+    # the samples' own predictions: message received → prediction ready, p99 per period
+    sample_p99 = [float(d["pipeline_latency_p99_ms"]) for d in all_diag[2:]
+                  if d.get("pipeline_latency_p99_ms", "nan") not in ("nan", "")]
     cpu = cpu1 - cpu0
     learned_before = int(all_diag[0].get("samples_learned", "0")) if all_diag else 0
     warm = checkpoint is not None
-    return {"design": DESIGNS[design], "learning": learning,
+    label = DESIGNS[design] if checkout == REPO else f"{DESIGNS[design]} at {_revision(checkout)}"
+    if overrides and design == "node":
+        label += " (" + ", ".join(overrides) + ")"
+    return {"design": label, "learning": learning,
             "consistent": consistent, "hz": hz, "seconds": seconds, "play_s": play_s,
             "warm_start": warm, "desired_sent": len(sent), "feedforward_received": len(latency),
             "answered_within_2ms": within_2ms, "joint_states_sent": count,
@@ -226,6 +245,8 @@ def run(seconds: float, hz: float, learning: bool, tmp: Path, consistent: bool =
             "node_latency_ms": {"p50_median_of_periods": float(np.median(node_p50)) if node_p50 else None,
                                 "p99_median_of_periods": float(np.median(node_p99)) if node_p99 else None,
                                 "p99_max_of_periods": max(node_p99, default=None)},
+            "sample_latency_p99_ms_median_of_periods": float(np.median(sample_p99)) if sample_p99 else None,
+            "parameters": list(overrides),
             "node_cpu_percent": 100.0 * cpu / (wall1 - wall0),
             "client_cpu_percent": 100.0 * (mine1 - mine0) / (wall1 - wall0),
             "samples_learned": int(diag.get("samples_learned", "0")),
@@ -243,6 +264,12 @@ def main() -> None:
     p.add_argument("--train-seconds", type=float, default=30.0,
                    help="simulated Panda recording learned into the checkpoint the node warm-starts from")
     p.add_argument("--output", type=Path, default=RESULTS)
+    p.add_argument("--compare-with", type=Path, default=None, metavar="DIR",
+                   help="also run the node of another checkout (e.g. a git worktree of an older commit), "
+                        "alternating with this one's, on the same checkpoint")
+    p.add_argument("--variant", action="append", default=[], metavar="NAME=VALUE[,NAME=VALUE]",
+                   help="also run this checkout's node learning with these parameters, in each repeat "
+                        "(repeatable), e.g. overload.max_delay=0.0")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="a node parameter for the estimator's runs (repeatable), e.g. overload.max_delay=0.0")
     p.add_argument("--no-floor", dest="floor", action="store_false",
@@ -253,13 +280,24 @@ def main() -> None:
     print(f"node logs in {tmp}")
     checkpoint = train_checkpoint(tmp, args.train_seconds)
     designs = ("node", "echo") if args.floor else ("node",)
-    runs = [run(args.seconds, args.hz, learning, tmp, True, checkpoint, design, tuple(args.set))
-            for _ in range(args.repeats) for design in designs
-            for learning in ((False,) if design == "echo" else (True, False))]
+    checkouts = (REPO,) if args.compare_with is None else (REPO, args.compare_with.resolve())
+    base = tuple(args.set)
+    runs = []
+    for _ in range(args.repeats):
+        for design in designs:
+            for checkout in (checkouts if design == "node" else (REPO,)):
+                for learning in ((False,) if design == "echo" else (True, False)):
+                    runs.append(run(args.seconds, args.hz, learning, tmp, True, checkpoint, design, base,
+                                    checkout))
+            if design == "node":  # each --variant: this checkout's node learning, with its parameters
+                for variant in args.variant:
+                    runs.append(run(args.seconds, args.hz, True, tmp, True, checkpoint, design,
+                                    (*base, *variant.split(",")), REPO))
     print("| answered by | node (warm start) | desired states | within 2 ms | "
           "round trip p50 / p99 / max [ms] | stamped → published p50 / p99 (median of periods) [ms] | "
-          "learned while serving | not-ready fallbacks | node CPU | client CPU |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "learned while serving | samples: received → predicted p99 (median of periods) [ms] | "
+          "not-ready fallbacks | node CPU | client CPU |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     def ms(value: float | None, digits: int = 2) -> str:
         return "–" if value is None else f"{value:.{digits}f}"
 
@@ -271,9 +309,11 @@ def main() -> None:
               f"{100 * r['answered_within_2ms']:.1f} % | "
               f"{ms(lat.get('p50'))} / {ms(lat.get('p99'))} / {ms(lat.get('max'), 1)} | "
               f"{ms(nl['p50_median_of_periods'])} / {ms(nl['p99_median_of_periods'])} | {learned} | "
+              f"{ms(r['sample_latency_p99_ms_median_of_periods'])} | "
               f"{r['fallback_not_ready']} | {r['node_cpu_percent']:.0f} % | "
               f"{r['client_cpu_percent']:.0f} % |")
-    out = {"command": "PYTHONPATH=$PWD .venv/bin/python bench/node/bench_feedforward.py",
+    command = " ".join(["PYTHONPATH=$PWD .venv/bin/python bench/node/bench_feedforward.py", *sys.argv[1:]])
+    out = {"command": command,
            "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                        "processor": platform.processor() or platform.machine()},
            "target": ">= 99 % answered within 2 ms and node-side p99 < 0.5 ms (or learning on within 1.2x of "

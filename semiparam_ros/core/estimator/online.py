@@ -209,7 +209,7 @@ class OnlineEstimator:
         With ``skip_learning`` (a node that fell behind its input) the sample is predicted by the model's
         cheap ``predict_held`` (the consistent SP holds its residual from the last full prediction) and
         not learned; the noise estimate skips it, the gate does not see it, and it is counted in
-        :attr:`n_learning_skipped`.
+        :attr:`n_learning_skipped`. So too with learning disabled: a late sample is predicted cheaply.
 
         Args:
             sample: A clean sample from the pipeline.
@@ -238,7 +238,7 @@ class OnlineEstimator:
             phi = stick.step(sample.q, sample.dq)
             held = stick.torque(phi)
         target = y if held is None else y - held  # what the learners learn
-        if skip_learning and self.learning_enabled:
+        if skip_learning:
             prediction = with_held(model.predict_held(x), held)
             assert prediction.variance is not None  # a held prediction carries it
             std = self.noise.std(prediction.variance)

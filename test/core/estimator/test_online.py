@@ -524,6 +524,31 @@ def test_skipped_learning_predicts_with_the_residual_held_and_leaves_the_learned
     assert np.mean(errors) < 0.1 * np.mean(sizes)
 
 
+def test_a_late_sample_is_predicted_cheaply_with_learning_disabled_too(config, regressor):
+    """A node serving a frozen model (``learning_enabled: false``) that falls behind predicts a late sample
+    as a learning one does: the rigid-body part at the sample, the residual held from the last full
+    prediction, nothing learned, counted; the state stays bit-identical to an estimator that predicted
+    every sample in full."""
+    samples = pipeline_samples(config, rich_stream().messages)
+    est = OnlineEstimator(config, regressor=regressor)
+    ref = OnlineEstimator(config, regressor=regressor)
+    for sample in samples[:300]:
+        est.step(sample)
+        ref.step(sample)
+    est.learning_enabled = ref.learning_enabled = False
+    last = est.step(samples[300]).prediction
+    ref.step(samples[300])
+    got = est.step(samples[301], skip_learning=True)
+    full = ref.step(samples[301]).prediction
+    assert not got.learned and est.n_learning_skipped == 1
+    np.testing.assert_allclose(got.prediction.parametric, full.parametric, rtol=1e-12, atol=1e-12)
+    held = got.prediction.residual - got.prediction.correction
+    scale = 1.0 + np.abs(last.total).max()
+    np.testing.assert_allclose(held, last.residual - last.correction, rtol=0, atol=1e-13 * scale)
+    assert est.n_samples_learned == ref.n_samples_learned
+    assert_close_state(snapshot(est), snapshot(ref))
+
+
 # ----------------------------------------------------------------------------- 5. reset
 @pytest.mark.parametrize("loaded", [False, True], ids=["trained", "trained_and_loaded"])
 def test_reset_forgets_everything(config, regressor, tmp_path, loaded):
