@@ -951,8 +951,6 @@ class ConsistentSemiparametricModel(TwoStageModel):
         """
         rigid_checked = checked_rigid(rigid, self.n_params)
         par, npm = self.parametric, self.nonparametric
-        par.rls._flush()
-        npm.rls._flush()
         theta = (self._reference if rigid_checked is None else rigid_checked).copy()
         t, d = self.n_outputs, npm.rls.n_features
         shift = np.zeros((0, t))
@@ -970,7 +968,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         s2, spread = self._weight_scales(served=True)
         _, noise, c = self._served_scales()
         s2, spread, noise, c = (np.array(a, dtype=np.float64) for a in (s2, spread, noise, c))
-        Mp, Mn, lam = par.rls._M.copy(), npm.rls._M.copy(), float(npm.rls.lam)
+        Mp, Mn, lam = par.rls.factor_copy(), npm.rls.factor_copy(), float(npm.rls.lam)
 
         def one(x: np.ndarray, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             yp, r, var = np.empty(t), np.empty(t), np.empty(t)

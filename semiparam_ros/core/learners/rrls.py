@@ -203,6 +203,15 @@ class RecursiveRLS:
         bounded = self.keep_prior and forgetting < 1.0
         self._reg = self.n_features * (1.0 - forgetting) * self.lam if bounded else 0.0
 
+    def factor_copy(self) -> np.ndarray:
+        """Return a C-contiguous copy of ``[R | d]`` (b, b + t), a pending update applied first.
+
+        What a copy frozen for serving keeps: ``solve_predict`` predicts from it, ``z W = (z R⁻¹) d``
+        and ``z A⁻¹ zᵀ = ‖R⁻ᵀ zᵀ‖²``, without the learner.
+        """
+        self._flush()
+        return self._M.copy()
+
     @property
     def R(self) -> np.ndarray:  # noqa: N802 (the factor's name in the literature)
         """The upper-triangular factor (b, b), ``RᵀR = A`` (read-only view)."""

@@ -94,6 +94,32 @@ def test_apply_pending_gives_the_same_state_as_the_fused_prediction():
     np.testing.assert_allclose(idle.weights, ridge, rtol=1e-8, atol=1e-10)
 
 
+def test_factor_copy_is_the_factor_with_the_pending_update_applied():
+    """``factor_copy``: ``[R | d]`` after a deferred update, bit for bit the factor of a learner that applied
+    it; predictions from it alone (``solve_predict``) are the closed-form ridge's, and it is a copy."""
+    from semiparam_ros.core.learners._kernels import solve_predict
+
+    rng = np.random.default_rng(8)
+    b, t = 20, 3
+    rls, ref = RecursiveRLS(b, t, 0.5), RecursiveRLS(b, t, 0.5)
+    Zs, Us = rng.standard_normal((30, b)), rng.standard_normal((30, t))
+    for z, u in zip(Zs, Us, strict=True):
+        for learner in (rls, ref):
+            learner.defer_step(RecursiveRLS.checked_step(z[None].copy(), u[None].copy()))
+    assert rls.has_pending
+    M = rls.factor_copy()
+    ref.apply_pending()
+    assert M.flags.c_contiguous and np.array_equal(M, np.hstack([ref.R, ref.d]))
+    q = rng.standard_normal((2, b))
+    P, var = np.empty((2, t)), np.empty(2)
+    solve_predict(M, q, P, var)
+    A = Zs.T @ Zs + 0.5 * np.eye(b)
+    np.testing.assert_allclose(P, q @ np.linalg.solve(A, Zs.T @ Us), rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(var, np.einsum("ij,ji->i", q, np.linalg.solve(A, q.T)), rtol=1e-8)
+    M[:] = 0.0
+    assert np.array_equal(rls.R, ref.R)  # a copy
+
+
 def test_update_steps_is_bitwise_equal_to_repeated_calls():
     rng = np.random.default_rng(3)
     b, t, k = 12, 2, 6
