@@ -10,12 +10,11 @@ formulas (no ``fastmath``). The tests compare every kernel with a numpy implemen
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
 from semiparam_ros.core.learners._kernels import solve_predict
+from semiparam_ros.core.learners._step_kernels import standardized_features
 
 __all__ = [
     "fast_total", "model_alone_one", "saving_step", "saving_update", "scale_step", "scale_update",
@@ -378,7 +377,8 @@ def model_alone_one(x: np.ndarray, Phi: np.ndarray, rigid: np.ndarray, Mp: np.nd
     pending update:
 
     * ``ŷ_P = Φπ``; ``var = diag(Φ A_P⁻¹ Φᵀ) + m(v)`` (``‖R_P⁻ᵀ Φ_kᵀ‖²`` per output row k);
-    * ``φ = a cos(((x − μ)/s) Ω + b)``; ``p = φ R⁻¹ d`` and ``v = ‖R⁻ᵀ φᵀ‖²`` (one forward sweep);
+    * ``φ = a cos(((x − μ)/s) Ω + b)`` (``standardized_features``, as the learner's own features);
+      ``p = φ R⁻¹ d`` and ``v = ‖R⁻ᵀ φᵀ‖²`` (one forward sweep);
       ``raw = p − φ·shift`` (``shift`` (D, t) the rigid-body change's share, or (0, t): none);
     * ``S = s² clip(1 − λv, 0, 1)``, ``g = S / (S + spread·v)`` (1 where that is 0), ``r = g·raw``;
     * ``m(v) = [(1 − g)² S + g² c σ² v + s² ν] / σ²`` (ν = clip(λv, 0, 1); v itself where σ² = 0).
@@ -419,16 +419,8 @@ def model_alone_one(x: np.ndarray, Phi: np.ndarray, rigid: np.ndarray, Mp: np.nd
         for k in range(t):
             r[k] = 0.0
         return
-    n, d = omega.shape
-    phase = np.zeros(d)
-    for i in range(n):
-        z = (x[i] - mean[i]) / scale[i]
-        row = omega[i]
-        for j in range(d):
-            phase[j] += z * row[j]
-    phi = np.empty((1, d))
-    for j in range(d):
-        phi[0, j] = amplitude * math.cos(phase[j] + offset[j])
+    d = omega.shape[1]
+    phi = standardized_features(x, mean, scale, omega, offset, amplitude)
     P = np.empty((1, t))
     vv = np.empty(1)
     solve_predict(Mn, phi, P, vv)

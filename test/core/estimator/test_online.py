@@ -485,6 +485,15 @@ def test_age_counts_the_samples_since_the_newest_learned_one(config, regressor):
     assert est.age_at(last + round(100 * step)) == 0.0
 
 
+def _twins(config, regressor, samples):
+    """Two estimators that learned the same samples (the one under test and its reference)."""
+    est, ref = OnlineEstimator(config, regressor=regressor), OnlineEstimator(config, regressor=regressor)
+    for sample in samples:
+        est.step(sample)
+        ref.step(sample)
+    return est, ref
+
+
 def test_skipped_learning_predicts_with_the_residual_held_and_leaves_the_learned_state(config, regressor):
     """``step(skip_learning=True)``: what a node that falls behind does with a late sample.
 
@@ -494,11 +503,7 @@ def test_skipped_learning_predicts_with_the_residual_held_and_leaves_the_learned
     10 ms between samples) is within 10 % of the residual's size of the full prediction.
     """
     samples = pipeline_samples(config, rich_stream().messages)
-    est = OnlineEstimator(config, regressor=regressor)
-    ref = OnlineEstimator(config, regressor=regressor)
-    for sample in samples[:300]:
-        est.step(sample)
-        ref.step(sample)
+    est, ref = _twins(config, regressor, samples[:300])
     errors, sizes, last = [], [], None
     for i, sample in enumerate(samples[300:]):
         if i % 2 == 0:
@@ -530,11 +535,7 @@ def test_a_late_sample_is_predicted_cheaply_with_learning_disabled_too(config, r
     prediction, nothing learned, counted; the state stays bit-identical to an estimator that predicted
     every sample in full."""
     samples = pipeline_samples(config, rich_stream().messages)
-    est = OnlineEstimator(config, regressor=regressor)
-    ref = OnlineEstimator(config, regressor=regressor)
-    for sample in samples[:300]:
-        est.step(sample)
-        ref.step(sample)
+    est, ref = _twins(config, regressor, samples[:300])
     est.learning_enabled = ref.learning_enabled = False
     last = est.step(samples[300]).prediction
     ref.step(samples[300])
