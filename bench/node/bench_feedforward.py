@@ -19,7 +19,7 @@ Targets: ≥ 99 % answered within 2 ms and node-side p99 < 0.5 ms (or learning o
 ≥ 95 % of the samples learned while serving.
 
     PYTHONPATH=$PWD .venv/bin/python bench/node/bench_feedforward.py [--seconds 20] [--hz 1000] [--repeats 2]
-        [--set NAME=VALUE] [--compare-with DIR]
+        [--set NAME=VALUE] [--variant NAME=VALUE[,NAME=VALUE]] [--compare-with DIR]
 """
 
 from __future__ import annotations

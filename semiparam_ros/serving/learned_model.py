@@ -126,7 +126,7 @@ class LearnedModel:
         self._attached: ConsistentEstimate | None = None
         self._solve = bool(solve)
         self._weights: np.ndarray | None = None  # the projection's prior weights (cached: 64 regressor rows)
-        self._one: tuple[tuple[int, bytes | None], Any] | None = None  # a frozen copy's compiled single state
+        self._one: tuple[bytes | None, Any] | None = None  # a frozen copy's compiled single state, by rigid
         self._sigma_one: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # its σ's arrays
         #: Software versions that wrote the checkpoint (empty for a live estimator).
         self.versions: dict[str, Any] = {}
@@ -411,7 +411,7 @@ class LearnedModel:
         if traits.combination == "consistent":
             model = cast(ConsistentSemiparametricModel, model)
             if X.shape[0] == 1 and self._frozen is not None:  # a served copy: one compiled call
-                key = (id(model), None if rigid is None else rigid.tobytes())
+                key = None if rigid is None else rigid.tobytes()  # the frozen model itself never changes
                 if self._one is None or self._one[0] != key:
                     self._one = (key, model.frozen_model_one(rigid))
                 x = X[0]

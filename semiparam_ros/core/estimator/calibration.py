@@ -124,14 +124,16 @@ def served_sigma_one(variance: np.ndarray, x: np.ndarray, n_joints: int, s2: np.
     """
     t = variance.shape[0]
     n = n_joints
-    arm_rest, arm_reversal = True, False
-    for j in range(n):
-        speed = abs(x[n + j])
-        rest = speed < REST_VELOCITY
-        arm_rest = arm_rest and rest
-        if not rest and speed < REVERSAL_WINDOW_S * abs(x[2 * n + j]):
-            arm_reversal = True
-    arm_state = 0 if arm_rest else (1 if arm_reversal else 2)
+    arm_state = 2  # outputs other than joint torques are judged by the arm
+    if t != n:
+        arm_rest, arm_reversal = True, False
+        for j in range(n):
+            speed = abs(x[n + j])
+            rest = speed < REST_VELOCITY
+            arm_rest = arm_rest and rest
+            if not rest and speed < REVERSAL_WINDOW_S * abs(x[2 * n + j]):
+                arm_reversal = True
+        arm_state = 0 if arm_rest else (1 if arm_reversal else 2)
     for k in range(t):
         vk = variance[k]
         if not vk >= 0.0:

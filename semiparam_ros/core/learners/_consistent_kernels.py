@@ -430,11 +430,7 @@ def model_alone_one(x: np.ndarray, Phi: np.ndarray, rigid: np.ndarray, Mp: np.nd
         nu = 0.0
     elif nu > 1.0:
         nu = 1.0
-    keep = 1.0 - lam * v
-    if keep < 0.0:
-        keep = 0.0
-    elif keep > 1.0:
-        keep = 1.0
+    keep = 1.0 - nu  # clip(1 − λv, 0, 1): the same value as clipping 1 − λv itself
     has_shift = shift.shape[0] == d
     for k in range(t):
         raw = P[0, k]
@@ -448,7 +444,7 @@ def model_alone_one(x: np.ndarray, Phi: np.ndarray, rigid: np.ndarray, Mp: np.nd
         g = signal / total if total > 0.0 else 1.0
         r[k] = raw * g
         if noise[k] > 0.0:
-            extra = ((1.0 - g) ** 2 * s2[k] * (1.0 - nu) + g * g * c[k] * noise[k] * v + s2[k] * nu)
+            extra = ((1.0 - g) ** 2 * s2[k] * keep + g * g * c[k] * noise[k] * v + s2[k] * nu)
             var[k] += extra / noise[k]
         else:
             var[k] += v
