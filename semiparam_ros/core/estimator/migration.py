@@ -25,6 +25,10 @@ Version 2 → 3: ``calibration.*`` (the served σ's scales for new motion,
 :mod:`semiparam_ros.core.estimator.calibration`) absent: empty histograms, i.e. the served σ is the one-step
 σ, as before; ``stick.*`` (friction that remembers, :mod:`semiparam_ros.core.learners.stick`) absent:
 c = 0, no torque held, as before.
+
+Version 3 → 4: the consistent SP's ``aged`` and ``aged_copies`` (the test of its residual on an aged copy,
+:meth:`~semiparam_ros.core.learners.consistent.ConsistentSemiparametricModel.residual_use`) absent: no
+evidence yet, i.e. the residual used on every output, as before.
 """
 
 from __future__ import annotations
@@ -163,4 +167,14 @@ def _v2_to_v3(state: dict[str, np.ndarray], fresh: Callable[[], dict[str, np.nda
     return state, notes
 
 
-_STEPS: dict[int, Step] = {1: _v1_to_v2, 2: _v2_to_v3}
+def _v3_to_v4(state: dict[str, np.ndarray], fresh: Callable[[], dict[str, np.ndarray]]
+              ) -> tuple[dict[str, np.ndarray], list[str]]:
+    new = fresh()
+    added = {k: v for k, v in new.items() if k.endswith((".aged", ".aged_copies")) and k not in state}
+    state.update(added)
+    notes = (["it carries no test of the residual on an aged copy: the residual is used on every output "
+              "until the model has learned a few tenths of a second more"] if added else [])
+    return state, notes
+
+
+_STEPS: dict[int, Step] = {1: _v1_to_v2, 2: _v2_to_v3, 3: _v3_to_v4}

@@ -25,7 +25,7 @@ from semiparam_ros.errors import CheckpointError
 
 #: Format version written to ``meta.version``; an older one is read through
 #: :func:`~semiparam_ros.core.estimator.migration.migrate`, a newer one is refused.
-CHECKPOINT_VERSION = 3
+CHECKPOINT_VERSION = 4
 
 
 def software_versions() -> dict[str, str]:

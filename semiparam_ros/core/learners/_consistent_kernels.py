@@ -168,6 +168,79 @@ def saving_update(fast_errors: np.ndarray, y: np.ndarray, model: np.ndarray, can
 
 
 @njit(cache=True, nogil=True)
+def aged_saving_step(errors: np.ndarray, y: np.ndarray, Phi: np.ndarray, theta: np.ndarray, phi: np.ndarray,
+                     W: np.ndarray, s2: np.ndarray, spread: np.ndarray, lam: float, v: float, a: float,
+                     window: float, corr_sq: np.ndarray, scale_model: np.ndarray, a_corr: float,
+                     min_evidence: float, use: np.ndarray) -> None:
+    """Score an aged copy of the residual on one learned sample, then decide per output whether to use it.
+
+    The copy is ``(θ, W)``: the reference and the residual's weights as they were a while ago. At the
+    sample, with e = y − Φθ (the aged rigid body's error) and the weighted aged residual
+    ``ρ = g(v)·φW`` (``g = S/(S + spread·v)``, ``S = s²·clip(1 − λv, 0, 1)``, 1 where that is 0: the
+    online weight at the sample's v), the saving ``d = e² − (e − ρ)²`` enters running means of d and d²
+    with weight a: ``errors[0] += a(d − errors[0])``, ``errors[1] += a(d² − errors[1])``.
+
+    Then ``use_k`` is false only where the mean saving m is negative by more than two standard errors:
+    ``m < −2·sqrt(max(errors[1] − m², 0)/n)`` with ``n = window/c`` effective samples, c the samples over
+    which the residual's errors stay correlated (``max((corr_sq/scale_model)(2 − a_corr)/a_corr, 1)``, as
+    ``correlation_samples``); true while n < ``min_evidence``.
+
+    Args:
+        errors: (2, t) running mean of d and of d², updated in place.
+        y: (t,) the measurement.
+        Phi: (t, p) the regressor at the sample.
+        theta: (p,) the aged copy's reference parameters.
+        phi: (D,) the random features at the sample.
+        W: (D, t) the aged copy's residual weights.
+        s2: (t,) the rigid-body part's systematic error variance s² (now).
+        spread: (t,) σ²/ν₀ of the online weight (now).
+        lam: λ of the residual learner.
+        v: The residual's relative predictive variance at the sample (now).
+        a: The running means' weight.
+        window: The samples the running means average over.
+        corr_sq: (t,) the smoothed residual error's Σβ m² (the correlation statistics).
+        scale_model: (t,) Σβ (y − ŷ_P − r)².
+        a_corr: 1 − β of the correlation statistics.
+        min_evidence: Effective samples below which the residual is used.
+        use: (t,) bool output.
+    """
+    t, p = Phi.shape
+    keep = 1.0 - lam * v
+    if keep < 0.0:
+        keep = 0.0
+    elif keep > 1.0:
+        keep = 1.0
+    for k in range(t):
+        rigid = 0.0
+        for j in range(p):
+            rigid += Phi[k, j] * theta[j]
+        raw = 0.0
+        for j in range(phi.shape[0]):
+            raw += phi[j] * W[j, k]
+        signal = s2[k] * keep
+        total = signal + spread[k] * v
+        g = signal / total if total > 0.0 else 1.0
+        e0 = y[k] - rigid
+        miss = e0 - g * raw
+        gain = e0 * e0 - miss * miss
+        errors[0, k] += a * (gain - errors[0, k])
+        errors[1, k] += a * (gain * gain - errors[1, k])
+        ratio = corr_sq[k] / scale_model[k] if scale_model[k] > 0.0 else 0.0
+        c = ratio * (2.0 - a_corr) / a_corr
+        if c < 1.0:
+            c = 1.0
+        n = window / c
+        if n < min_evidence:
+            use[k] = True
+            continue
+        mean = errors[0, k]
+        var = errors[1, k] - mean * mean
+        if var < 0.0:
+            var = 0.0
+        use[k] = not (mean < -2.0 * np.sqrt(var / n))
+
+
+@njit(cache=True, nogil=True)
 def shrunk_choice(estimates: np.ndarray, errors: np.ndarray, gains: np.ndarray, noise: np.ndarray,
                   z2: float, ready: bool, out: np.ndarray) -> None:
     """Write the chosen smoother's estimate, shrunk by the noise it carries, into ``out`` (t,).

@@ -49,6 +49,13 @@ residual's own error counted with the length c over which its errors stay correl
 data do not explain. The online prediction's variance stays the residual's own ``v``: its errors are the
 fast correction's, one step ahead.
 
+The online weight is 0 on an output where a copy of the residual a tenth to two tenths of a second old
+does worse than its own rigid body on the samples learned since, by more than two standard errors
+(:meth:`residual_use`): a residual that fits what belongs to time (errors correlated over a tenth of a
+second) helps one step ahead and harms a moment later, and the online prediction is then its rigid part
+and fast correction. The model used alone (below) keeps its served weight, which already counts the
+residual's error over the length its errors stay correlated.
+
 **4. Fast correction** (the tracker: one step ahead, payloads, contacts). Two parts, both learned only
 from the samples the model learns (the contact gate's refusals are held out of them too):
 
@@ -104,6 +111,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from semiparam_ros.core.learners._consistent_kernels import (
+    aged_saving_step,
     fast_total,
     model_alone_one,
     saving_step,
@@ -345,12 +353,13 @@ def structural_entries(regressor: Regressor, n_inputs: int, n_outputs: int, n_pa
 class _Context(PredictionContext):
     """A prediction context that also keeps the local tracker's reference prediction and weight at x."""
 
-    __slots__ = ("fast_candidate", "kappa", "model_only", "model_total", "raw_residual", "reference")
+    __slots__ = ("fast_candidate", "kappa", "model_only", "model_total", "raw_residual", "reference",
+                 "residual_variance")
 
     def __init__(self, prediction: Prediction, model: Any, x: np.ndarray, Phi: np.ndarray | None,
                  phi: np.ndarray | None, model_total: np.ndarray, kappa: float,
                  raw_residual: np.ndarray | None, fast_candidate: np.ndarray, model_only: np.ndarray,
-                 reference: np.ndarray) -> None:
+                 reference: np.ndarray, residual_variance: float | None = None) -> None:
         super().__init__(prediction, model, x, Phi, phi)
         self.model_total = model_total
         self.model_only = model_only  # model(x) = ŷ_P + g·r, without the fast corrections
@@ -358,6 +367,7 @@ class _Context(PredictionContext):
         self.kappa = kappa  # the tracker's weight at x
         self.raw_residual = raw_residual  # r before its weight (None before the residual is ready)
         self.fast_candidate = fast_candidate  # κ_f Φδ_f at x before its weight (zeros without a tracker)
+        self.residual_variance = residual_variance  # v = φA⁻¹φᵀ at x (None before the residual is ready)
 
 
 class ConsistentSemiparametricModel(TwoStageModel):
@@ -473,6 +483,11 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._fast_errors = np.zeros((2, self.n_outputs))  # recent mean of d and d², d the fast saving
         self._corr = np.zeros((2, self.n_outputs))     # smoothed residual error m, Σ β^{n−m} m² (its memory)
         self._fast_n = 0                               # samples in them
+        self._aged_errors = np.zeros((2, self.n_outputs))  # mean of d and d², d the aged residual's saving
+        self._aged_n = 0                                   # samples in them
+        self._residual_use = np.ones(self.n_outputs, dtype=np.bool_)  # residual_use()
+        self._aged_copies: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]  # (θ_ref, W)
+        self._aged_count = 0                               # learned samples since the newer copy
         self._weight_cache: tuple[np.ndarray, np.ndarray] | None = None  # (s², σ²/ν₀) until the next learn
         self._fast_mask: np.ndarray | None = None      # _fast_useful() until the next learn
         self._shift_cache: tuple[tuple[int, bytes], np.ndarray] | None = None  # _rigid_shift's last Ω
@@ -616,6 +631,8 @@ class ConsistentSemiparametricModel(TwoStageModel):
         s2, spread = self._weight_scales(served=model_variance)
         r = np.empty(t)
         weighted_residual(raw, s2, spread, npm.rls.lam, float(v[0]), r)
+        if not model_variance:
+            r *= self._residual_use  # the online weight only (residual_use)
         self._raw = raw
         if own and not model_variance:
             self._held = (r, float(v[0]))  # the residual a held prediction reuses (not copied: read only)
@@ -642,6 +659,9 @@ class ConsistentSemiparametricModel(TwoStageModel):
         error variance the model reports for itself (:meth:`model_variance`, κ = 1). The online prediction,
         whose correlated errors the fast correction tracks, keeps ``σ² v``.
 
+        The online weight is 0 on an output where the residual does worse than its rigid body a moment
+        later (:meth:`residual_use` false); the served weight is not changed by that test.
+
         Args:
             v: The residual's relative predictive variance, a scalar or (N,).
             served: The model used alone (see above).
@@ -653,7 +673,8 @@ class ConsistentSemiparametricModel(TwoStageModel):
         v_arr = np.asarray(v, dtype=np.float64)[..., None]
         signal = s2 * np.clip(1.0 - self.nonparametric.rls.lam * v_arr, 0.0, 1.0)  # s²(1 − ν)
         total = signal + spread * v_arr
-        return np.divide(signal, total, out=np.ones_like(total), where=total > 0.0)
+        g = np.divide(signal, total, out=np.ones_like(total), where=total > 0.0)
+        return g if served else g * self._residual_use
 
     def model_variance(self, v: Any) -> np.ndarray:
         """Return the residual stage's share of the relative variance of model(x) = ŷ_P + g·r used alone.
@@ -747,6 +768,26 @@ class ConsistentSemiparametricModel(TwoStageModel):
             return np.zeros(self.n_outputs), np.zeros(self.n_outputs)
         noise = self._scale_model / w
         return np.maximum(self._recent_rigid - noise, 0.0), noise
+
+    def residual_use(self) -> np.ndarray:
+        """Per output (t,) bool: whether the online prediction uses the residual (its weight is 0 where not).
+
+        False where a copy of the residual :attr:`AGED_COPY_S` to twice that old, scored on every learned
+        sample against its own rigid body as it was then (``d = e² − (e − g·r_aged)²``, the residual's
+        memory), made the squared error larger by more than two standard errors of the mean (the samples
+        counted over the length c its errors stay correlated, :meth:`correlation_samples`): a residual
+        that learned what belongs to time rather than to the state (errors correlated over a tenth of a
+        second, such as a q̈ estimate's window error) fits each sample's neighbourhood one step ahead but
+        is worse than no residual a moment later. True before there is enough evidence (fewer than
+        :attr:`AGED_MIN_EVIDENCE` effective samples). The model used alone (:meth:`predict_model`, the
+        served weight) does not depend on it.
+
+        Example:
+            >>> m = ConsistentSemiparametricModel(lambda x: x[None, :1], 1, 3, 1, n_features=8)
+            >>> m.residual_use().tolist()
+            [True]
+        """
+        return self._residual_use.copy()
 
     def _fast_useful(self) -> np.ndarray:
         """Per output: whether the fast correction recently reduced the one-step squared error significantly.
@@ -1020,8 +1061,9 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._fast_candidate = np.zeros(self.n_outputs)
         pred, model_total, phi, kappa = self.predict_checked(xv, Phi)
         raw = None if phi is None else self._raw
+        v = None if phi is None or self._held is None else self._held[1]
         return _Context(pred, self, xv, Phi, phi, model_total, kappa, raw, self._fast_candidate,
-                        self._model_only, self._reference)
+                        self._model_only, self._reference, v)
 
     def learn_ahead_checked(self, context: PredictionContext, yv: np.ndarray) -> None:
         """Do :meth:`learn_ahead` for an output already checked (finite, ``n_outputs`` values)."""
@@ -1067,6 +1109,8 @@ class ConsistentSemiparametricModel(TwoStageModel):
                        ctx.raw_residual, beta, a, 1.0 - self._corr_beta, self._scale_weight,
                        self.novelty_scale, s2, spread)
             self._weight_cache = (s2, spread)
+            if ctx.residual_variance is not None:
+                self._score_aged(Phi, phi, yv, s2, spread, ctx.residual_variance)
         if fast_step is not None:
             self.fast.defer_step(fast_step)
             self.tracker.update(xv, yv, ctx.model_total, ctx.kappa)
@@ -1088,6 +1132,40 @@ class ConsistentSemiparametricModel(TwoStageModel):
             self._rereference(self.parameters)
         if phi is None:
             self.learn_held()
+
+    #: Age [s] of the copy of the residual scored on every learned sample (between this and twice this):
+    #: the residual is used only where a copy that old still saves a significant part of the squared error.
+    AGED_COPY_S = 0.1
+
+    def _score_aged(self, Phi: np.ndarray, phi: np.ndarray, yv: np.ndarray, s2: np.ndarray,
+                    spread: np.ndarray, v: float) -> None:
+        """Score the aged copy of the residual on this sample (:attr:`AGED_COPY_S`); take a new one when due.
+
+        Every ``AGED_COPY_S`` of learned samples the newer copy ``(θ_ref, W)`` becomes the older and a new
+        one is taken (one triangular solve with t right-hand sides), so the copy scored is between one and
+        two ``AGED_COPY_S`` old. :func:`aged_saving_step` then updates its saving's statistics (the
+        residual's memory) and :attr:`_residual_use`.
+        """
+        npm = self.nonparametric
+        self._aged_count += 1
+        if self._aged_count >= max(round(self.AGED_COPY_S / self._period_s), 1):
+            self._aged_count = 0
+            self._aged_copies = [self._aged_copies[1], (self._reference.copy(), npm.rls.weights.copy())]
+        aged = self._aged_copies[0]
+        if aged is None:
+            return
+        self._aged_n += 1
+        a = max(1.0 / self._aged_n, 1.0 - npm.rls.forgetting)
+        window = min(float(self._aged_n), (2.0 - a) / a)
+        use = np.empty(self.n_outputs, dtype=np.bool_)
+        aged_saving_step(self._aged_errors, yv, Phi, aged[0], phi[0], aged[1], s2, spread, npm.rls.lam, v, a,
+                         window, self._corr[1], self._scale_model, 1.0 - self._corr_beta,
+                         self.AGED_MIN_EVIDENCE, use)
+        self._residual_use = use
+
+    #: Effective samples (samples over the errors' correlation length) of the aged copy's saving below
+    #: which the residual is used without the test.
+    AGED_MIN_EVIDENCE = 10.0
 
     def learn_held(self) -> None:
         """Learn the warm-up's samples, in their order, once the residual's standardizer is ready.
@@ -1166,6 +1244,14 @@ class ConsistentSemiparametricModel(TwoStageModel):
         state[f"{prefix}scales"] = np.concatenate([[self._scale_weight, self._recent_n, self._fast_n],
                                                    self._scale_model, self._recent_rigid,
                                                    self._fast_errors.reshape(-1), self._corr.reshape(-1)])
+        # the aged copy's test: its statistics and decision, and the copies (θ_ref, W) taken so far, flat
+        state[f"{prefix}aged"] = np.concatenate([[self._aged_n, self._aged_count],
+                                                 self._aged_errors.reshape(-1),
+                                                 self._residual_use.astype(np.float64)])
+        kept = [np.concatenate([theta, W.reshape(-1)]) for theta, W in
+                (c for c in self._aged_copies if c is not None)]
+        size = self.n_params + self.nonparametric.rls.n_features * self.n_outputs
+        state[f"{prefix}aged_copies"] = np.array(kept, dtype=np.float64).reshape(len(kept), size)
         return state
 
     def load_state_dict(self, state: dict[str, np.ndarray], prefix: str = "") -> None:
@@ -1198,6 +1284,19 @@ class ConsistentSemiparametricModel(TwoStageModel):
                 or bool((scales[:3 + 2 * t] < 0.0).any()) or bool((scales[3 + 3 * t:3 + 4 * t] < 0.0).any())
                 or bool((scales[3 + 5 * t:] < 0.0).any())):
             raise CheckpointError("the residual's error scales have the wrong size or invalid values")
+        aged = state.get(f"{prefix}aged")
+        if aged is None:
+            raise CheckpointError("the checkpoint has no test of the residual at an age (a corrupt file: "
+                                  "older versions are migrated)")
+        aged = np.asarray(aged, dtype=np.float64)
+        copies = np.asarray(state.get(f"{prefix}aged_copies", np.zeros((3, 0))), dtype=np.float64)
+        size = self.n_params + self.nonparametric.rls.n_features * t
+        if (aged.shape != (2 + 3 * t,) or not np.isfinite(aged).all() or aged[0] < 0.0 or aged[1] < 0.0
+                or bool((aged[2 + t:2 + 2 * t] < 0.0).any())
+                or not bool(np.isin(aged[2 + 2 * t:], (0.0, 1.0)).all())
+                or copies.ndim != 2 or copies.shape[0] > 2 or copies.shape[1] != size
+                or not np.isfinite(copies).all()):
+            raise CheckpointError("the test of the residual at an age has the wrong size or invalid values")
         D, E, p = self.nonparametric.rls.n_features, self._phi_entries.size, self.n_params
         try:
             entries_rhs = np.asarray(state[f"{prefix}entries_rhs"], dtype=np.float64)
@@ -1219,6 +1318,12 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._scale_model, self._recent_rigid = scales[3:3 + t].copy(), scales[3 + t:3 + 2 * t].copy()
         self._fast_errors = scales[3 + 2 * t:3 + 4 * t].reshape(2, t).copy()
         self._corr = scales[3 + 4 * t:].reshape(2, t).copy()
+        self._aged_n, self._aged_count = int(aged[0]), int(aged[1])
+        self._aged_errors = aged[2:2 + 2 * t].reshape(2, t).copy()
+        self._residual_use = aged[2 + 2 * t:] == 1.0
+        kept: list[tuple[np.ndarray, np.ndarray] | None] = [None] * (2 - copies.shape[0])
+        kept += [(row[:p].copy(), row[p:].reshape(-1, t).copy()) for row in copies]
+        self._aged_copies = kept
         self._weight_cache = self._fast_mask = self._shift_cache = self._served_cache = None
         if reference[p + 1] != 0.0:
             # it predicted with the learned parameters, or with a rigid body set by use_rigid, which is not

@@ -648,7 +648,12 @@ def test_bad_messages_are_counted_and_do_not_change_learned_state(config, regres
         for part in ("parametric", "residual", "total"):
             np.testing.assert_allclose(getattr(a.prediction, part), getattr(b.prediction, part),
                                        rtol=1e-9, atol=1e-12, err_msg=part)
-    assert_close_state(snapshot(est), snapshot(clean))
+    state, clean_state = snapshot(est), snapshot(clean)
+    # the residual's aged copies hold W = R⁻¹d: rounding in [R | d] reaches W amplified by up to cond(R)
+    W, W_clean = state.pop("aged_copies"), clean_state.pop("aged_copies")
+    amplified = 1e-9 * np.linalg.cond(clean.model.nonparametric.rls.R)
+    np.testing.assert_allclose(W, W_clean, rtol=0, atol=amplified * float(np.abs(W_clean).max()))
+    assert_close_state(state, clean_state)
     for reason, count in expected.items():
         assert est.drops[reason] == count
     assert est.drops["acceleration_warmup"] == clean.drops["acceleration_warmup"]
@@ -1098,6 +1103,32 @@ def test_a_checkpoint_carries_the_period_it_was_learned_at(tmp_path):
     OnlineEstimator(cfg).load(tmp_path / "c.npz")  # written before the period was stored: loads
 
 
+def test_a_version_3_checkpoint_uses_its_residual_on_every_output_and_says_so(config, tmp_path):
+    """Format 3 had no test of the residual on an aged copy: migrated, the model uses its residual on every
+    output (as it did then), predicts as the model that wrote it with that mask, and says so once; the same
+    array missing from a version-4 file is a corrupt file."""
+    from semiparam_ros.core.checkpoint import atomic_save_npz as save_npz
+    from semiparam_ros.core.checkpoint import load_npz
+
+    est = OnlineEstimator(config)
+    feed(est, rich_stream().messages[:400])
+    assert est.model.residual_use().shape == (est.model.n_outputs,)
+    est.save(tmp_path / "now.npz")
+    state = load_npz(tmp_path / "now.npz")
+    assert "model.aged" in state
+    old = {k: v for k, v in state.items() if k != "model.aged"}
+    save_npz(tmp_path / "v3.npz", dict(old, **{"meta.version": np.array(3)}))
+    loaded = OnlineEstimator(config)
+    loaded.load(tmp_path / "v3.npz")
+    assert loaded.model.residual_use().all()
+    notes = " ".join(loaded.migration_notes)
+    assert "aged copy" in notes and notes.count("aged copy") == 1
+    assert loaded.n_samples_learned == est.n_samples_learned
+    save_npz(tmp_path / "v4_missing.npz", old)
+    with pytest.raises(CheckpointError, match="at an age"):
+        OnlineEstimator(config).load(tmp_path / "v4_missing.npz")
+
+
 def test_a_version_1_checkpoint_is_migrated_and_a_current_one_missing_arrays_is_refused(config, tmp_path):
     """Format 1 wrote no noise estimate, no gate and no robot in early checkpoints: read through the one
     migration, such a file predicts as the model that wrote it, starts σ and the gate afresh, and says what
@@ -1106,7 +1137,7 @@ def test_a_version_1_checkpoint_is_migrated_and_a_current_one_missing_arrays_is_
     from semiparam_ros.core.checkpoint import load_npz
     from semiparam_ros.core.estimator.state import CHECKPOINT_VERSION
 
-    assert CHECKPOINT_VERSION == 3
+    assert CHECKPOINT_VERSION == 4
     est = OnlineEstimator(config)
     feed(est, rich_stream().messages[:400])
     est.save(tmp_path / "now.npz")

@@ -689,3 +689,96 @@ def test_the_frozen_single_state_call_is_predict_models_formula(with_rigid):
         np.testing.assert_array_equal(a, b)
     with pytest.raises(RejectedSampleError):
         m.frozen_model_one(np.array([np.nan, 0.0, 0.0]))
+
+
+def _smooth_stream(n: int, kind: str, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A smooth two-joint motion at 100 Hz. ``state``: y = truth(x) (an effect of the state the rigid body
+    cannot express); ``time``: the rigid body plus ±0.3 switching every 0.2 s whatever the state (what
+    belongs to time: a residual fits it from the samples just before, and a copy 0.1–0.2 s old gets it
+    wrong about half the time or more)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    X = np.zeros((n, 6))
+    w1, w2 = 2 * np.pi * 0.31, 2 * np.pi * 0.23
+    X[:, 0], X[:, 1] = np.sin(w1 * t), np.cos(w2 * t)
+    X[:, 2], X[:, 3] = w1 * np.cos(w1 * t), -w2 * np.sin(w2 * t)
+    if kind == "state":
+        Y = np.array([truth(x) for x in X])
+    else:
+        Y = np.array([regressor(x) @ np.array([2.0, 0.5, -1.0]) for x in X])
+        Y += 0.3 * np.sign(np.sin(2 * np.pi * t / 0.4))[:, None]
+    return X, Y + 0.01 * rng.normal(size=Y.shape)
+
+
+def _aged_saving(X: np.ndarray, Y: np.ndarray, copies: list[tuple[int, np.ndarray, np.ndarray]],
+                 m: ConsistentSemiparametricModel) -> np.ndarray:
+    """Mean saving e² − (e − r)² of copies (k, θ_ref, W) taken while learning, each scored on the samples
+    10–19 after it was taken (its residual unweighted, e = y − Φθ_ref), with numpy."""
+    gains = []
+    for k0, theta, W in copies:
+        for k in range(k0 + 10, min(k0 + 20, len(X))):
+            e = Y[k] - regressor(X[k]) @ theta
+            r = m.nonparametric.features_of(X[k])[0] @ W
+            gains.append(e ** 2 - (e - r) ** 2)
+    return np.mean(gains, axis=0)
+
+
+def test_the_residual_is_dropped_where_an_aged_copy_of_it_does_worse_than_its_rigid_body():
+    """On errors that belong to the state, a copy of the residual 0.1–0.2 s old still helps, and the residual
+    is kept; on errors that belong to time (the same motion, ±0.3 switching every 0.2 s), it fits the last
+    samples one step ahead but its aged copy does worse than the rigid body alone — measured here
+    independently, copies of (θ_ref, W) taken every 10 samples and scored with numpy — and the online
+    prediction drops it: its residual part is then the fast correction alone. The model used alone keeps
+    its served weight. The test's state survives a checkpoint, copies included."""
+    outcome = {}
+    for kind in ("state", "time"):
+        m = model(sample_period_s=0.01, tracker=True)
+        X, Y = _smooth_stream(3000, kind)
+        copies = []
+        for k, (x, y) in enumerate(zip(X, Y, strict=True)):
+            m.learn_one(x, y)
+            if k % 10 == 0 and k >= 1000:
+                copies.append((k, m.reference_parameters, m.nonparametric.rls.weights.copy()))
+        outcome[kind] = (m, _aged_saving(X, Y, copies, m), X, Y)
+    kept, saving_kept, _, _ = outcome["state"]
+    dropped, saving_dropped, X, Y = outcome["time"]
+    assert np.all(saving_kept > 0.0) and np.all(saving_dropped < 0.0)  # what the test is to find
+    assert kept.residual_use().all()
+    assert not dropped.residual_use().any()
+    x = np.array([0.2, 0.4, 0.5, -0.3, 0.0, 0.0])
+    for m, used in ((kept, True), (dropped, False)):
+        pred = m.predict_one(x)
+        assert bool(np.all(pred.residual - pred.correction != 0.0)) == used
+        assert bool(np.all(m.residual_weight(0.01) > 0.0)) == used
+        s2, noise = m.error_scales()  # the served weight is its formula, whatever the test found
+        signal = s2 * (1.0 - m.nonparametric.rls.lam * 0.01)
+        total = signal + m.correlation_samples() * noise / m.novelty_scale * 0.01
+        served = np.where(total > 0.0, signal / np.where(total > 0.0, total, 1.0), 1.0)
+        np.testing.assert_allclose(m.residual_weight(0.01, served=True), served, rtol=1e-12)
+    again = model(sample_period_s=0.01, tracker=True)
+    again.load_state_dict(dropped.state_dict())
+    assert np.array_equal(again.residual_use(), dropped.residual_use())
+    for x, y in zip(X[:300], Y[:300], strict=True):  # the copies too: the test goes on as it would have
+        again.learn_one(x, y)
+        dropped.learn_one(x, y)
+    np.testing.assert_array_equal(again.state_dict()["aged"], dropped.state_dict()["aged"])
+
+
+@pytest.mark.parametrize("bad", ["short", "nan", "negative_count", "half"])
+def test_a_corrupt_aged_test_in_a_checkpoint_is_refused_and_the_model_is_unchanged(bad):
+    m = model()
+    X, Y = data(100, 5)
+    for x, y in zip(X, Y, strict=True):
+        m.learn_one(x, y)
+    state = m.state_dict()
+    aged = np.array(state["aged"], dtype=np.float64)
+    broken = {"short": aged[:-1], "nan": np.where(np.arange(aged.size) == 1, np.nan, aged),
+              "negative_count": np.concatenate([[-1.0], aged[1:]]),
+              "half": np.concatenate([aged[:-1], [0.5]])}[bad]
+    other = model()
+    with pytest.raises(CheckpointError, match="at an age"):
+        other.load_state_dict(dict(state, aged=broken))
+    assert other.n_samples_seen == 0
+    missing = {k: v for k, v in state.items() if k != "aged"}
+    with pytest.raises(CheckpointError, match="at an age"):
+        other.load_state_dict(missing)

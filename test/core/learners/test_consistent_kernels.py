@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from semiparam_ros.core.learners._consistent_kernels import (
+    aged_saving_step,
     fast_total,
     saving_step,
     saving_update,
@@ -177,6 +178,58 @@ def test_saving_step_is_the_update_then_its_significance():
     expect = np.empty(t, dtype=np.bool_)
     significant_saving(ref, 9, expect)
     assert np.array_equal(fe, ref) and np.array_equal(useful, expect)
+
+
+def _aged_reference(errors, y, Phi, theta, phi, W, s2, spread, lam, v, a, window, corr_sq, scale_model,
+                    a_corr, min_evidence):
+    """``aged_saving_step``'s formulas with numpy: the new means and the decision."""
+    keep = min(max(1.0 - lam * v, 0.0), 1.0)
+    signal = s2 * keep
+    total = signal + spread * v
+    g = np.where(total > 0.0, signal / np.where(total > 0.0, total, 1.0), 1.0)
+    e = y - Phi @ theta
+    gain = e ** 2 - (e - g * (phi @ W)) ** 2
+    mean = errors[0] + a * (gain - errors[0])
+    square = errors[1] + a * (gain ** 2 - errors[1])
+    c = np.maximum(np.where(scale_model > 0.0, corr_sq / np.where(scale_model > 0.0, scale_model, 1.0), 0.0)
+                   * (2.0 - a_corr) / a_corr, 1.0)
+    n = window / c
+    harm = mean < -2.0 * np.sqrt(np.maximum(square - mean ** 2, 0.0) / n)
+    return np.stack([mean, square]), np.where(n < min_evidence, True, ~harm)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_aged_saving_step_is_the_saving_of_the_weighted_aged_residual_then_the_harm_test(seed):
+    """The aged copy's saving e² − (e − g·φW)² (e the aged rigid body's error) enters the running means,
+    and an output is dropped only where the mean is negative by more than two standard errors over
+    window/c effective samples; outputs with too little evidence keep the residual. The sums over p and D
+    are accumulated in another order than numpy's products: agreement to a bound on their rounding."""
+    rng = np.random.default_rng(seed)
+    t, p, D = 5, 4, 30
+    errors = np.stack([rng.normal(0.0, 0.05, t), rng.uniform(0.0, 0.01, t)])
+    y, Phi, theta = rng.normal(size=t), rng.normal(size=(t, p)), rng.normal(size=p)
+    phi, W = rng.normal(size=D), rng.normal(0.0, 0.3, size=(D, t))
+    s2, spread = rng.uniform(0.0, 1.0, t), rng.uniform(0.0, 1.0, t)
+    s2[0] = spread[0] = 0.0  # 0/0: weight 1
+    corr_sq, scale_model = rng.uniform(0.0, 0.02, t), rng.uniform(0.5, 1.0, t)  # c of 1 to 2
+    scale_model[1] = 0.0  # no statistics: c = 1
+    corr_sq[2] = 50.0  # long correlation: too little evidence, the residual is kept
+    args = (y, Phi, theta, phi, W, s2, spread, 0.1, 0.7, 0.01, 400.0, corr_sq, scale_model, 0.05, 10.0)
+    ref_errors, ref_use = _aged_reference(errors, *args)
+    use = np.empty(t, dtype=np.bool_)
+    got = errors.copy()
+    aged_saving_step(got, *args, use)
+    e = np.abs(y) + np.abs(Phi) @ np.abs(theta)
+    bound = 8 * (D + p) * EPS * (e + np.abs(phi) @ np.abs(W)) ** 2  # the sums' rounding, squared terms
+    np.testing.assert_allclose(got[0], ref_errors[0], rtol=0, atol=float(bound.max()))
+    np.testing.assert_allclose(got[1], ref_errors[1], rtol=0,
+                               atol=float((4 * bound * (e + np.abs(phi) @ np.abs(W)) ** 2).max()))
+    assert np.array_equal(use, ref_use)
+    assert use[2]  # n = 400 / c < 10
+    harmful = np.stack([np.full(t, -0.5), np.full(t, 0.26)])  # mean −0.5 with spread 0.01: harm is clear
+    use_h = np.empty(t, dtype=np.bool_)
+    aged_saving_step(harmful, *args[:8], 0.0, *args[9:], use_h)  # a = 0: the means stay where they are
+    assert not use_h[[0, 1, 3, 4]].any() and use_h[2]
 
 
 def test_state_weight_is_the_gaussian_of_the_scaled_distance():
