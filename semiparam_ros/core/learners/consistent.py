@@ -1134,7 +1134,8 @@ class ConsistentSemiparametricModel(TwoStageModel):
             self.learn_held()
 
     #: Age [s] of the copy of the residual scored on every learned sample (between this and twice this):
-    #: the residual is used only where a copy that old still saves a significant part of the squared error.
+    #: the online prediction leaves the residual out where a copy that old clearly does harm
+    #: (:meth:`residual_use`).
     AGED_COPY_S = 0.1
 
     def _score_aged(self, Phi: np.ndarray, phi: np.ndarray, yv: np.ndarray, s2: np.ndarray,
