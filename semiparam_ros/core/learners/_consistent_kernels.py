@@ -233,11 +233,7 @@ def aged_saving_step(errors: np.ndarray, y: np.ndarray, Phi: np.ndarray, theta: 
         if n < min_evidence:
             use[k] = True
             continue
-        mean = errors[0, k]
-        var = errors[1, k] - mean * mean
-        if var < 0.0:
-            var = 0.0
-        use[k] = not (mean < -2.0 * np.sqrt(var / n))
+        use[k] = not (errors[0, k] < -two_standard_errors(errors, k, n))
 
 
 @njit(cache=True, nogil=True)
@@ -272,6 +268,22 @@ def shrunk_choice(estimates: np.ndarray, errors: np.ndarray, gains: np.ndarray, 
 
 
 @njit(cache=True, nogil=True)
+def two_standard_errors(stats: np.ndarray, k: int, n: float) -> float:
+    """``2·sqrt(max(s − m², 0)/n)``: two standard errors of the running mean m of column k over n samples.
+
+    Args:
+        stats: (2, t) the running mean m and mean square s.
+        k: The column (output).
+        n: The (effective) samples averaged, > 0.
+    """
+    mean = stats[0, k]
+    spread = stats[1, k] - mean * mean
+    if spread < 0.0:
+        spread = 0.0
+    return 2.0 * np.sqrt(spread / n)
+
+
+@njit(cache=True, nogil=True)
 def significant_saving(fast_errors: np.ndarray, n: int, out: np.ndarray) -> None:
     """Write whether each output's mean saving exceeds two standard errors into ``out`` (t,) bool.
 
@@ -287,11 +299,7 @@ def significant_saving(fast_errors: np.ndarray, n: int, out: np.ndarray) -> None
         if n < 2:
             out[k] = False
             continue
-        mean = fast_errors[0, k]
-        spread = fast_errors[1, k] - mean * mean
-        if spread < 0.0:
-            spread = 0.0
-        out[k] = mean > 2.0 * np.sqrt(spread / n)
+        out[k] = fast_errors[0, k] > two_standard_errors(fast_errors, k, n)
 
 
 @njit(cache=True, nogil=True)
