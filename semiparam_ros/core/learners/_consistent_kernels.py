@@ -205,26 +205,19 @@ def aged_saving_step(errors: np.ndarray, y: np.ndarray, Phi: np.ndarray, theta: 
         use: (t,) bool output.
     """
     t, p = Phi.shape
-    keep = 1.0 - lam * v
-    if keep < 0.0:
-        keep = 0.0
-    elif keep > 1.0:
-        keep = 1.0
+    rigid, raw, candidate = np.empty(t), np.empty(t), np.empty(t)
     for k in range(t):
-        rigid = 0.0
+        acc = 0.0
         for j in range(p):
-            rigid += Phi[k, j] * theta[j]
-        raw = 0.0
+            acc += Phi[k, j] * theta[j]
+        rigid[k] = acc
+        acc = 0.0
         for j in range(phi.shape[0]):
-            raw += phi[j] * W[j, k]
-        signal = s2[k] * keep
-        total = signal + spread[k] * v
-        g = signal / total if total > 0.0 else 1.0
-        e0 = y[k] - rigid
-        miss = e0 - g * raw
-        gain = e0 * e0 - miss * miss
-        errors[0, k] += a * (gain - errors[0, k])
-        errors[1, k] += a * (gain * gain - errors[1, k])
+            acc += phi[j] * W[j, k]
+        raw[k] = acc
+    weighted_residual(raw, s2, spread, lam, v, candidate)  # ρ = g(v)·φW, the online weight
+    saving_update(errors, y, rigid, candidate, a)  # d = e² − (e − ρ)²
+    for k in range(t):
         ratio = corr_sq[k] / scale_model[k] if scale_model[k] > 0.0 else 0.0
         c = ratio * (2.0 - a_corr) / a_corr
         if c < 1.0:

@@ -468,6 +468,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._cross = EntryCrossProducts(self.nonparametric.rls.n_features, self._phi_entries.size)
         self._since_reference = 0  # learned samples since θ_ref last followed π̂
         self._reference_samples = self._reference_count(sample_period_s)
+        self._aged_samples = max(round(self.AGED_COPY_S / float(sample_period_s)), 1)  # between copies
         self._recent_beta = self._scale_forgetting(sample_period_s)
         self._corr_beta = self._correlation_forgetting(sample_period_s)
         self._period_s = float(sample_period_s)  # T [s]: what the age fade counts c's samples in
@@ -597,6 +598,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         self._recent_beta = self._scale_forgetting(sample_period_s)
         self._corr_beta = self._correlation_forgetting(sample_period_s)
         self._reference_samples = self._reference_count(sample_period_s)
+        self._aged_samples = max(round(self.AGED_COPY_S / float(sample_period_s)), 1)  # between copies
         self._period_s = float(sample_period_s)
         return beta
 
@@ -1149,7 +1151,7 @@ class ConsistentSemiparametricModel(TwoStageModel):
         """
         npm = self.nonparametric
         self._aged_count += 1
-        if self._aged_count >= max(round(self.AGED_COPY_S / self._period_s), 1):
+        if self._aged_count >= self._aged_samples:
             self._aged_count = 0
             self._aged_copies = [self._aged_copies[1], (self._reference.copy(), npm.rls.weights.copy())]
         aged = self._aged_copies[0]
